@@ -1,0 +1,59 @@
+"""gaussim: robot simulation by the Gauss principle of least constraint.
+
+The motion of a robot with generalized coordinates q, velocities v, inertia M(q) and forces
+F = tau - b(q, v) under constraints minimises the Gauss functional
+
+    Z(a) = 1/2 a^T M a - a^T F    over the admissible set Omega(t, q, v)
+
+(at the velocity level, Z(v+) = 1/2 (v+ - v_free)^T M (v+ - v_free) with v_free = v + dt M^-1 F).
+Each constraint module (contacts with Coulomb friction, joint limits, bilateral constraints)
+contributes linear rows to Omega; ProxQP solves the QP and its multipliers are the reactions.
+See FORMULATION.md in the project's documentation for the derivation.
+"""
+
+from .constraints import BilateralReaction, ContactForce, LimitReaction
+from .exceptions import (
+    FrameNotFound,
+    GaussimError,
+    GeometryNotFound,
+    InfeasibleConstraints,
+    InvalidOptions,
+    InvalidRobot,
+    InvalidState,
+    RobotNotFound,
+    SolverError,
+)
+from .options import Options
+from .report import StepReport
+from .robot import Robot, load_robot
+from .scene import Anchor, Box, Ground, LoopClosure, Scene, Sphere
+from .simulator import Simulator
+from .solver import Certificate
+from .state import State
+
+__all__ = [
+    "Anchor",
+    "BilateralReaction",
+    "Box",
+    "Certificate",
+    "ContactForce",
+    "FrameNotFound",
+    "GaussimError",
+    "GeometryNotFound",
+    "Ground",
+    "InfeasibleConstraints",
+    "InvalidOptions",
+    "InvalidRobot",
+    "InvalidState",
+    "LimitReaction",
+    "LoopClosure",
+    "Options",
+    "Robot",
+    "RobotNotFound",
+    "Scene",
+    "Simulator",
+    "Sphere",
+    "State",
+    "StepReport",
+    "load_robot",
+]

@@ -1,0 +1,60 @@
+"""Stage 4, assembly: stack the modules' rows into one Gauss problem
+
+    min_x 1/2 x^T M x - x^T f   s.t.   A x = b,   l <= C x
+
+with f = M v + dt F (velocity level), M v (impulse level) or F (acceleration level).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .constraints.base import ConstraintModule, Rows
+
+
+@dataclass
+class GaussProblem:
+    """A dense convex QP in ProxQP's form and the blocks of rows it came from.
+
+    Attributes:
+        H: Hessian M, shape (nv, nv).
+        g: linear term -f, shape (nv,).
+        A, b: equality rows (n_eq, nv), (n_eq,).
+        C, l: inequality rows (n_in, nv), lower bounds (n_in,) (upper bounds are +inf).
+        blocks: (module, rows, equality?, slice into the multipliers of that kind).
+    """
+
+    H: np.ndarray
+    g: np.ndarray
+    A: np.ndarray
+    b: np.ndarray
+    C: np.ndarray
+    l: np.ndarray
+    blocks: list[tuple[ConstraintModule, Rows, slice]]
+
+    def labels(self, equality: bool) -> list[str]:
+        """Row names of the equality or inequality rows, in order."""
+        return [label for _, rows, _ in self.blocks if rows.equality == equality for label in rows.labels]
+
+
+def assemble(H: np.ndarray, f: np.ndarray, parts: list[tuple[ConstraintModule, Rows]]) -> GaussProblem:
+    """Stack rows: equalities into (A, b), inequalities into (C, l), remembering where each block went."""
+    nv = len(f)
+    counts = {True: 0, False: 0}
+    blocks = []
+    for module, rows in parts:
+        start = counts[rows.equality]
+        counts[rows.equality] += len(rows)
+        blocks.append((module, rows, slice(start, counts[rows.equality])))
+        if rows.force is not None:
+            f = f + rows.force
+    def stack(equality: bool) -> tuple[np.ndarray, np.ndarray]:
+        chosen = [rows for _, rows in parts if rows.equality == equality]
+        if not chosen:
+            return np.zeros((0, nv)), np.zeros(0)
+        return np.vstack([r.J for r in chosen]), np.concatenate([r.bound for r in chosen])
+    A, b = stack(True)
+    C, l = stack(False)
+    return GaussProblem(H, -f, A, b, C, l, blocks)

@@ -1,0 +1,69 @@
+"""Joint position limits from the URDF: q_min <= q <= q_max as unilateral rows on 1-dof joints.
+
+Lower limit: phi = q - q_min >= 0, row  +e_i^T x >= bound;  upper: phi = q_max - q, row -e_i^T x >= bound.
+Only limits the joint can reach within the step (plus ``Options.limit_margin``) produce rows.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from .base import Context, Rows, is_active, stabilised_bound
+
+
+@dataclass
+class LimitReaction:
+    """The generalized force a joint limit applies [N m or N] (an impulse [N m s] in impact reports)."""
+
+    joint: str
+    side: str
+    torque: float
+
+
+class LimitModule:
+    """Rows of the joint limits of the 1-dof joints with finite limits."""
+
+    name = "limit"
+
+    def __init__(self, model: pin.Model) -> None:
+        idx_q, idx_v, signs, bounds, labels = [], [], [], [], []
+        for joint_id in range(1, model.njoints):
+            joint = model.joints[joint_id]
+            if joint.nq != 1 or joint.nv != 1:
+                continue
+            iq, iv = joint.idx_q, joint.idx_v
+            for sign, value, side in ((1.0, model.lowerPositionLimit[iq], "lower"), (-1.0, model.upperPositionLimit[iq], "upper")):
+                if np.isfinite(value) and abs(value) < 1e10:
+                    idx_q.append(iq)
+                    idx_v.append(iv)
+                    signs.append(sign)
+                    bounds.append(value)
+                    labels.append((model.names[joint_id], side))
+        self.idx_q, self.idx_v = np.array(idx_q, dtype=int), np.array(idx_v, dtype=int)
+        self.signs, self.limits, self.labels = np.array(signs), np.array(bounds), labels
+
+    def rows(self, ctx: Context) -> Rows | None:
+        if not len(self.signs):
+            return None
+        phi = self.signs * (ctx.q[self.idx_q] - self.limits)
+        rate = self.signs * ctx.v[self.idx_v]
+        active = np.flatnonzero(is_active(ctx, phi, rate, ctx.options.limit_margin))
+        if not len(active):
+            return None
+        J = np.zeros((len(active), ctx.model.nv))
+        J[np.arange(len(active)), self.idx_v[active]] = self.signs[active]
+        bound = stabilised_bound(ctx, phi[active], rate[active], 0.0, True)
+        labels = [f"limit {self.labels[i][0]} {self.labels[i][1]}" for i in active]
+        return Rows(J, bound, False, labels, active)
+
+    def reactions(self, rows: Rows, multipliers: np.ndarray, scale: float) -> list[LimitReaction]:
+        return [
+            LimitReaction(*self.labels[i], float(scale * lam * self.signs[i]))
+            for i, lam in zip(rows.data, multipliers)  # type: ignore[call-overload]
+        ]
+
+    def refine(self, ctx: Context, rows: Rows, x: np.ndarray, multipliers: np.ndarray) -> bool:
+        return False

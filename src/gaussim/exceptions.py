@@ -1,0 +1,71 @@
+"""The exceptions gaussim raises: one hierarchy, messages that name the cause and the valid choices."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+
+
+class GaussimError(Exception):
+    """Base class of every error gaussim raises on purpose."""
+
+
+def _choices(known: Iterable[str], limit: int = 80) -> str:
+    names = sorted(known)
+    shown = ", ".join(names[:limit])
+    return shown + (f", ... ({len(names) - limit} more)" if len(names) > limit else "")
+
+
+class RobotNotFound(GaussimError):
+    """A robot name is neither an example-robot-data robot nor an existing URDF file."""
+
+    def __init__(self, name: str, known: Iterable[str]) -> None:
+        super().__init__(
+            f"no robot '{name}': not an existing URDF path and not an example-robot-data "
+            f"robot; known names: {_choices(known)}"
+        )
+
+
+class InvalidRobot(GaussimError):
+    """A URDF file could not be parsed into a usable model."""
+
+
+class FrameNotFound(GaussimError):
+    """A frame name does not exist in the robot model."""
+
+    def __init__(self, name: str, known: Iterable[str], what: str = "frame") -> None:
+        super().__init__(f"no {what} '{name}' in the robot; known: {_choices(known)}")
+
+
+class GeometryNotFound(FrameNotFound):
+    """A collision geometry or environment object name does not exist."""
+
+    def __init__(self, name: str, known: Iterable[str], what: str = "collision geometry") -> None:
+        super().__init__(name, known, what)
+
+
+class InvalidOptions(GaussimError, ValueError):
+    """An option or scene field holds an invalid value; ``field`` names it."""
+
+    def __init__(self, field: str, message: str) -> None:
+        self.field = field
+        super().__init__(f"{field}: {message}")
+
+
+class InvalidState(GaussimError, ValueError):
+    """A configuration, velocity or torque has the wrong shape, is not finite, or is off the manifold."""
+
+
+class SolverError(GaussimError):
+    """ProxQP did not return a usable solution; ``report`` holds the step's certificate."""
+
+    def __init__(self, message: str, report: object | None = None) -> None:
+        self.report = report
+        super().__init__(message)
+
+
+class InfeasibleConstraints(SolverError):
+    """The admissible set of the step is empty; ``rows`` names the constraints that conflict."""
+
+    def __init__(self, message: str, rows: list[str], report: object | None = None) -> None:
+        self.rows = rows
+        super().__init__(message, report)

@@ -1,0 +1,111 @@
+"""Simulation options, validated once at construction."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+from .exceptions import InvalidOptions
+
+SCHEMES = ("velocity", "acceleration")
+FRICTION_MODES = ("pyramid", "accurate", "exact")
+ON_FAILURE = ("raise", "report")
+
+
+@dataclass(frozen=True)
+class Options:
+    """How a scene is stepped: the speed/accuracy knobs.
+
+    Attributes:
+        dt: time step [s].
+        scheme: ``"velocity"`` (discrete Gauss principle on v+, Moreau-Jean time stepping; default)
+            or ``"acceleration"`` (the paper's scheme: Gauss principle on a over the active set,
+            impulsive projection at impacts, Baumgarte stabilisation).
+        friction_facets: number k of facets of the pyramid approximating the Coulomb cone (>= 3).
+        friction_mode: ``"pyramid"`` (Anitescu's convex relaxation: one QP, sliding contacts lift off
+            by mu*|slip|*dt per step), ``"accurate"`` (default: the pyramid is turned against the free
+            tangential velocity and its normal bound shifted by mu*|slip| of the current velocity, the
+            one-step De Saxce correction: no lift-off, no pyramid anisotropy while sliding) or
+            ``"exact"`` (the De Saxce shift iterated to a fixed point within the step).
+        friction_iterations: maximal number of QPs per step for ``"exact"`` friction and for sliding
+            contacts of the acceleration scheme.
+        restitution_threshold: impacts slower than this normal speed are treated as inelastic [m/s]
+            (prevents micro-bouncing of resting contacts when restitution > 0).
+        stabilisation: fraction in (0, 1] of a constraint violation (penetration, limit overshoot,
+            bilateral drift) removed per step; the acceleration scheme uses it as a critically
+            damped Baumgarte term with time constant dt / stabilisation.
+        contact_margin: pairs closer than this distance produce contact rows [m]; the velocity
+            scheme lets an approaching contact close exactly, so a margin of a few |v| dt suffices.
+        limit_margin: joint limits closer than this produce rows [rad or m], plus the distance the
+            joint can travel in one step.
+        active_tolerance: acceleration scheme: a gap below this is an active contact [m].
+        eps_abs: ProxQP absolute tolerance on primal/dual residuals and duality gap.
+        max_iter: ProxQP iteration cap.
+        on_failure: ``"raise"`` (default) a :class:`SolverError` when ProxQP does not converge, or
+            ``"report"`` (accept the finite iterate and record the status). A non-finite solution
+            or an infeasible constraint set always raises.
+    """
+
+    dt: float = 1e-3
+    scheme: str = "velocity"
+    friction_facets: int = 4
+    friction_mode: str = "accurate"
+    friction_iterations: int = 10
+    restitution_threshold: float = 1e-2
+    stabilisation: float = 0.2
+    contact_margin: float = 5e-3
+    limit_margin: float = 1e-2
+    active_tolerance: float = 1e-6
+    eps_abs: float = 1e-9
+    max_iter: int = 1000
+    on_failure: str = "raise"
+
+    def __post_init__(self) -> None:
+        _positive("dt", self.dt)
+        _choice("scheme", self.scheme, SCHEMES)
+        _choice("friction_mode", self.friction_mode, FRICTION_MODES)
+        _choice("on_failure", self.on_failure, ON_FAILURE)
+        _integer("friction_facets", self.friction_facets, minimum=3)
+        _integer("friction_iterations", self.friction_iterations, minimum=1)
+        _integer("max_iter", self.max_iter, minimum=1)
+        _positive("eps_abs", self.eps_abs)
+        _positive("contact_margin", self.contact_margin)
+        _positive("active_tolerance", self.active_tolerance)
+        _non_negative("restitution_threshold", self.restitution_threshold)
+        _non_negative("limit_margin", self.limit_margin)
+        if not (_is_real(self.stabilisation) and 0.0 < self.stabilisation <= 1.0):
+            raise InvalidOptions("stabilisation", f"must be in (0, 1], got {self.stabilisation!r}")
+
+    def replace(self, **changes: object) -> Options:
+        """Return a copy with some fields changed (validated again)."""
+        known = {f.name for f in fields(self)}
+        for key in changes:
+            if key not in known:
+                raise InvalidOptions(key, f"unknown option; known: {', '.join(sorted(known))}")
+        values = {f.name: getattr(self, f.name) for f in fields(self)}
+        values.update(changes)
+        return Options(**values)  # type: ignore[arg-type]
+
+
+def _is_real(value: object) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _positive(field: str, value: object) -> None:
+    if not (_is_real(value) and value > 0):  # type: ignore[operator]
+        raise InvalidOptions(field, f"must be a finite number > 0, got {value!r}")
+
+
+def _non_negative(field: str, value: object) -> None:
+    if not (_is_real(value) and value >= 0):  # type: ignore[operator]
+        raise InvalidOptions(field, f"must be a finite number >= 0, got {value!r}")
+
+
+def _integer(field: str, value: object, minimum: int) -> None:
+    if not (isinstance(value, int) and not isinstance(value, bool) and value >= minimum):
+        raise InvalidOptions(field, f"must be an integer >= {minimum}, got {value!r}")
+
+
+def _choice(field: str, value: object, choices: tuple[str, ...]) -> None:
+    if value not in choices:
+        raise InvalidOptions(field, f"{value!r} is not one of {', '.join(choices)}")

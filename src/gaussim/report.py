@@ -1,0 +1,77 @@
+"""What one step reports: reactions per contact, limit and bilateral constraint, and the solver's word."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cached_property
+
+import numpy as np
+
+from .constraints import BilateralReaction, ContactForce, LimitReaction
+from .solver import Certificate
+
+# Relative singular-value threshold under which stacked contact Jacobians count as rank deficient.
+RANK_TOLERANCE = 1e-9
+
+
+@dataclass
+class StepReport:
+    """The reactions and certificates of one step.
+
+    Attributes:
+        t: time at the start of the step [s].
+        contacts: force at each contact point [N], world frame.
+        limits: joint-limit torques [N m] (forces [N] for prismatic joints).
+        bilaterals: bilateral reaction wrenches.
+        impulses: contact impulses [N s] of an impact (acceleration scheme only).
+        certificates: one per QP solved this step (fixed-point iterations and impacts add QPs).
+        timings: wall time per stage [s]: dynamics, collision, assembly, solve, integrate.
+        contact_jacobian: stacked 3-row point Jacobians of the contacts, shape (3 m, nv).
+    """
+
+    t: float
+    contacts: list[ContactForce] = field(default_factory=list)
+    limits: list[LimitReaction] = field(default_factory=list)
+    bilaterals: list[BilateralReaction] = field(default_factory=list)
+    impulses: list[ContactForce] = field(default_factory=list)
+    certificates: list[Certificate] = field(default_factory=list)
+    timings: dict[str, float] = field(default_factory=dict)
+    contact_jacobian: np.ndarray | None = None
+
+    @property
+    def converged(self) -> bool:
+        """True when every QP of the step converged (vacuously true when none was needed)."""
+        return all(c.converged for c in self.certificates)
+
+    @property
+    def iterations(self) -> int:
+        return sum(c.iterations for c in self.certificates)
+
+    @property
+    def max_residual(self) -> float:
+        """Largest primal or dual residual of the step's QPs (0 when none was solved)."""
+        return max((max(c.primal_residual, c.dual_residual) for c in self.certificates), default=0.0)
+
+    @cached_property
+    def redundant(self) -> bool:
+        """True when the contact forces are not unique: the contact point Jacobians are rank deficient
+        (four coplanar feet, a box face on the ground). The motion is unique all the same."""
+        J = self.contact_jacobian
+        if J is None or not len(J):
+            return False
+        s = np.linalg.svd(J, compute_uv=False)
+        return int(np.sum(s > RANK_TOLERANCE * s[0])) < J.shape[0]
+
+    def total_contact_force(self) -> np.ndarray:
+        """Sum of the contact forces, shape (3,) [N]."""
+        return np.sum([c.force for c in self.contacts], axis=0) if self.contacts else np.zeros(3)
+
+    def table(self) -> str:
+        """A plain-text table of the contact forces."""
+        lines = [f"{'contact':<28} {'fx [N]':>9} {'fy [N]':>9} {'fz [N]':>9} {'normal [N]':>11} {'gap [mm]':>9}"]
+        for c in self.contacts:
+            fx, fy, fz = c.force
+            lines.append(f"{c.name:<28} {fx:9.3f} {fy:9.3f} {fz:9.3f} {c.normal_force:11.3f} {1e3 * c.gap:9.4f}")
+        total = self.total_contact_force()
+        lines.append(f"{'total':<28} {total[0]:9.3f} {total[1]:9.3f} {total[2]:9.3f}")
+        return "\n".join(lines)

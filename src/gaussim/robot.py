@@ -1,0 +1,183 @@
+"""Robots: a Pinocchio model with its collision and visual geometry, loaded from a URDF."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import coal
+import numpy as np
+import pinocchio as pin
+
+from .exceptions import FrameNotFound, GeometryNotFound, InvalidRobot, RobotNotFound
+
+ROBOTS_DIR = Path(__file__).resolve().parents[2] / "robots"
+
+
+@dataclass(frozen=True)
+class Robot:
+    """An immutable robot model.
+
+    Attributes:
+        name: the name it was loaded by.
+        model: Pinocchio kinematic/dynamic model.
+        collision_model: Pinocchio geometry model used for contacts.
+        visual_model: Pinocchio geometry model used for display.
+        urdf: path of the URDF file.
+        package_dirs: directories where ``package://`` meshes are resolved.
+        reference_configurations: named configurations (e.g. ``standing``), shape (nq,) each.
+    """
+
+    name: str
+    model: pin.Model
+    collision_model: pin.GeometryModel
+    visual_model: pin.GeometryModel
+    urdf: str
+    package_dirs: tuple[str, ...] = ()
+    reference_configurations: dict[str, np.ndarray] = field(default_factory=dict)
+
+    @property
+    def floating(self) -> bool:
+        """True when the root joint is a free flyer."""
+        return self.model.njoints > 1 and self.model.joints[1].shortname() == "JointModelFreeFlyer"
+
+    @property
+    def mass(self) -> float:
+        """Total mass [kg]."""
+        return float(sum(inertia.mass for inertia in self.model.inertias))
+
+    def neutral(self) -> np.ndarray:
+        """Neutral configuration, shape (nq,)."""
+        return pin.neutral(self.model)
+
+    def configuration(self, name: str) -> np.ndarray:
+        """A named reference configuration, shape (nq,)."""
+        if name == "neutral":
+            return self.neutral()
+        if name not in self.reference_configurations:
+            raise FrameNotFound(name, ["neutral", *self.reference_configurations], "configuration")
+        return self.reference_configurations[name].copy()
+
+    def frame_id(self, name: str) -> int:
+        """Index of a frame; raises :class:`FrameNotFound` listing every frame name."""
+        if not self.model.existFrame(name):
+            raise FrameNotFound(name, [f.name for f in self.model.frames])
+        return int(self.model.getFrameId(name))
+
+    def geometry_id(self, name: str) -> int:
+        """Index of a collision geometry; raises :class:`GeometryNotFound` listing them."""
+        if not self.collision_model.existGeometryName(name):
+            raise GeometryNotFound(name, [g.name for g in self.collision_model.geometryObjects])
+        return int(self.collision_model.getGeometryId(name))
+
+
+def example_robot_names() -> list[str]:
+    """Names of the robots example-robot-data can load."""
+    from example_robot_data.robots_loader import ROBOTS
+
+    return sorted(ROBOTS)
+
+
+def load_robot(
+    name: str | os.PathLike[str],
+    *,
+    package_dirs: list[str] | tuple[str, ...] = (),
+    floating_base: bool | None = None,
+) -> Robot:
+    """Load a robot.
+
+    Args:
+        name: a URDF path, a robot of the project's ``robots/`` folder (``"ball"``), or an
+            example-robot-data name (``"solo12"``, ``"talos"``).
+        package_dirs: where ``package://`` meshes of a URDF are looked up.
+        floating_base: add a free-flyer root joint. Default: example-robot-data decides for its
+            robots (mobile robots float); a URDF path is fixed-base unless told.
+
+    Raises:
+        RobotNotFound: the name is none of the above (the message lists the known names).
+        InvalidRobot: the URDF could not be parsed or describes an unusable model.
+    """
+    path = Path(name)
+    local = ROBOTS_DIR / f"{name}.urdf"
+    if path.suffix == ".urdf" or path.exists():
+        if not path.is_file():
+            raise RobotNotFound(str(name), _known_names())
+        return _from_urdf(path, package_dirs, bool(floating_base))
+    if local.is_file():
+        return _from_urdf(local, (str(ROBOTS_DIR), *package_dirs), bool(floating_base))
+    known = example_robot_names()
+    if str(name) not in known:
+        raise RobotNotFound(str(name), _known_names())
+    from example_robot_data.robots_loader import ROBOTS
+
+    loader = ROBOTS[str(name)]()
+    model = loader.robot.model
+    if floating_base is not None and floating_base != loader.free_flyer:
+        base = "floating" if loader.free_flyer else "fixed"
+        raise InvalidRobot(
+            f"robot '{name}' has a {base} base in example-robot-data; to change it, load its "
+            f"URDF by path: load_robot('{loader.df_path}', floating_base={floating_base})"
+        )
+    configurations = {k: np.array(v) for k, v in model.referenceConfigurations.items()}
+    return _finish(
+        str(name),
+        model,
+        loader.robot.collision_model,
+        loader.robot.visual_model,
+        str(loader.df_path),
+        (str(loader.model_path),),
+        configurations,
+    )
+
+
+def _known_names() -> list[str]:
+    local = [p.stem for p in ROBOTS_DIR.glob("*.urdf")] if ROBOTS_DIR.is_dir() else []
+    return local + example_robot_names()
+
+
+def _from_urdf(
+    path: Path, package_dirs: tuple[str, ...] | list[str], floating: bool, name: str | None = None
+) -> Robot:
+    dirs = [str(d) for d in (*package_dirs, path.parent)]
+    try:
+        if floating:
+            model, collision, visual = pin.buildModelsFromUrdf(
+                str(path), dirs, pin.JointModelFreeFlyer()
+            )
+        else:
+            model, collision, visual = pin.buildModelsFromUrdf(str(path), dirs)
+    except (RuntimeError, ValueError, OSError) as err:
+        raise InvalidRobot(f"{path}: cannot build a model from this URDF: {err}") from err
+    return _finish(name or path.stem, model, collision, visual, str(path), tuple(dirs), {})
+
+
+def _finish(
+    name: str,
+    model: pin.Model,
+    collision: pin.GeometryModel,
+    visual: pin.GeometryModel,
+    urdf: str,
+    package_dirs: tuple[str, ...],
+    configurations: dict[str, np.ndarray],
+) -> Robot:
+    """Check the model is simulable and prepare the collision geometry for contact detection."""
+    if model.nv == 0:
+        raise InvalidRobot(f"{urdf or name}: the model has no degree of freedom")
+    for joint_id in range(1, model.njoints):
+        inertia = model.inertias[joint_id]
+        if not np.isfinite(inertia.mass) or inertia.mass < 0:
+            raise InvalidRobot(f"{urdf or name}: body of joint '{model.names[joint_id]}' has mass {inertia.mass}")
+    data = model.createData()
+    mass_matrix = pin.crba(model, data, pin.neutral(model))
+    if not np.all(np.isfinite(mass_matrix)) or np.linalg.eigvalsh(mass_matrix).min() <= 0:
+        raise InvalidRobot(
+            f"{urdf or name}: the mass matrix is not positive definite at the neutral "
+            "configuration (a moving body without mass or inertia?)"
+        )
+    for geometry in collision.geometryObjects:
+        if isinstance(geometry.geometry, coal.BVHModelBase):
+            # Contacts are detected on the convex hull of a mesh (coal's GJK/EPA needs convex shapes
+            # to give signed distances and contact patches); built once here.
+            geometry.geometry.buildConvexHull(True, "Qt")
+    return Robot(name, model, collision, visual, urdf, package_dirs, configurations)

@@ -1,0 +1,216 @@
+"""The simulator: a short ``step`` that reads as the algorithm.
+
+velocity scheme (default), the discrete Gauss principle (Moreau-Jean time stepping):
+    M, F = dynamics(q, v);  contacts = detect(q)
+    v+ = argmin 1/2 (w - v_free)^T M (w - v_free)  over the velocity-level rows,  v_free = v + dt M^-1 F
+    q+ = q (+) dt v+
+
+acceleration scheme, the paper's:
+    if v is not admissible (an impact): v = argmin 1/2 (w - v)^T M (w - v) over the impulse-level rows
+    a  = argmin 1/2 a^T M a - a^T F  over the acceleration-level rows (second-order tangent sets)
+    v+ = v + dt a;  q+ = q (+) dt v+
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pinocchio as pin
+
+from .assembly import assemble
+from .collision import Contact, ContactDetector
+from .constraints import BilateralModule, ContactModule, LimitModule
+from .constraints.base import ConstraintModule, Context, Level, Rows
+from .dynamics import Dynamics, compute_dynamics
+from .exceptions import InvalidState, SolverError
+from .integrator import integrate
+from .options import Options
+from .report import StepReport
+from .scene import Scene
+from .solver import GaussSolver
+from .state import State
+
+# A velocity violating an impulse-level row by more than this is an impact [m/s or rad/s].
+IMPACT_TOLERANCE = 1e-9
+
+
+class Simulator:
+    """Steps a scene with the Gauss principle; ``last_step`` holds the latest :class:`StepReport`."""
+
+    def __init__(self, scene: Scene, options: Options | None = None) -> None:
+        self.scene = scene
+        self.options = options or Options()
+        self.model = scene.robot.model.copy()
+        self.model.gravity.linear = scene.gravity
+        self.data = self.model.createData()
+        self.detector = ContactDetector(scene, self.options.contact_margin) if scene.pairs else None
+        self.modules = self._modules(scene, self.options)
+        self.solvers: dict[Level, GaussSolver] = {
+            level: GaussSolver(self.options) for level in ("velocity", "impulse", "acceleration")
+        }
+        self.last_step: StepReport | None = None
+
+    @staticmethod
+    def _modules(scene: Scene, options: Options) -> list[ConstraintModule]:
+        """One module per constraint family the scene declares, and no other."""
+        modules: list[ConstraintModule] = []
+        if scene.pairs:
+            modules.append(ContactModule(options.friction_facets, options.friction_mode))
+        if scene.joint_limits:
+            modules.append(LimitModule(scene.robot.model))
+        if scene.bilaterals:
+            modules.append(BilateralModule(scene.robot.frame_id, scene.bilaterals))
+        return modules
+
+    # -- state handling ---------------------------------------------------------------------------
+
+    def reset(self, q: np.ndarray | None = None, v: np.ndarray | None = None, t: float = 0.0) -> State:
+        """A validated initial state (default: neutral configuration at rest)."""
+        q = pin.neutral(self.model) if q is None else q
+        v = np.zeros(self.model.nv) if v is None else v
+        state = State(t, q, v)
+        self._check_state(state)
+        self.last_step = None
+        return state
+
+    def _check_state(self, state: State) -> None:
+        model = self.model
+        for name, arr, size in (("q", state.q, model.nq), ("v", state.v, model.nv)):
+            if arr.shape != (size,):
+                raise InvalidState(f"{name} must have shape ({size},), got {arr.shape}")
+            if not np.all(np.isfinite(arr)):
+                raise InvalidState(f"{name} has non-finite entries at {np.flatnonzero(~np.isfinite(arr)).tolist()}")
+        if not np.isfinite(state.t):
+            raise InvalidState(f"t must be finite, got {state.t}")
+        for j in range(1, model.njoints):
+            joint = model.joints[j]
+            if joint.nq > joint.nv:  # a unit quaternion or (cos, sin) pair ends the joint's q
+                part = slice(joint.idx_q + joint.nv - 1, joint.idx_q + joint.nq)
+                norm = float(np.linalg.norm(state.q[part]))
+                if abs(norm - 1.0) > 1e-6:
+                    raise InvalidState(
+                        f"q[{part.start}:{part.stop}] of joint '{model.names[j]}' must be a unit "
+                        f"{'quaternion (x, y, z, w)' if joint.nq - joint.nv == 1 and joint.nq > 2 else 'vector'}, "
+                        f"got norm {norm:.9g}; normalize it (pinocchio.normalize)"
+                    )
+
+    def _torque(self, tau: np.ndarray | None) -> np.ndarray:
+        nv = self.model.nv
+        if tau is None:
+            return np.zeros(nv)
+        tau = np.asarray(tau, dtype=float)
+        if self.scene.robot.floating and tau.shape == (nv - 6,):
+            tau = np.concatenate([np.zeros(6), tau])
+        if tau.shape != (nv,):
+            hint = f" or ({nv - 6},) for the actuated joints" if self.scene.robot.floating else ""
+            raise InvalidState(f"tau must have shape ({nv},){hint}, got {tau.shape}")
+        if not np.all(np.isfinite(tau)):
+            raise InvalidState(f"tau has non-finite entries at {np.flatnonzero(~np.isfinite(tau)).tolist()}")
+        return tau
+
+    # -- the step ---------------------------------------------------------------------------------
+
+    def step(self, state: State, tau: np.ndarray | None = None) -> State:
+        """Advance ``state`` by one time step under joint torques ``tau`` (nv,) [N m]; return the new state.
+
+        Raises:
+            InvalidState: bad state or torque.
+            InfeasibleConstraints: the constraints admit no motion (the rows involved are named).
+            SolverError: ProxQP failed (see ``Options.on_failure``) or the result is not finite.
+        """
+        self._check_state(state)
+        tau = self._torque(tau)
+        o = self.options
+        report = StepReport(state.t)
+        clock = time.perf_counter()
+        acceleration = o.scheme == "acceleration"
+        dyn = compute_dynamics(self.model, self.data, state.q, state.v, tau, acceleration)
+        clock = _lap(report, "dynamics", clock)
+        contacts = self.detector.detect(self.data) if self.detector else []
+        clock = _lap(report, "collision", clock)
+        if acceleration:
+            v = self._impact(state, dyn, contacts, report)
+            if v is not state.v:
+                dyn = compute_dynamics(self.model, self.data, state.q, v, tau, True)
+            a_free = np.linalg.solve(dyn.M, dyn.F)
+            a = self._gauss("acceleration", state.q, v, dyn.M, dyn.F, a_free, contacts, report, 1.0)
+            v_next = v + o.dt * a
+        else:
+            v_free = state.v + o.dt * np.linalg.solve(dyn.M, dyn.F)
+            f = dyn.M @ state.v + o.dt * dyn.F
+            v_next = self._gauss("velocity", state.q, state.v, dyn.M, f, v_free, contacts, report, 1.0 / o.dt)
+        clock = time.perf_counter()
+        q_next = integrate(self.model, state.q, v_next, o.dt)
+        _lap(report, "integrate", clock)
+        if not (np.all(np.isfinite(q_next)) and np.all(np.isfinite(v_next))):
+            raise SolverError(f"step at t={state.t:.6g} s produced a non-finite state", report)
+        self.last_step = report
+        return State(state.t + o.dt, q_next, v_next)
+
+    def _impact(self, state: State, dyn: Dynamics, contacts: list[Contact], report: StepReport) -> np.ndarray:
+        """The impulsive Gauss projection of v when v violates an impulse-level row, else v itself."""
+        ctx = self._context("impulse", state.q, state.v, state.v, contacts)
+        parts = self._rows(ctx)
+        if not any(np.any(rows.J @ state.v < rows.bound - IMPACT_TOLERANCE) for _, rows in parts if not rows.equality):
+            return state.v
+        impulses = StepReport(state.t)
+        v = self._solve(ctx, dyn.M, dyn.M @ state.v, parts, impulses, 1.0)
+        report.impulses = impulses.contacts
+        report.certificates += impulses.certificates
+        return v
+
+    def _gauss(
+        self, level: Level, q: np.ndarray, v: np.ndarray, M: np.ndarray, f: np.ndarray,
+        x_free: np.ndarray, contacts: list[Contact], report: StepReport, scale: float,
+    ) -> np.ndarray:
+        """Minimise the Gauss functional of ``level``; record the reactions in ``report``."""
+        ctx = self._context(level, q, v, x_free, contacts)
+        return self._solve(ctx, M, f, self._rows(ctx), report, scale)
+
+    def _context(self, level: Level, q: np.ndarray, v: np.ndarray, x_free: np.ndarray, contacts: list[Contact]) -> Context:
+        return Context(self.model, self.data, q, v, x_free, contacts, self.options, level)
+
+    def _rows(self, ctx: Context) -> list[tuple[ConstraintModule, Rows]]:
+        parts = [(module, module.rows(ctx)) for module in self.modules]
+        return [(module, rows) for module, rows in parts if rows is not None]
+
+    def _solve(
+        self, ctx: Context, M: np.ndarray, f: np.ndarray,
+        parts: list[tuple[ConstraintModule, Rows]], report: StepReport, scale: float,
+    ) -> np.ndarray:
+        """Solve, re-posing the rows while a module's fixed-point iteration asks for it."""
+        for _ in range(self.options.friction_iterations):
+            clock = time.perf_counter()
+            if not parts:
+                _lap(report, "assembly", clock)
+                return ctx.x_free
+            problem = assemble(M, f, parts)
+            clock = _lap(report, "assembly", clock)
+            solution = self.solvers[ctx.level].solve(problem)
+            clock = _lap(report, "solve", clock)
+            report.certificates.append(solution.certificate)
+            refine = False
+            for module, rows, rows_slice in problem.blocks:
+                multipliers = (solution.lambda_eq if rows.equality else solution.lambda_in)[rows_slice]
+                refine |= module.refine(ctx, rows, solution.x, multipliers)
+            if not refine:
+                break
+            parts = self._rows(ctx)
+        self._record(problem, solution, report, scale)
+        return solution.x
+
+    @staticmethod
+    def _record(problem, solution, report: StepReport, scale: float) -> None:
+        for module, rows, rows_slice in problem.blocks:
+            multipliers = (solution.lambda_eq if rows.equality else solution.lambda_in)[rows_slice]
+            reactions = module.reactions(rows, multipliers, scale)
+            getattr(report, {"contact": "contacts", "limit": "limits", "bilateral": "bilaterals"}[module.name]).extend(reactions)
+            if module.name == "contact":
+                report.contact_jacobian = np.vstack([p.J for p in rows.data])
+
+
+def _lap(report: StepReport, stage: str, start: float) -> float:
+    now = time.perf_counter()
+    report.timings[stage] = report.timings.get(stage, 0.0) + now - start
+    return now
