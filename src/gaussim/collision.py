@@ -10,9 +10,11 @@ import pinocchio as pin
 
 from .scene import Ground, Scene
 
+# Surface points within this distance of the support plane belong to a contact patch [m].
+PATCH_TOLERANCE = 1e-6
 # A contact patch narrower than this is one point (the rounded foot of a mesh hull touches on a
-# tiny facet; several points there would only add redundant rows) [m].
-PATCH_MIN_EXTENT = 1e-3
+# small facet; several points there would only add redundant rows) [m].
+PATCH_MIN_EXTENT = 5e-3
 
 
 @dataclass
@@ -77,6 +79,7 @@ class ContactDetector:
         self.request.security_margin = margin
         self.request.num_max_contacts = 1
         self.patch_request = coal.ContactPatchRequest()
+        self.patch_request.setPatchTolerance(PATCH_TOLERANCE)
         self.result = coal.CollisionResult()
         self.patch_result = coal.ContactPatchResult(self.patch_request)
 

@@ -119,7 +119,7 @@ def load_robot(
             f"robot '{name}' has a {base} base in example-robot-data; to change it, load its "
             f"URDF by path: load_robot('{loader.df_path}', floating_base={floating_base})"
         )
-    configurations = {k: np.array(v) for k, v in model.referenceConfigurations.items()}
+    configurations = {e.key(): np.array(e.data()) for e in model.referenceConfigurations}
     return _finish(
         str(name),
         model,

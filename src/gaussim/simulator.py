@@ -33,6 +33,8 @@ from .state import State
 
 # A velocity violating an impulse-level row by more than this is an impact [m/s or rad/s].
 IMPACT_TOLERANCE = 1e-9
+# How far from 1 the norm of a configuration's quaternion may be.
+UNIT_TOLERANCE = 1e-6
 
 
 class Simulator:
@@ -86,13 +88,14 @@ class Simulator:
         for j in range(1, model.njoints):
             joint = model.joints[j]
             if joint.nq > joint.nv:  # a unit quaternion or (cos, sin) pair ends the joint's q
-                part = slice(joint.idx_q + joint.nv - 1, joint.idx_q + joint.nq)
+                planar = any(k in joint.shortname() for k in ("RUB", "Planar"))
+                what, size = ("(cos, sin) pair", 2) if planar else ("quaternion (x, y, z, w)", 4)
+                part = slice(joint.idx_q + joint.nq - size, joint.idx_q + joint.nq)
                 norm = float(np.linalg.norm(state.q[part]))
-                if abs(norm - 1.0) > 1e-6:
+                if abs(norm - 1.0) > UNIT_TOLERANCE:
                     raise InvalidState(
                         f"q[{part.start}:{part.stop}] of joint '{model.names[j]}' must be a unit "
-                        f"{'quaternion (x, y, z, w)' if joint.nq - joint.nv == 1 and joint.nq > 2 else 'vector'}, "
-                        f"got norm {norm:.9g}; normalize it (pinocchio.normalize)"
+                        f"{what}, got norm {norm:.9g}; normalize it (pinocchio.normalize)"
                     )
 
     def _torque(self, tau: np.ndarray | None) -> np.ndarray:

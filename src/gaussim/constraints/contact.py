@@ -7,8 +7,12 @@ Each contact point with normal n, point Jacobian J (3, nv) and friction mu contr
 where d_i are k unit tangent directions: the multipliers lambda_i >= 0 give the force
 sum_i lambda_i (n + mu d_i), which lies in the friction pyramid inscribed in the Coulomb cone.
 (The rows say that the contact velocity lies in the dual of that pyramid: Anitescu's relaxation.)
-b is the stabilised normal bound, s the De Saxce shift mu |u_t| that removes the relaxation's
-lift-off while sliding ("accurate" and "exact" modes), and d_1 is turned against the tangential
+b is the stabilised normal bound, s the De Saxce shift mu |u_t+| that removes the relaxation's
+lift-off while sliding. The shift needs the slip u_t+ of the solution: it starts from the current
+slip and, while a contact slides, the QP is solved again with the slip of the last solution until
+it moves less than SLIP_TOLERANCE[mode] (a lagged slip lets a decelerating contact sink by
+mu (|u_t| - |u_t+|) dt per step; each pass divides that error by about 1 + 1/mu^2).
+d_1 is turned against the tangential
 velocity the contact would have without friction, so a sliding or pulled contact sees the full
 cone, not a facet of the pyramid. With mu = 0 a contact is the single row n^T J x >= b.
 
@@ -30,8 +34,10 @@ from .base import Context, Rows, is_active, stabilised_bound
 
 # Below this tangential speed a contact sticks at the acceleration level [m/s].
 SLIP_SPEED = 1e-4
-# Fixed-point iterations stop when the lagged slip speed or normal force moves less than this.
-REFINE_TOLERANCE = 1e-8
+# Fixed-point iterations on the slip stop when it moves less than this [m/s].
+SLIP_TOLERANCE = {"accurate": 1e-4, "exact": 1e-9}
+# Acceleration-level sliding friction iterations stop when the normal force moves less than this [N].
+NORMAL_FORCE_TOLERANCE = 1e-8
 
 
 @dataclass
@@ -108,12 +114,11 @@ class ContactModule:
             J = point_jacobian(ctx.model, ctx.data, contact.joint, contact.point)
             u = J @ ctx.v
             u_n = float(u @ n)
-            u_t = u - u_n * n
+            u_t = _tangential(u, n)
             if ctx.level != "velocity" and not is_active(ctx, np.array([contact.gap]), np.array([u_n]), 0.0)[0]:
                 continue
             drift = point_drift(ctx.model, ctx.data, contact.joint, contact.point) if acceleration else np.zeros(3)
-            exact = self.mode == "exact" and not acceleration
-            slip = ctx.lagged.get((contact.name, "slip"), u_t) if exact else u_t
+            slip = u_t if acceleration else ctx.lagged.get((contact.name, "slip"), u_t)
             slip_speed = float(np.linalg.norm(slip))
             friction = None
             if mu == 0.0:
@@ -162,13 +167,20 @@ class ContactModule:
             start += len(p.generators)
             c = p.contact
             if p.friction is not None:
-                key, value = (c.name, "normal"), lam[0]
-            elif self.mode == "exact" and ctx.level != "acceleration" and c.friction > 0:
-                u = p.J @ x
-                key, value = (c.name, "slip"), u - (u @ c.normal) * c.normal
+                key, value, previous = (c.name, "normal"), lam[0], ctx.lagged.get((c.name, "normal"), 0.0)
+                tolerance = NORMAL_FORCE_TOLERANCE
+            elif self.mode != "pyramid" and ctx.level != "acceleration" and c.friction > 0:
+                key, value = (c.name, "slip"), _tangential(p.J @ x, c.normal)
+                previous = ctx.lagged.get(key, _tangential(p.J @ ctx.v, c.normal))
+                if max(np.linalg.norm(previous), np.linalg.norm(value)) <= SLIP_SPEED:
+                    continue  # a sticking contact has no shift to refine
+                tolerance = SLIP_TOLERANCE[self.mode]
             else:
                 continue
-            previous = ctx.lagged.get(key)
-            changed |= previous is None or float(np.max(np.abs(value - previous))) > REFINE_TOLERANCE
+            changed |= float(np.max(np.abs(value - previous))) > tolerance
             ctx.lagged[key] = value
         return changed
+
+
+def _tangential(u: np.ndarray, n: np.ndarray) -> np.ndarray:
+    return u - (u @ n) * n
