@@ -19,7 +19,8 @@ cone, not a facet of the pyramid. With mu = 0 a contact is the single row n^T J 
 At the acceleration level a sliding contact (|u_t| > SLIP_SPEED) cannot be posed as a QP row set
 (its force is on the cone's edge opposite the slip, which couples to the normal force): it keeps
 the normal row and receives the friction force -mu lambda_n u_t/|u_t| outside the QP, with lambda_n
-iterated to a fixed point (``Options.friction_iterations``).
+iterated to a fixed point (``Options.friction_iterations``); a contact whose slip that force would
+reverse within the step sticks instead.
 """
 
 from __future__ import annotations
@@ -123,7 +124,7 @@ class ContactModule:
             friction = None
             if mu == 0.0:
                 generators = n[None, :]
-            elif acceleration and slip_speed > SLIP_SPEED:
+            elif acceleration and slip_speed > SLIP_SPEED and (contact.name, "stops") not in ctx.lagged:
                 generators = n[None, :]
                 normal_force = float(ctx.lagged.get((contact.name, "normal"), 0.0))
                 friction = -mu * normal_force * slip / slip_speed
@@ -167,6 +168,11 @@ class ContactModule:
             start += len(p.generators)
             c = p.contact
             if p.friction is not None:
+                u_next = _tangential(p.J @ (ctx.v + ctx.options.dt * x), c.normal)
+                if u_next @ p.friction > 0:  # friction would reverse the slip: the contact sticks
+                    ctx.lagged[(c.name, "stops")] = np.ones(1)
+                    changed = True
+                    continue
                 key, value, previous = (c.name, "normal"), lam[0], ctx.lagged.get((c.name, "normal"), 0.0)
                 tolerance = NORMAL_FORCE_TOLERANCE
             elif self.mode != "pyramid" and ctx.level != "acceleration" and c.friction > 0:
