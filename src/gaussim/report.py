@@ -23,7 +23,8 @@ class StepReport:
         contacts: force at each contact point [N], world frame.
         limits: joint-limit torques [N m] (forces [N] for prismatic joints).
         bilaterals: bilateral reaction wrenches.
-        impulses: contact impulses [N s] of an impact (acceleration scheme only).
+        impact: the reactions of an impact resolved at the start of the step, as impulses
+            ([N s], [N m s]) (acceleration scheme only), or None.
         certificates: one per QP solved this step (fixed-point iterations and impacts add QPs).
         timings: wall time per stage [s]: dynamics, collision, assembly, solve, integrate.
         contact_jacobian: stacked 3-row point Jacobians of the contacts, shape (3 m, nv).
@@ -33,7 +34,7 @@ class StepReport:
     contacts: list[ContactForce] = field(default_factory=list)
     limits: list[LimitReaction] = field(default_factory=list)
     bilaterals: list[BilateralReaction] = field(default_factory=list)
-    impulses: list[ContactForce] = field(default_factory=list)
+    impact: StepReport | None = None
     certificates: list[Certificate] = field(default_factory=list)
     timings: dict[str, float] = field(default_factory=dict)
     contact_jacobian: np.ndarray | None = None

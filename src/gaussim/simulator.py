@@ -157,10 +157,9 @@ class Simulator:
         parts = self._rows(ctx)
         if not any(np.any(rows.J @ state.v < rows.bound - IMPACT_TOLERANCE) for _, rows in parts if not rows.equality):
             return state.v
-        impulses = StepReport(state.t)
-        v = self._solve(ctx, dyn.M, dyn.M @ state.v, parts, impulses, 1.0)
-        report.impulses = impulses.contacts
-        report.certificates += impulses.certificates
+        report.impact = StepReport(state.t)
+        v = self._solve(ctx, dyn.M, dyn.M @ state.v, parts, report.impact, 1.0)
+        report.certificates += report.impact.certificates
         return v
 
     def _gauss(

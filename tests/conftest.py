@@ -1,0 +1,46 @@
+"""Shared fixtures: robots are loaded once per test session (they are immutable)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import gaussim
+
+G = 9.81
+
+
+@pytest.fixture(scope="session")
+def ball() -> gaussim.Robot:
+    return gaussim.load_robot("ball", floating_base=True)
+
+
+@pytest.fixture(scope="session")
+def box() -> gaussim.Robot:
+    return gaussim.load_robot("box", floating_base=True)
+
+
+@pytest.fixture(scope="session")
+def pendulum() -> gaussim.Robot:
+    return gaussim.load_robot("pendulum")
+
+
+@pytest.fixture(scope="session")
+def solo12() -> gaussim.Robot:
+    return gaussim.load_robot("solo12")
+
+
+def at_height(robot: gaussim.Robot, z: float) -> np.ndarray:
+    """Neutral configuration of a floating robot with its base at height z [m]."""
+    q = robot.neutral()
+    q[2] = z
+    return q
+
+
+def run(sim: gaussim.Simulator, state: gaussim.State, steps: int, tau=None, each=None) -> gaussim.State:
+    """Step ``steps`` times, calling ``each(state)`` after every step."""
+    for _ in range(steps):
+        state = sim.step(state, tau(state) if callable(tau) else tau)
+        if each is not None:
+            each(state)
+    return state
