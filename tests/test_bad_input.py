@@ -1,0 +1,119 @@
+"""Every bad input gets a clear error that names the cause (one test per class)."""
+
+import numpy as np
+import pytest
+
+import gaussim
+
+from .conftest import at_height
+
+
+@pytest.fixture
+def sim(ball):
+    return gaussim.Simulator(gaussim.Scene(ball, ground=gaussim.Ground()))
+
+
+def test_wrong_shapes(sim, ball):
+    with pytest.raises(gaussim.InvalidState, match=r"q must have shape \(7,\)"):
+        sim.reset(np.zeros(3))
+    with pytest.raises(gaussim.InvalidState, match=r"v must have shape \(6,\)"):
+        sim.reset(at_height(ball, 1.0), np.zeros(7))
+    state = sim.reset(at_height(ball, 1.0))
+    with pytest.raises(gaussim.InvalidState, match=r"tau must have shape \(6,\) or \(0,\)"):
+        sim.step(state, np.zeros(2))
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_non_finite_state_and_torque(sim, ball, bad):
+    q = at_height(ball, 1.0)
+    q[0] = bad
+    with pytest.raises(gaussim.InvalidState, match=r"q has non-finite entries at \[0\]"):
+        sim.reset(q)
+    v = np.zeros(6)
+    v[4] = bad
+    with pytest.raises(gaussim.InvalidState, match=r"v has non-finite entries at \[4\]"):
+        sim.reset(at_height(ball, 1.0), v)
+    tau = np.zeros(6)
+    tau[2] = bad
+    with pytest.raises(gaussim.InvalidState, match=r"tau has non-finite entries at \[2\]"):
+        sim.step(sim.reset(at_height(ball, 1.0)), tau)
+
+
+def test_non_unit_quaternion(sim, ball):
+    q = at_height(ball, 1.0)
+    q[3:7] = [0, 0, 0, 2.0]
+    with pytest.raises(gaussim.InvalidState, match=r"q\[3:7\] of joint 'root_joint' must be a unit quaternion"):
+        sim.reset(q)
+
+
+def test_unknown_robot_lists_choices():
+    with pytest.raises(gaussim.RobotNotFound, match=r"no robot 'solo13'.*known names:.*solo12"):
+        gaussim.load_robot("solo13")
+    with pytest.raises(gaussim.RobotNotFound, match=r"no robot 'missing.urdf'"):
+        gaussim.load_robot("missing.urdf")
+
+
+def test_malformed_urdf_names_the_file(tmp_path):
+    path = tmp_path / "broken.urdf"
+    path.write_text("<robot name='x'><link name='a'>")
+    with pytest.raises(gaussim.InvalidRobot, match="broken.urdf"):
+        gaussim.load_robot(path)
+
+
+def test_unknown_frame_and_geometry_list_choices(ball, solo12):
+    with pytest.raises(gaussim.FrameNotFound, match=r"no frame 'FL_TOE'.*FL_FOOT"):
+        gaussim.Scene(solo12, bilaterals=[gaussim.Anchor("FL_TOE", (0, 0, 0))])
+    with pytest.raises(gaussim.GeometryNotFound, match=r"no collision geometry 'FL_TOE_0'.*FL_FOOT_0"):
+        gaussim.Scene(solo12, ground=gaussim.Ground(), contacts=[("FL_TOE_0", "ground")])
+    with pytest.raises(gaussim.GeometryNotFound, match=r"no obstacle 'table'.*ground"):
+        gaussim.Scene(ball, ground=gaussim.Ground(), contacts=[("ball_0", "table")])
+    with pytest.raises(gaussim.FrameNotFound, match=r"no configuration 'sitting'.*standing"):
+        solo12.configuration("sitting")
+
+
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [("dt", -1e-3), ("dt", 0.0), ("dt", np.nan), ("scheme", "implicit"), ("friction_mode", "cone"),
+     ("friction_facets", 2), ("friction_facets", 4.0), ("stabilisation", 0.0), ("eps_abs", -1.0),
+     ("max_iter", 0), ("on_failure", "ignore"), ("contact_margin", -1.0)],
+)
+def test_bad_options_name_the_field(field, value):
+    with pytest.raises(gaussim.InvalidOptions, match=rf"^{field}: "):
+        gaussim.Options(**{field: value})
+
+
+def test_unknown_option_lists_known():
+    with pytest.raises(gaussim.InvalidOptions, match=r"unknown option; known:.*dt"):
+        gaussim.Options().replace(timestep=1e-3)
+
+
+@pytest.mark.parametrize(("field", "kwargs"), [("ground.friction", {"friction": -0.1}),
+                                                ("ground.restitution", {"restitution": 1.5}),
+                                                ("ground.normal", {"normal": (0, 0, 0)})])
+def test_bad_materials_name_the_field(field, kwargs):
+    with pytest.raises(gaussim.InvalidOptions, match=rf"^{field}: "):
+        gaussim.Ground(**kwargs)
+
+
+def test_non_convergence_is_reported_or_raised(box):
+    scene = gaussim.Scene(box, ground=gaussim.Ground())
+    strict = gaussim.Simulator(scene, gaussim.Options(max_iter=1))
+    q = at_height(box, 0.05)
+    with pytest.raises(gaussim.SolverError, match="did not converge: PROXQP_MAX_ITER_REACHED"):
+        for _ in range(5):
+            strict.step(strict.reset(q))
+    lenient = gaussim.Simulator(scene, gaussim.Options(max_iter=1, on_failure="report"))
+    state = lenient.step(lenient.reset(q))
+    assert not lenient.last_step.converged
+    assert lenient.last_step.certificates[-1].status == "PROXQP_MAX_ITER_REACHED"
+    assert np.all(np.isfinite(state.q))
+
+
+def test_infeasible_constraints_name_the_rows(ball):
+    """A ball anchored 0.5 m below the ground: both cannot hold."""
+    scene = gaussim.Scene(ball, ground=gaussim.Ground(), bilaterals=[gaussim.Anchor("ball", (0, 0, -0.5))])
+    sim = gaussim.Simulator(scene)
+    with pytest.raises(gaussim.InfeasibleConstraints) as info:
+        sim.step(sim.reset(at_height(ball, 0.1)))
+    assert any(row.startswith("contact ball_0/ground") for row in info.value.rows)
+    assert any(row.startswith("anchor ball") for row in info.value.rows)
