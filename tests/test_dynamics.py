@@ -3,40 +3,37 @@
 import numpy as np
 import pinocchio as pin
 
-from gaussim.dynamics import compute_dynamics, point_drift, point_jacobian
+from gaussim.dynamics import compute_dynamics, point_drifts, point_jacobians
 
 FD_STEP = 1e-7
 FD_TOLERANCE = 1e-5
 
 
-def _point(model, data, q, joint, local):
-    pin.forwardKinematics(model, data, q)
-    return data.oMi[joint].act(local)
-
-
-def test_point_jacobian_and_drift_match_finite_differences(solo12):
+def test_point_jacobians_and_drifts_match_finite_differences(solo12):
     model = solo12.model
     data = model.createData()
     rng = np.random.default_rng(3)
     q = solo12.configuration("standing")
     v = rng.normal(size=model.nv)
-    joint = model.getJointId("FL_KFE")
-    local = np.array([0.01, -0.02, -0.16])
-    compute_dynamics(model, data, q, v, np.zeros(model.nv), drifts=True)
-    p = data.oMi[joint].act(local)
-    J = point_jacobian(model, data, joint, p)
-    drift = point_drift(model, data, joint, p)
+    joints = [model.getJointId("FL_KFE"), model.getJointId("HR_HAA"), 1]
+    local = rng.normal(scale=0.1, size=(3, 3))
+
+    def points(q_):
+        pin.forwardKinematics(model, scratch, q_)
+        return np.array([scratch.oMi[j].act(p) for j, p in zip(joints, local)])
 
     scratch = model.createData()
+    compute_dynamics(model, data, q, v, np.zeros(model.nv), drifts=True)
+    p = points(q)
+    J = point_jacobians(model, data, joints, p)
+    drift = point_drifts(model, data, joints, p)
+    assert J.shape == (3, 3, model.nv) and drift.shape == (3, 3)
 
-    def velocity(q_, v_):
-        return (_point(model, scratch, pin.integrate(model, q_, FD_STEP * v_), joint, local) - _point(model, scratch, q_, joint, local)) / FD_STEP
-
-    np.testing.assert_allclose(J @ v, velocity(q, v), atol=FD_TOLERANCE)
-    # Jdot v: derivative of the point velocity J(q) v along the motion, at constant v
     q_next = pin.integrate(model, q, FD_STEP * v)
+    np.testing.assert_allclose(J @ v, (points(q_next) - p) / FD_STEP, atol=FD_TOLERANCE)
+    # Jdot v: derivative of the body-point velocity J(q) v along the motion, at constant v
     compute_dynamics(model, data, q_next, v, np.zeros(model.nv), drifts=False)
-    J_next = point_jacobian(model, data, joint, data.oMi[joint].act(local))
+    J_next = point_jacobians(model, data, joints, points(q_next))
     np.testing.assert_allclose(drift, (J_next @ v - J @ v) / FD_STEP, atol=FD_TOLERANCE * 10)
 
 

@@ -36,7 +36,7 @@ class GaussProblem:
 
     def labels(self, equality: bool) -> list[str]:
         """Row names of the equality or inequality rows, in order."""
-        return [label for _, rows, _ in self.blocks if rows.equality == equality for label in rows.labels]
+        return [label for _, rows, _ in self.blocks if rows.equality == equality for label in rows.labels()]
 
 
 def assemble(H: np.ndarray, f: np.ndarray, parts: list[tuple[ConstraintModule, Rows]]) -> GaussProblem:

@@ -209,7 +209,7 @@ class Simulator:
             reactions = module.reactions(rows, multipliers, scale)
             getattr(report, {"contact": "contacts", "limit": "limits", "bilateral": "bilaterals"}[module.name]).extend(reactions)
             if module.name == "contact":
-                report.contact_jacobian = np.vstack([p.J for p in rows.data])
+                report.contact_jacobian = rows.data.J.reshape(-1, rows.data.J.shape[-1])
 
 
 def _lap(report: StepReport, stage: str, start: float) -> float:

@@ -12,6 +12,7 @@ level). The QP multipliers of those rows are the reactions (impulses at the firs
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from collections.abc import Callable
 from typing import Literal, Protocol
 
 import numpy as np
@@ -31,7 +32,7 @@ class Rows:
         J: row Jacobians, shape (m, nv).
         bound: right-hand sides, shape (m,).
         equality: True for bilateral rows.
-        labels: one name per row, used to report infeasibility.
+        labels: returns one name per row; called only to report infeasibility.
         data: module-specific bookkeeping used to turn multipliers into reactions.
         force: generalized force the module applies outside the QP, shape (nv,), or None
             (sliding friction at the acceleration level).
@@ -40,7 +41,7 @@ class Rows:
     J: np.ndarray
     bound: np.ndarray
     equality: bool
-    labels: list[str]
+    labels: Callable[[], list[str]]
     data: object = None
     force: np.ndarray | None = None
 

@@ -78,7 +78,7 @@ class BilateralModule:
             bounds.append(stabilised_bound(ctx, phi, J @ ctx.v, (d_a - d_b)[:m], False))
             J_rows.append(J)
             labels += [f"{name} row {i}" for i in range(m)]
-        return Rows(np.vstack(J_rows), np.concatenate(bounds), True, labels, [len(b) for b in bounds])
+        return Rows(np.vstack(J_rows), np.concatenate(bounds), True, lambda: labels, [len(b) for b in bounds])
 
     def reactions(self, rows: Rows, multipliers: np.ndarray, scale: float) -> list[BilateralReaction]:
         reports, start = [], 0

@@ -7,14 +7,14 @@ Each contact point with normal n, point Jacobian J (3, nv) and friction mu contr
 where d_i are k unit tangent directions: the multipliers lambda_i >= 0 give the force
 sum_i lambda_i (n + mu d_i), which lies in the friction pyramid inscribed in the Coulomb cone.
 (The rows say that the contact velocity lies in the dual of that pyramid: Anitescu's relaxation.)
-b is the stabilised normal bound, s the De Saxce shift mu |u_t+| that removes the relaxation's
-lift-off while sliding. The shift needs the slip u_t+ of the solution: it starts from the current
-slip and, while a contact slides, the QP is solved again with the slip of the last solution until
-it moves less than SLIP_TOLERANCE[mode] (a lagged slip lets a decelerating contact sink by
-mu (|u_t| - |u_t+|) dt per step; each pass divides that error by about 1 + 1/mu^2).
-d_1 is turned against the tangential
-velocity the contact would have without friction, so a sliding or pulled contact sees the full
-cone, not a facet of the pyramid. With mu = 0 a contact is the single row n^T J x >= b.
+b is the stabilised normal bound (with restitution), s the De Saxce shift mu |u_t+| that removes
+the relaxation's lift-off while sliding. The shift needs the slip u_t+ of the solution: it starts
+from the current slip and, while a contact slides, the QP is solved again with the slip of the last
+solution until it moves less than SLIP_TOLERANCE[mode] (a lagged slip lets a decelerating contact
+sink by mu (|u_t| - |u_t+|) dt per step; each pass divides that error by about 1 + 1/mu^2).
+d_1 is turned against the tangential velocity the contact would have without friction, so a
+sliding or pulled contact sees the full cone, not a facet of the pyramid ("pyramid" mode keeps a
+fixed basis and no shift). With mu = 0 a contact is the single row n^T J x >= b.
 
 At the acceleration level a sliding contact (|u_t| > SLIP_SPEED) cannot be posed as a QP row set
 (its force is on the cone's edge opposite the slip, which couples to the normal force): it keeps
@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..collision import Contact
-from ..dynamics import point_drift, point_jacobian
+from ..dynamics import cross, point_drifts, point_jacobians
 from .base import Context, Rows, is_active, stabilised_bound
 
 # Below this tangential speed a contact sticks at the acceleration level [m/s].
@@ -75,25 +75,52 @@ class ContactForce:
 
 
 @dataclass
-class _Point:
-    contact: Contact
-    J: np.ndarray  # (3, nv)
-    generators: np.ndarray  # (m, 3): row i reads generators[i] @ J x >= bound[i]
-    friction: np.ndarray | None  # friction force applied outside the QP (sliding, acceleration level)
+class _Batch:
+    """The contacts that produced rows, and what turns multipliers back into forces.
+
+    Attributes:
+        contacts: m contacts.
+        J: point Jacobians, shape (m, 3, nv).
+        generators: force directions, shape (m, k, 3); row (i, j) reads generators[i, j] @ J[i] x >= bound.
+        valid: which (contact, facet) pairs are rows, shape (m, k).
+        friction: friction force applied outside the QP, shape (m, 3) (acceleration-level sliding).
+        sliding: which contacts get that force, shape (m,).
+        slipping: which contacts iterate the De Saxce shift, shape (m,).
+    """
+
+    contacts: list[Contact]
+    J: np.ndarray
+    generators: np.ndarray
+    valid: np.ndarray
+    friction: np.ndarray
+    sliding: np.ndarray
+    slipping: np.ndarray
+
+    def multipliers(self, lam: np.ndarray) -> np.ndarray:
+        """Scatter the rows' multipliers into shape (m, k)."""
+        full = np.zeros(self.valid.shape)
+        full[self.valid] = lam
+        return full
+
+
+def _normalized(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    norm = np.linalg.norm(x, axis=-1)
+    return x / np.where(norm > 1e-12, norm, 1.0)[..., None], norm
 
 
 def _tangent_basis(n: np.ndarray, direction: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
-    """Unit tangents (t1, t2); t1 along ``direction`` projected on the tangent plane when it has one."""
+    """Unit tangents (t1, t2), shape (m, 3) each; t1 along ``direction`` projected on the tangent
+    plane where it has a component there, else a fixed axis."""
+    axis = np.eye(3)[np.argmin(np.abs(n), axis=1)]
+    t1, _ = _normalized(cross(n, axis))
     if direction is not None:
-        t1 = direction - (direction @ n) * n
-        norm = np.linalg.norm(t1)
-        if norm > 1e-12:
-            t1 = t1 / norm
-            return t1, np.cross(n, t1)
-    axis = np.eye(3)[int(np.argmin(np.abs(n)))]
-    t1 = np.cross(n, axis)
-    t1 /= np.linalg.norm(t1)
-    return t1, np.cross(n, t1)
+        projected, norm = _normalized(direction - np.sum(direction * n, axis=1)[:, None] * n)
+        t1 = np.where((norm > 1e-12)[:, None], projected, t1)
+    return t1, cross(n, t1)
+
+
+def _tangential(u: np.ndarray, n: np.ndarray) -> np.ndarray:
+    return u - np.sum(u * n, axis=-1)[..., None] * n
 
 
 class ContactModule:
@@ -104,89 +131,95 @@ class ContactModule:
     def __init__(self, facets: int, mode: str) -> None:
         self.mode = mode
         angles = 2.0 * np.pi * np.arange(facets) / facets
-        self.cos, self.sin = np.cos(angles), np.sin(angles)
+        self.cos, self.sin = np.cos(angles)[None, :, None], np.sin(angles)[None, :, None]
 
     def rows(self, ctx: Context) -> Rows | None:
-        points, bounds = [], []
-        force = np.zeros(ctx.model.nv)
-        acceleration = ctx.level == "acceleration"
-        for contact in ctx.contacts:
-            n, mu = contact.normal, contact.friction
-            J = point_jacobian(ctx.model, ctx.data, contact.joint, contact.point)
-            u = J @ ctx.v
-            u_n = float(u @ n)
-            u_t = _tangential(u, n)
-            if ctx.level != "velocity" and not is_active(ctx, np.array([contact.gap]), np.array([u_n]), 0.0)[0]:
-                continue
-            drift = point_drift(ctx.model, ctx.data, contact.joint, contact.point) if acceleration else np.zeros(3)
-            slip = u_t if acceleration else ctx.lagged.get((contact.name, "slip"), u_t)
-            slip_speed = float(np.linalg.norm(slip))
-            friction = None
-            if mu == 0.0:
-                generators = n[None, :]
-            elif acceleration and slip_speed > SLIP_SPEED and (contact.name, "stops") not in ctx.lagged:
-                generators = n[None, :]
-                normal_force = float(ctx.lagged.get((contact.name, "normal"), 0.0))
-                friction = -mu * normal_force * slip / slip_speed
-                force += J.T @ friction
-            else:
-                # friction opposes the tangential velocity the contact would have without it
-                tendency = J @ ctx.x_free + drift if self.mode != "pyramid" else None
-                t1, t2 = _tangent_basis(n, None if tendency is None else -tendency)
-                generators = n + mu * (np.outer(self.cos, t1) + np.outer(self.sin, t2))
-            rate = generators @ u
-            bound = stabilised_bound(ctx, np.full(len(generators), contact.gap), rate, generators @ drift, True)
-            if ctx.level != "acceleration":
-                if -u_n > ctx.options.restitution_threshold and contact.restitution > 0:
-                    bound = np.maximum(bound, -contact.restitution * u_n)
-                if self.mode != "pyramid" and mu > 0:
-                    bound = bound - mu * slip_speed  # De Saxce: no lift-off while sliding
-            points.append(_Point(contact, J, generators, friction))
-            bounds.append(bound)
-        if not points:
+        contacts = ctx.contacts
+        if not contacts:
             return None
-        labels = [f"contact {p.contact.name} row {i}" for p in points for i in range(len(p.generators))]
-        J_rows = np.vstack([p.generators @ p.J for p in points])
-        return Rows(J_rows, np.concatenate(bounds), False, labels, points, force if force.any() else None)
+        model, data, options = ctx.model, ctx.data, ctx.options
+        acceleration = ctx.level == "acceleration"
+        n = np.array([c.normal for c in contacts])
+        points = np.array([c.point for c in contacts])
+        J = point_jacobians(model, data, [c.joint for c in contacts], points)
+        u = J @ ctx.v
+        u_n = np.sum(u * n, axis=1)
+        gap = np.array([c.gap for c in contacts])
+        if ctx.level != "velocity":
+            keep = is_active(ctx, gap, u_n, 0.0)
+            if not keep.any():
+                return None
+            contacts = [c for c, k in zip(contacts, keep) if k]
+            n, points, J, u, u_n, gap = n[keep], points[keep], J[keep], u[keep], u_n[keep], gap[keep]
+        mu = np.array([c.friction for c in contacts])
+        u_t = _tangential(u, n)
+        drift = point_drifts(model, data, [c.joint for c in contacts], points) if acceleration else np.zeros_like(u)
+        slip = u_t if acceleration else np.array([ctx.lagged.get((c.name, "slip"), s) for c, s in zip(contacts, u_t)])
+        slip_direction, slip_speed = _normalized(slip)
+        sliding = acceleration & (slip_speed > SLIP_SPEED) & (mu > 0)
+        sliding &= np.array([(c.name, "stops") not in ctx.lagged for c in contacts])
+        pyramid = (mu > 0) & ~sliding
+
+        tendency = None if self.mode == "pyramid" else -(J @ ctx.x_free + drift)
+        t1, t2 = _tangent_basis(n, tendency)
+        generators = n[:, None, :] + mu[:, None, None] * (self.cos * t1[:, None, :] + self.sin * t2[:, None, :])
+        generators[~pyramid] = n[~pyramid, None, :]
+        valid = pyramid[:, None] | (np.arange(generators.shape[1]) == 0)[None, :]
+
+        rate = np.einsum("mki,mi->mk", generators, u)
+        phi = np.broadcast_to(gap[:, None], rate.shape)
+        bound = stabilised_bound(ctx, phi, rate, np.einsum("mki,mi->mk", generators, drift), True)
+        if not acceleration:
+            e = np.array([c.restitution for c in contacts])
+            bounce = (-u_n > options.restitution_threshold) & (e > 0)
+            bound = np.where(bounce[:, None], np.maximum(bound, (-e * u_n)[:, None]), bound)
+            if self.mode != "pyramid":
+                bound = bound - (mu * slip_speed)[:, None]  # De Saxce: no lift-off while sliding
+        normal_force = np.array([ctx.lagged.get((c.name, "normal"), 0.0) for c in contacts])
+        friction = np.where(sliding[:, None], -(mu * normal_force)[:, None] * slip_direction, 0.0)
+        batch = _Batch(
+            contacts, J, generators, valid, friction, sliding,
+            pyramid & ~acceleration & (self.mode != "pyramid"),
+        )
+        rows = np.einsum("mki,min->mkn", generators, J)[valid]
+
+        def labels() -> list[str]:
+            return [f"contact {contacts[i].name} row {j}" for i, j in zip(*np.nonzero(valid))]
+
+        force = np.einsum("min,mi->n", J, friction) if sliding.any() else None
+        return Rows(rows, bound[valid], False, labels, batch, force)
 
     def reactions(self, rows: Rows, multipliers: np.ndarray, scale: float) -> list[ContactForce]:
-        reports, start = [], 0
-        for p in rows.data:  # type: ignore[attr-defined]
-            lam = multipliers[start : start + len(p.generators)]
-            start += len(p.generators)
-            force = scale * (lam @ p.generators)
-            if p.friction is not None:
-                force = force + p.friction
-            c = p.contact
-            reports.append(ContactForce(c.name, c.geometry, c.obstacle, c.point, c.normal, c.gap, force))
-        return reports
+        b: _Batch = rows.data  # type: ignore[assignment]
+        forces = scale * np.einsum("mk,mki->mi", b.multipliers(multipliers), b.generators) + b.friction
+        return [
+            ContactForce(c.name, c.geometry, c.obstacle, c.point, c.normal, c.gap, f)
+            for c, f in zip(b.contacts, forces)
+        ]
 
     def refine(self, ctx: Context, rows: Rows, x: np.ndarray, multipliers: np.ndarray) -> bool:
-        changed, start = False, 0
-        for p in rows.data:  # type: ignore[attr-defined]
-            lam = multipliers[start : start + len(p.generators)]
-            start += len(p.generators)
-            c = p.contact
-            if p.friction is not None:
-                u_next = _tangential(p.J @ (ctx.v + ctx.options.dt * x), c.normal)
-                if u_next @ p.friction > 0:  # friction would reverse the slip: the contact sticks
-                    ctx.lagged[(c.name, "stops")] = np.ones(1)
+        b: _Batch = rows.data  # type: ignore[assignment]
+        changed = False
+        if b.sliding.any():
+            lam = b.multipliers(multipliers)[:, 0]
+            u_next = _tangential(b.J @ (ctx.v + ctx.options.dt * x), np.array([c.normal for c in b.contacts]))
+            for i in np.flatnonzero(b.sliding):
+                name = b.contacts[i].name
+                if u_next[i] @ b.friction[i] > 0:  # friction would reverse the slip: the contact sticks
+                    ctx.lagged[(name, "stops")] = np.ones(1)
                     changed = True
                     continue
-                key, value, previous = (c.name, "normal"), lam[0], ctx.lagged.get((c.name, "normal"), 0.0)
-                tolerance = NORMAL_FORCE_TOLERANCE
-            elif self.mode != "pyramid" and ctx.level != "acceleration" and c.friction > 0:
-                key, value = (c.name, "slip"), _tangential(p.J @ x, c.normal)
-                previous = ctx.lagged.get(key, _tangential(p.J @ ctx.v, c.normal))
-                if max(np.linalg.norm(previous), np.linalg.norm(value)) <= SLIP_SPEED:
+                changed |= abs(lam[i] - ctx.lagged.get((name, "normal"), 0.0)) > NORMAL_FORCE_TOLERANCE
+                ctx.lagged[(name, "normal")] = lam[i]
+        if b.slipping.any():
+            n = np.array([c.normal for c in b.contacts])
+            new = _tangential(b.J @ x, n)
+            old = _tangential(b.J @ ctx.v, n)
+            for i in np.flatnonzero(b.slipping):
+                key = (b.contacts[i].name, "slip")
+                previous = ctx.lagged.get(key, old[i])
+                if max(np.linalg.norm(previous), np.linalg.norm(new[i])) <= SLIP_SPEED:
                     continue  # a sticking contact has no shift to refine
-                tolerance = SLIP_TOLERANCE[self.mode]
-            else:
-                continue
-            changed |= float(np.max(np.abs(value - previous))) > tolerance
-            ctx.lagged[key] = value
+                changed |= float(np.max(np.abs(new[i] - previous))) > SLIP_TOLERANCE[self.mode]
+                ctx.lagged[key] = new[i]
         return changed
-
-
-def _tangential(u: np.ndarray, n: np.ndarray) -> np.ndarray:
-    return u - (u @ n) * n

@@ -56,7 +56,9 @@ class LimitModule:
         J = np.zeros((len(active), ctx.model.nv))
         J[np.arange(len(active)), self.idx_v[active]] = self.signs[active]
         bound = stabilised_bound(ctx, phi[active], rate[active], 0.0, True)
-        labels = [f"limit {self.labels[i][0]} {self.labels[i][1]}" for i in active]
+        def labels() -> list[str]:
+            return [f"limit {self.labels[i][0]} {self.labels[i][1]}" for i in active]
+
         return Rows(J, bound, False, labels, active)
 
     def reactions(self, rows: Rows, multipliers: np.ndarray, scale: float) -> list[LimitReaction]:
