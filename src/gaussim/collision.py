@@ -88,8 +88,8 @@ class ContactDetector:
         contacts: list[Contact] = []
         for pair in self.pairs:
             placement = data.oMi[pair.joint] * pair.local
-            if not self._near(pair, placement):
-                continue
+            if pair.obstacle_radius < np.inf and not self._near(pair, placement):
+                continue  # coal's half-space test is as cheap as this bounding-sphere test
             tf = coal.Transform3s(placement)
             self.result.clear()
             if not coal.collide(pair.shape, tf, pair.obstacle_shape, pair.obstacle_tf, self.request, self.result):
@@ -102,12 +102,11 @@ class ContactDetector:
                 pair.shape, tf, pair.obstacle_shape, pair.obstacle_tf, self.result,
                 self.patch_request, self.patch_result,
             )
-            if self.patch_result.numContactPatches():
-                patch = self.patch_result.getContactPatch(0)
+            if self.patch_result.numContactPatches() and (patch := self.patch_result.getContactPatch(0)).size() > 1:
                 # patch points lie midway between the surfaces: move them onto the robot's
-                middle = [np.asarray(patch.getPoint(i)) + normal * (gap / 2) for i in range(patch.size())]
-                if len(middle) > 1 and np.ptp(np.array(middle), axis=0).max() > PATCH_MIN_EXTENT:
-                    points = middle
+                middle = np.array([patch.getPoint(i) for i in range(patch.size())]) + normal * (gap / 2)
+                if np.ptp(middle, axis=0).max() > PATCH_MIN_EXTENT:
+                    points = list(middle)
             for k, point in enumerate(points):
                 contacts.append(
                     Contact(
@@ -119,10 +118,5 @@ class ContactDetector:
 
     def _near(self, pair: _Pair, placement: pin.SE3) -> bool:
         """Bounding-sphere test that skips the narrow phase for far pairs."""
-        center = placement.act(pair.center)
-        obstacle = pair.obstacle
-        if isinstance(obstacle, Ground):
-            distance = float(np.dot(obstacle.normal, center)) - obstacle.height
-            return distance - pair.radius <= self.margin
-        gap = np.linalg.norm(center - pair.obstacle_center) - pair.radius
+        gap = np.linalg.norm(placement.act(pair.center) - pair.obstacle_center) - pair.radius
         return gap - pair.obstacle_radius <= self.margin

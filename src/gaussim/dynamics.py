@@ -8,6 +8,7 @@ import numpy as np
 import pinocchio as pin
 
 LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+_IDENTITY = np.eye(3)
 
 
 @dataclass
@@ -45,26 +46,23 @@ def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
 
 
-def point_jacobians(model: pin.Model, data: pin.Data, joints: list[int], points: np.ndarray) -> np.ndarray:
-    """Jacobians of the world velocities of points fixed to ``joints``' bodies, shape (m, 3, nv).
+def point_placements(data: pin.Data, joints: list[int], points: np.ndarray) -> list[pin.SE3]:
+    """Placements, relative to their joints, of frames at world ``points`` (m, 3) [m] with world axes' orientation."""
+    return [pin.SE3(_IDENTITY, data.oMi[j].actInv(p)) for j, p in zip(joints, points)]
+
+
+def point_jacobians(model: pin.Model, data: pin.Data, joints: list[int], placements: list[pin.SE3]) -> np.ndarray:
+    """Jacobians of the world velocities of body points, shape (m, 3, nv).
 
     Args:
-        points: current world positions of the points, shape (m, 3) [m].
+        placements: the points as :func:`point_placements` gives them.
     """
-    J = np.array([pin.getJointJacobian(model, data, j, LWA) for j in joints])
-    r = points - np.array([data.oMi[j].translation for j in joints])
-    # v_p = v_o + w x r = v_o - r x w, column by column
-    return J[:, :3] - cross(r[:, None, :], J[:, 3:].transpose(0, 2, 1)).transpose(0, 2, 1)
+    return np.array([pin.getFrameJacobian(model, data, j, M, LWA)[:3] for j, M in zip(joints, placements)])
 
 
-def point_drifts(model: pin.Model, data: pin.Data, joints: list[int], points: np.ndarray) -> np.ndarray:
+def point_drifts(model: pin.Model, data: pin.Data, joints: list[int], placements: list[pin.SE3]) -> np.ndarray:
     """Classical accelerations of body points at zero joint acceleration (Jdot v), shape (m, 3) [m/s^2].
 
     Needs the spatial accelerations of a forward pass with a = 0 (``compute_dynamics(drifts=True)``).
     """
-    velocity = np.array([pin.getVelocity(model, data, j, LWA).vector for j in joints])
-    acceleration = np.array([pin.getAcceleration(model, data, j, LWA).vector for j in joints])
-    r = points - np.array([data.oMi[j].translation for j in joints])
-    w = velocity[:, 3:]
-    v_point = velocity[:, :3] + cross(w, r)
-    return acceleration[:, :3] + cross(acceleration[:, 3:], r) + cross(w, v_point)
+    return np.array([pin.getFrameClassicalAcceleration(model, data, j, M, LWA).linear for j, M in zip(joints, placements)])

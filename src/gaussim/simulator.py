@@ -52,6 +52,16 @@ class Simulator:
             level: GaussSolver(self.options) for level in ("velocity", "impulse", "acceleration")
         }
         self.last_step: StepReport | None = None
+        self._last_state: State | None = None  # the state the last step returned: already valid
+        # (slice, what) of each joint whose configuration ends with a unit quaternion or (cos, sin)
+        self._unit_parts = []
+        for j in range(1, self.model.njoints):
+            joint = self.model.joints[j]
+            if joint.nq > joint.nv:
+                planar = any(k in joint.shortname() for k in ("RUB", "Planar"))
+                what, size = ("(cos, sin) pair", 2) if planar else ("quaternion (x, y, z, w)", 4)
+                part = slice(joint.idx_q + joint.nq - size, joint.idx_q + joint.nq)
+                self._unit_parts.append((part, f"q[{part.start}:{part.stop}] of joint '{self.model.names[j]}' must be a unit {what}"))
 
     @staticmethod
     def _modules(scene: Scene, options: Options) -> list[ConstraintModule]:
@@ -85,18 +95,10 @@ class Simulator:
                 raise InvalidState(f"{name} has non-finite entries at {np.flatnonzero(~np.isfinite(arr)).tolist()}")
         if not np.isfinite(state.t):
             raise InvalidState(f"t must be finite, got {state.t}")
-        for j in range(1, model.njoints):
-            joint = model.joints[j]
-            if joint.nq > joint.nv:  # a unit quaternion or (cos, sin) pair ends the joint's q
-                planar = any(k in joint.shortname() for k in ("RUB", "Planar"))
-                what, size = ("(cos, sin) pair", 2) if planar else ("quaternion (x, y, z, w)", 4)
-                part = slice(joint.idx_q + joint.nq - size, joint.idx_q + joint.nq)
-                norm = float(np.linalg.norm(state.q[part]))
-                if abs(norm - 1.0) > UNIT_TOLERANCE:
-                    raise InvalidState(
-                        f"q[{part.start}:{part.stop}] of joint '{model.names[j]}' must be a unit "
-                        f"{what}, got norm {norm:.9g}; normalize it (pinocchio.normalize)"
-                    )
+        for part, message in self._unit_parts:
+            norm = float(np.linalg.norm(state.q[part]))
+            if abs(norm - 1.0) > UNIT_TOLERANCE:
+                raise InvalidState(f"{message}, got norm {norm:.9g}; normalize it (pinocchio.normalize)")
 
     def _torque(self, tau: np.ndarray | None) -> np.ndarray:
         nv = self.model.nv
@@ -108,7 +110,7 @@ class Simulator:
         if tau.shape != (nv,):
             hint = f" or ({nv - 6},) for the actuated joints" if self.scene.robot.floating else ""
             raise InvalidState(f"tau must have shape ({nv},){hint}, got {tau.shape}")
-        if not np.all(np.isfinite(tau)):
+        if not np.isfinite(tau).all():
             raise InvalidState(f"tau has non-finite entries at {np.flatnonzero(~np.isfinite(tau)).tolist()}")
         return tau
 
@@ -122,7 +124,8 @@ class Simulator:
             InfeasibleConstraints: the constraints admit no motion (the rows involved are named).
             SolverError: ProxQP failed (see ``Options.on_failure``) or the result is not finite.
         """
-        self._check_state(state)
+        if state is not self._last_state:
+            self._check_state(state)
         tau = self._torque(tau)
         o = self.options
         report = StepReport(state.t)
@@ -146,10 +149,11 @@ class Simulator:
         clock = time.perf_counter()
         q_next = integrate(self.model, state.q, v_next, o.dt)
         _lap(report, "integrate", clock)
-        if not (np.all(np.isfinite(q_next)) and np.all(np.isfinite(v_next))):
+        if not (np.isfinite(q_next).all() and np.isfinite(v_next).all()):
             raise SolverError(f"step at t={state.t:.6g} s produced a non-finite state", report)
         self.last_step = report
-        return State(state.t + o.dt, q_next, v_next)
+        self._last_state = State(state.t + o.dt, q_next, v_next)
+        return self._last_state
 
     def _impact(self, state: State, dyn: Dynamics, contacts: list[Contact], report: StepReport) -> np.ndarray:
         """The impulsive Gauss projection of v when v violates an impulse-level row, else v itself."""
@@ -168,7 +172,7 @@ class Simulator:
     ) -> np.ndarray:
         """Minimise the Gauss functional of ``level``; record the reactions in ``report``."""
         ctx = self._context(level, q, v, x_free, contacts)
-        return self._solve(ctx, M, f, self._rows(ctx), report, scale)
+        return self._solve(ctx, M, f, None, report, scale)
 
     def _context(self, level: Level, q: np.ndarray, v: np.ndarray, x_free: np.ndarray, contacts: list[Contact]) -> Context:
         return Context(self.model, self.data, q, v, x_free, contacts, self.options, level)
@@ -179,11 +183,12 @@ class Simulator:
 
     def _solve(
         self, ctx: Context, M: np.ndarray, f: np.ndarray,
-        parts: list[tuple[ConstraintModule, Rows]], report: StepReport, scale: float,
+        parts: list[tuple[ConstraintModule, Rows]] | None, report: StepReport, scale: float,
     ) -> np.ndarray:
         """Solve, re-posing the rows while a module's fixed-point iteration asks for it."""
         for _ in range(self.options.friction_iterations):
             clock = time.perf_counter()
+            parts = self._rows(ctx) if parts is None else parts
             if not parts:
                 _lap(report, "assembly", clock)
                 return ctx.x_free
@@ -198,7 +203,7 @@ class Simulator:
                 refine |= module.refine(ctx, rows, solution.x, multipliers)
             if not refine:
                 break
-            parts = self._rows(ctx)
+            parts = None
         self._record(problem, solution, report, scale)
         return solution.x
 

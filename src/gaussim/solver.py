@@ -104,7 +104,7 @@ class GaussSolver:
 
     def _check(self, problem: GaussProblem, solution: Solution) -> None:
         c = solution.certificate
-        finite = all(np.all(np.isfinite(a)) for a in (solution.x, solution.lambda_eq, solution.lambda_in))
+        finite = np.isfinite(solution.x).all() and np.isfinite(solution.lambda_eq).all() and np.isfinite(solution.lambda_in).all()
         if c.status in ("PROXQP_PRIMAL_INFEASIBLE", "PROXQP_SOLVED_CLOSEST_PRIMAL_FEASIBLE"):
             rows = self._violated(problem, solution.x)
             raise InfeasibleConstraints(

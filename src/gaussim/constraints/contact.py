@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..collision import Contact
-from ..dynamics import cross, point_drifts, point_jacobians
+from ..dynamics import cross, point_drifts, point_jacobians, point_placements
 from .base import Context, Rows, is_active, stabilised_bound
 
 # Below this tangential speed a contact sticks at the acceleration level [m/s].
@@ -86,6 +86,8 @@ class _Batch:
         friction: friction force applied outside the QP, shape (m, 3) (acceleration-level sliding).
         sliding: which contacts get that force, shape (m,).
         slipping: which contacts iterate the De Saxce shift, shape (m,).
+        normals: contact normals, shape (m, 3).
+        slip: the slip the De Saxce shift used, shape (m, 3) [m/s], and its norm slip_speed (m,).
     """
 
     contacts: list[Contact]
@@ -95,6 +97,9 @@ class _Batch:
     friction: np.ndarray
     sliding: np.ndarray
     slipping: np.ndarray
+    normals: np.ndarray
+    slip: np.ndarray
+    slip_speed: np.ndarray
 
     def multipliers(self, lam: np.ndarray) -> np.ndarray:
         """Scatter the rows' multipliers into shape (m, k)."""
@@ -104,23 +109,26 @@ class _Batch:
 
 
 def _normalized(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    norm = np.linalg.norm(x, axis=-1)
+    norm = np.sqrt(np.einsum("...i,...i->...", x, x))
     return x / np.where(norm > 1e-12, norm, 1.0)[..., None], norm
 
 
 def _tangent_basis(n: np.ndarray, direction: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
     """Unit tangents (t1, t2), shape (m, 3) each; t1 along ``direction`` projected on the tangent
     plane where it has a component there, else a fixed axis."""
-    axis = np.eye(3)[np.argmin(np.abs(n), axis=1)]
-    t1, _ = _normalized(cross(n, axis))
     if direction is not None:
-        projected, norm = _normalized(direction - np.sum(direction * n, axis=1)[:, None] * n)
-        t1 = np.where((norm > 1e-12)[:, None], projected, t1)
+        t1, norm = _normalized(direction - np.einsum("mi,mi->m", direction, n)[:, None] * n)
+        fixed = norm <= 1e-12
+    else:
+        t1, fixed = np.empty_like(n), np.ones(len(n), dtype=bool)
+    if fixed.any():
+        axis = np.eye(3)[np.argmin(np.abs(n[fixed]), axis=1)]
+        t1[fixed] = _normalized(cross(n[fixed], axis))[0]
     return t1, cross(n, t1)
 
 
 def _tangential(u: np.ndarray, n: np.ndarray) -> np.ndarray:
-    return u - np.sum(u * n, axis=-1)[..., None] * n
+    return u - np.einsum("mi,mi->m", u, n)[:, None] * n
 
 
 class ContactModule:
@@ -140,20 +148,23 @@ class ContactModule:
         model, data, options = ctx.model, ctx.data, ctx.options
         acceleration = ctx.level == "acceleration"
         n = np.array([c.normal for c in contacts])
-        points = np.array([c.point for c in contacts])
-        J = point_jacobians(model, data, [c.joint for c in contacts], points)
+        joints = [c.joint for c in contacts]
+        placements = point_placements(data, joints, [c.point for c in contacts])
+        J = point_jacobians(model, data, joints, placements)
         u = J @ ctx.v
-        u_n = np.sum(u * n, axis=1)
+        u_n = np.einsum("mi,mi->m", u, n)
         gap = np.array([c.gap for c in contacts])
         if ctx.level != "velocity":
             keep = is_active(ctx, gap, u_n, 0.0)
             if not keep.any():
                 return None
             contacts = [c for c, k in zip(contacts, keep) if k]
-            n, points, J, u, u_n, gap = n[keep], points[keep], J[keep], u[keep], u_n[keep], gap[keep]
+            joints = [c.joint for c in contacts]
+            placements = [M for M, k in zip(placements, keep) if k]
+            n, J, u, u_n, gap = n[keep], J[keep], u[keep], u_n[keep], gap[keep]
         mu = np.array([c.friction for c in contacts])
         u_t = _tangential(u, n)
-        drift = point_drifts(model, data, [c.joint for c in contacts], points) if acceleration else np.zeros_like(u)
+        drift = point_drifts(model, data, joints, placements) if acceleration else np.zeros_like(u)
         slip = u_t if acceleration else np.array([ctx.lagged.get((c.name, "slip"), s) for c, s in zip(contacts, u_t)])
         slip_direction, slip_speed = _normalized(slip)
         sliding = acceleration & (slip_speed > SLIP_SPEED) & (mu > 0)
@@ -179,7 +190,7 @@ class ContactModule:
         friction = np.where(sliding[:, None], -(mu * normal_force)[:, None] * slip_direction, 0.0)
         batch = _Batch(
             contacts, J, generators, valid, friction, sliding,
-            pyramid & ~acceleration & (self.mode != "pyramid"),
+            pyramid & ~acceleration & (self.mode != "pyramid"), n, slip, slip_speed,
         )
         rows = np.einsum("mki,min->mkn", generators, J)[valid]
 
@@ -202,7 +213,7 @@ class ContactModule:
         changed = False
         if b.sliding.any():
             lam = b.multipliers(multipliers)[:, 0]
-            u_next = _tangential(b.J @ (ctx.v + ctx.options.dt * x), np.array([c.normal for c in b.contacts]))
+            u_next = _tangential(b.J @ (ctx.v + ctx.options.dt * x), b.normals)
             for i in np.flatnonzero(b.sliding):
                 name = b.contacts[i].name
                 if u_next[i] @ b.friction[i] > 0:  # friction would reverse the slip: the contact sticks
@@ -212,14 +223,11 @@ class ContactModule:
                 changed |= abs(lam[i] - ctx.lagged.get((name, "normal"), 0.0)) > NORMAL_FORCE_TOLERANCE
                 ctx.lagged[(name, "normal")] = lam[i]
         if b.slipping.any():
-            n = np.array([c.normal for c in b.contacts])
-            new = _tangential(b.J @ x, n)
-            old = _tangential(b.J @ ctx.v, n)
-            for i in np.flatnonzero(b.slipping):
-                key = (b.contacts[i].name, "slip")
-                previous = ctx.lagged.get(key, old[i])
-                if max(np.linalg.norm(previous), np.linalg.norm(new[i])) <= SLIP_SPEED:
-                    continue  # a sticking contact has no shift to refine
+            new = _tangential(b.J @ x, b.normals)
+            # a sticking contact has no shift to refine
+            moving = b.slipping & ((b.slip_speed > SLIP_SPEED) | (_normalized(new)[1] > SLIP_SPEED))
+            for i in np.flatnonzero(moving):
+                previous = ctx.lagged.get((b.contacts[i].name, "slip"), b.slip[i])
                 changed |= float(np.max(np.abs(new[i] - previous))) > SLIP_TOLERANCE[self.mode]
-                ctx.lagged[key] = new[i]
+                ctx.lagged[(b.contacts[i].name, "slip")] = new[i]
         return changed

@@ -1,0 +1,143 @@
+"""Cost of one step of Solo-12 standing (dt 1e-3, velocity scheme, hard contacts), split by stage,
+and MuJoCo's step on the same robot in the same run when MuJoCo is installed (`pip install -e '.[bench]'`).
+
+Run:  python benchmarks/step_cost.py [--steps 3000] [--repeats 3]
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+import gaussim
+
+KP, KD = 5.0, 0.2
+STAGES = ("dynamics", "collision", "assembly", "solve", "integrate")
+FEET = ("FL", "FR", "HL", "HR")
+
+
+def gaussim_cost(steps: int, **options) -> tuple[float, dict[str, float], float]:
+    """(us per step, us per stage, max penetration [m]) after 1 s of settling."""
+    robot = gaussim.load_robot("solo12")
+    scene = gaussim.Scene(robot, ground=gaussim.Ground(friction=0.8), contacts=[(f"{leg}_FOOT_0", "ground") for leg in FEET])
+    sim = gaussim.Simulator(scene, gaussim.Options(**options))
+    q_ref = robot.configuration("standing")
+    state = sim.reset(q_ref)
+
+    def tau(s):
+        return KP * (q_ref[7:] - s.q[7:]) - KD * s.v[6:]
+
+    for _ in range(1000):
+        state = sim.step(state, tau(state))
+    split = dict.fromkeys(STAGES, 0.0)
+    penetration = 0.0
+    start = time.perf_counter()
+    for _ in range(steps):
+        state = sim.step(state, tau(state))
+        for stage, seconds in sim.last_step.timings.items():
+            split[stage] += seconds
+        penetration = max(penetration, max((-c.gap for c in sim.last_step.contacts), default=0.0))
+    total = (time.perf_counter() - start) / steps * 1e6
+    return total, {k: v / steps * 1e6 for k, v in split.items()}, penetration
+
+
+def _mujoco_model(robot: gaussim.Robot):
+    """Solo-12 in MuJoCo: URDF without meshes, sphere feet of gaussim's foot size, a free joint, a floor."""
+    import mujoco
+    import pinocchio as pin
+
+    text = Path(robot.urdf).read_text()
+    text = re.sub(r"<visual>.*?</visual>", "", text, flags=re.S)
+    text = re.sub(r"<collision>.*?</collision>", "", text, flags=re.S)
+    text = text.replace("</robot>", '<mujoco><compiler fusestatic="false" discardvisual="true"/></mujoco></robot>')
+    spec_model = mujoco.MjModel.from_xml_string(text)
+    path = Path("/tmp/gaussim_solo12_mujoco.xml")
+    mujoco.mj_saveLastXML(str(path), spec_model)
+    xml = path.read_text()
+    # foot spheres: radius and centre from the collision hull of the foot in gaussim's model
+    geometry = robot.collision_model.geometryObjects[robot.geometry_id("FL_FOOT_0")]
+    points = np.asarray(geometry.geometry.convex.points()) if hasattr(geometry.geometry, "convex") else np.zeros((1, 3))
+    radius = float(np.max(np.linalg.norm(points - points.mean(axis=0), axis=1))) if len(points) > 1 else 0.016
+    center = geometry.placement.act(points.mean(axis=0))
+    frame = robot.model.frames[robot.frame_id("FL_FOOT")]
+    del frame, pin
+    for leg in FEET:
+        xml = re.sub(
+            rf'(<body name="{leg}_LOWER_LEG"[^>]*>)',
+            rf'\1<geom type="sphere" size="{radius:.5f}" pos="{center[0]:.5f} {center[1]:.5f} {center[2]:.5f}" friction="0.8"/>',
+            xml,
+        )
+    xml = re.sub(r'(<body name="base_link"[^>]*>)', r"\1<freejoint/>", xml, count=1)
+    xml = xml.replace("<worldbody>", '<worldbody><geom type="plane" size="5 5 0.1" friction="0.8"/>', 1)
+    xml = xml.replace("<compiler", '<option timestep="0.001" integrator="implicitfast"/><compiler', 1)
+    return mujoco.MjModel.from_xml_string(xml)
+
+
+def mujoco_cost(robot: gaussim.Robot, steps: int, solver: str) -> tuple[float, float]:
+    """(us per step, max penetration [m]) of MuJoCo on Solo-12 standing under the same PD hold."""
+    import mujoco
+
+    model = _mujoco_model(robot)
+    model.opt.solver = {"Newton": mujoco.mjtSolver.mjSOL_NEWTON, "PGS": mujoco.mjtSolver.mjSOL_PGS}[solver]
+    data = mujoco.MjData(model)
+    q_ref = robot.configuration("standing")
+    data.qpos[:3] = q_ref[:3]
+    data.qpos[3:7] = [q_ref[6], *q_ref[3:6]]  # Pinocchio xyzw -> MuJoCo wxyz
+    data.qpos[7:] = q_ref[7:]
+    for _ in range(1000):
+        data.qfrc_applied[6:] = KP * (q_ref[7:] - data.qpos[7:]) - KD * data.qvel[6:]
+        mujoco.mj_step(model, data)
+    penetration = 0.0
+    start = time.perf_counter()
+    for _ in range(steps):
+        data.qfrc_applied[6:] = KP * (q_ref[7:] - data.qpos[7:]) - KD * data.qvel[6:]
+        mujoco.mj_step(model, data)
+        if data.ncon:
+            penetration = max(penetration, -float(data.contact.dist.min()))
+    return (time.perf_counter() - start) / steps * 1e6, penetration
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--steps", type=int, default=3000)
+    parser.add_argument("--repeats", type=int, default=3, help="the median of this many runs is reported")
+    args = parser.parse_args(argv)
+
+    runs = [gaussim_cost(args.steps) for _ in range(args.repeats)]
+    total = statistics.median(r[0] for r in runs)
+    split = {k: statistics.median(r[1][k] for r in runs) for k in STAGES}
+    rows = [("gaussim (velocity, accurate friction)", total, max(r[2] for r in runs))]
+    acc = [gaussim_cost(args.steps, scheme="acceleration") for _ in range(args.repeats)]
+    rows.append(("gaussim (acceleration scheme)", statistics.median(r[0] for r in acc), max(r[2] for r in acc)))
+    try:
+        import mujoco  # noqa: F401
+
+        robot = gaussim.load_robot("solo12")
+        for solver in ("Newton", "PGS"):
+            peer = [mujoco_cost(robot, args.steps, solver) for _ in range(args.repeats)]
+            rows.append((f"MuJoCo {solver} (pyramidal)", statistics.median(p[0] for p in peer), max(p[1] for p in peer)))
+    except ImportError:
+        print("MuJoCo is not installed (pip install -e '.[bench]'): no peer in this run.\n")
+
+    print("Solo-12 standing, dt = 1 ms, 4 foot contacts, PD posture hold\n")
+    print("| engine | us/step | ratio to MuJoCo Newton | max penetration [mm] |")
+    print("|---|---:|---:|---:|")
+    reference = next((r[1] for r in rows if r[0].startswith("MuJoCo Newton")), None)
+    for name, cost, pen in rows:
+        ratio = f"{cost / reference:.2f}" if reference else "n/a"
+        print(f"| {name} | {cost:.1f} | {ratio} | {1e3 * pen:.4f} |")
+    print("\ngaussim split (velocity scheme), us/step:\n")
+    print("| " + " | ".join(STAGES) + " | other |")
+    print("|" + "---:|" * (len(STAGES) + 1))
+    print("| " + " | ".join(f"{split[k]:.1f}" for k in STAGES) + f" | {total - sum(split.values()):.1f} |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
