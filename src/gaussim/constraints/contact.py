@@ -179,6 +179,7 @@ class ContactModule:
 
         generators, phi, rates, drift_rates, shifts, floors = [], [], [], [], [], []
         starts, frictions, sliding, slipping, normals, slips, slip_speeds = [], [], [], [], [], [], []
+        owner: list[int] = []
         for c, u, drift, tendency in zip(contacts, U, drifts, tendencies):
             n, mu = c.normal.tolist(), c.friction
             u_n = _dot(u, n)
@@ -200,8 +201,10 @@ class ContactModule:
             starts.append(len(generators))
             generators += gens
             phi += [c.gap] * len(gens)
-            rates += [_dot(g, u) for g in gens]
-            drift_rates += [_dot(g, drift) for g in gens]
+            if acceleration:  # the velocity and impulse levels' bounds use neither
+                rates += [_dot(g, u) for g in gens]
+                drift_rates += [_dot(g, drift) for g in gens]
+            owner += [len(starts) - 1] * len(gens)
             # restitution: an approaching contact leaves at -e u_n at least (velocity and impulse levels)
             bounce = not acceleration and c.restitution > 0 and -u_n > options.restitution_threshold
             floors += [-c.restitution * u_n if bounce else -np.inf] * len(gens)
@@ -216,15 +219,21 @@ class ContactModule:
 
         G = np.array(generators)
         starts_ = np.array(starts)
-        owner = np.repeat(np.arange(len(contacts)), np.diff(np.append(starts_, len(G))))
-        bound = stabilised_bound(ctx, np.array(phi), np.array(rates), np.array(drift_rates), True)
+        phi_ = np.array(phi)
+        if acceleration:
+            bound = stabilised_bound(ctx, phi_, np.array(rates), np.array(drift_rates), True)
+        else:
+            bound = stabilised_bound(ctx, phi_, phi_, 0.0, True)
         bound = np.maximum(bound, floors) - np.array(shifts)
         friction_ = np.array(frictions)
         batch = _Batch(
             contacts, J, G, starts_, friction_, np.array(sliding), np.array(slipping),
             np.array(normals), np.array(slips), np.array(slip_speeds),
         )
-        rows = np.einsum("ri,rin->rn", G, J[owner])
+        if len(G) == len(contacts) * len(self.directions):  # every contact has a full pyramid
+            rows = np.matmul(G.reshape(len(contacts), -1, 3), J).reshape(len(G), -1)
+        else:
+            rows = np.einsum("ri,rin->rn", G, J[owner])
 
         def labels() -> list[str]:
             return [f"contact {contacts[i].name} row {r - starts[i]}" for r, i in enumerate(owner)]
