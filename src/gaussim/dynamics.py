@@ -18,10 +18,12 @@ class Dynamics:
     Attributes:
         M: joint-space inertia, shape (nv, nv), symmetric positive definite.
         F: generalized force tau - b(q, v), shape (nv,) [N or N m].
+        a_free: unconstrained acceleration M^-1 F, shape (nv,) (Pinocchio's ABA).
     """
 
     M: np.ndarray
     F: np.ndarray
+    a_free: np.ndarray
 
 
 def compute_dynamics(
@@ -32,11 +34,12 @@ def compute_dynamics(
     With ``drifts`` the spatial accelerations at a = 0 are computed too, for the acceleration-level
     constraint terms Jdot v (see :func:`point_drifts`).
     """
+    a_free = pin.aba(model, data, q, v, tau).copy()
     pin.computeAllTerms(model, data, q, v)
     if drifts:
         pin.forwardKinematics(model, data, q, v, np.zeros(model.nv))
     pin.updateFramePlacements(model, data)
-    return Dynamics(data.M.copy(), tau - data.nle)
+    return Dynamics(data.M.copy(), tau - data.nle, a_free)
 
 
 def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:

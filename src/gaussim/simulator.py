@@ -139,11 +139,10 @@ class Simulator:
             v = self._impact(state, dyn, contacts, report)
             if v is not state.v:
                 dyn = compute_dynamics(self.model, self.data, state.q, v, tau, True)
-            a_free = np.linalg.solve(dyn.M, dyn.F)
-            a = self._gauss("acceleration", state.q, v, dyn.M, dyn.F, a_free, contacts, report, 1.0)
+            a = self._gauss("acceleration", state.q, v, dyn.M, dyn.F, dyn.a_free, contacts, report, 1.0)
             v_next = v + o.dt * a
         else:
-            v_free = state.v + o.dt * np.linalg.solve(dyn.M, dyn.F)
+            v_free = state.v + o.dt * dyn.a_free
             f = dyn.M @ state.v + o.dt * dyn.F
             v_next = self._gauss("velocity", state.q, state.v, dyn.M, f, v_free, contacts, report, 1.0 / o.dt)
         clock = time.perf_counter()

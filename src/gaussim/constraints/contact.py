@@ -264,11 +264,15 @@ class ContactModule:
                 changed |= abs(lam[i] - ctx.lagged.get((name, "normal"), 0.0)) > NORMAL_FORCE_TOLERANCE
                 ctx.lagged[(name, "normal")] = lam[i]
         if b.slipping.any():
-            new = _tangential(b.J @ x, b.normals)
-            # a sticking contact has no shift to refine
-            moving = b.slipping & ((b.slip_speed > SLIP_SPEED) | (_normalized(new)[1] > SLIP_SPEED))
-            for i in np.flatnonzero(moving):
-                previous = ctx.lagged.get((b.contacts[i].name, "slip"), b.slip[i])
-                changed |= float(np.max(np.abs(new[i] - previous))) > SLIP_TOLERANCE[self.mode]
-                ctx.lagged[(b.contacts[i].name, "slip")] = new[i]
+            for i, (u, slips) in enumerate(zip((b.J @ x).tolist(), b.slipping.tolist())):
+                if not slips:
+                    continue
+                n = b.contacts[i].normal.tolist()
+                u_n = _dot(u, n)
+                new = [u[k] - u_n * n[k] for k in range(3)]
+                if max(b.slip_speed[i], _dot(new, new) ** 0.5) <= SLIP_SPEED:
+                    continue  # a sticking contact has no shift to refine
+                previous = b.slip[i]
+                changed |= max(abs(new[k] - previous[k]) for k in range(3)) > SLIP_TOLERANCE[self.mode]
+                ctx.lagged[(b.contacts[i].name, "slip")] = new
         return changed
