@@ -25,7 +25,9 @@ FEET = ("FL", "FR", "HL", "HR")
 def gaussim_cost(steps: int, **options) -> tuple[float, dict[str, float], float]:
     """(us per step, us per stage, max penetration [m]) after 1 s of settling."""
     robot = gaussim.load_robot("solo12")
-    scene = gaussim.Scene(robot, ground=gaussim.Ground(friction=0.8), contacts=[(f"{leg}_FOOT_0", "ground") for leg in FEET])
+    scene = gaussim.Scene(
+        robot, ground=gaussim.Ground(friction=0.8), contacts=[(f"{leg}_FOOT_0", "ground") for leg in FEET]
+    )
     sim = gaussim.Simulator(scene, gaussim.Options(**options))
     q_ref = robot.configuration("standing")
     state = sim.reset(q_ref)
@@ -36,41 +38,47 @@ def gaussim_cost(steps: int, **options) -> tuple[float, dict[str, float], float]
     for _ in range(1000):
         state = sim.step(state, tau(state))
     split = dict.fromkeys(STAGES, 0.0)
-    penetration = 0.0
     start = time.perf_counter()
     for _ in range(steps):
         state = sim.step(state, tau(state))
         for stage, seconds in sim.last_step.timings.items():
             split[stage] += seconds
-        penetration = max(penetration, max((-c.gap for c in sim.last_step.contacts), default=0.0))
     total = (time.perf_counter() - start) / steps * 1e6
+    penetration = 0.0
+    for _ in range(steps):  # untimed: reading the reports builds the per-contact forces
+        state = sim.step(state, tau(state))
+        penetration = max(penetration, max((-c.gap for c in sim.last_step.contacts), default=0.0))
     return total, {k: v / steps * 1e6 for k, v in split.items()}, penetration
 
 
 def _mujoco_model(robot: gaussim.Robot):
     """Solo-12 in MuJoCo: URDF without meshes, sphere feet of gaussim's foot size, a free joint, a floor."""
     import mujoco
-    import pinocchio as pin
 
     text = Path(robot.urdf).read_text()
     text = re.sub(r"<visual>.*?</visual>", "", text, flags=re.S)
     text = re.sub(r"<collision>.*?</collision>", "", text, flags=re.S)
-    text = text.replace("</robot>", '<mujoco><compiler fusestatic="false" discardvisual="true"/></mujoco></robot>')
+    text = text.replace(
+        "</robot>", '<mujoco><compiler fusestatic="false" discardvisual="true"/></mujoco></robot>'
+    )
     spec_model = mujoco.MjModel.from_xml_string(text)
     path = Path("/tmp/gaussim_solo12_mujoco.xml")
     mujoco.mj_saveLastXML(str(path), spec_model)
     xml = path.read_text()
     # foot spheres: radius and centre from the collision hull of the foot in gaussim's model
     geometry = robot.collision_model.geometryObjects[robot.geometry_id("FL_FOOT_0")]
-    points = np.asarray(geometry.geometry.convex.points()) if hasattr(geometry.geometry, "convex") else np.zeros((1, 3))
+    points = (
+        np.asarray(geometry.geometry.convex.points())
+        if hasattr(geometry.geometry, "convex")
+        else np.zeros((1, 3))
+    )
     radius = float(np.max(np.linalg.norm(points - points.mean(axis=0), axis=1))) if len(points) > 1 else 0.016
     center = geometry.placement.act(points.mean(axis=0))
-    frame = robot.model.frames[robot.frame_id("FL_FOOT")]
-    del frame, pin
+    pos = " ".join(f"{x:.5f}" for x in center)
     for leg in FEET:
         xml = re.sub(
             rf'(<body name="{leg}_LOWER_LEG"[^>]*>)',
-            rf'\1<geom type="sphere" size="{radius:.5f}" pos="{center[0]:.5f} {center[1]:.5f} {center[2]:.5f}" friction="0.8"/>',
+            rf'\1<geom type="sphere" size="{radius:.5f}" pos="{pos}" friction="0.8"/>',
             xml,
         )
     xml = re.sub(r'(<body name="base_link"[^>]*>)', r"\1<freejoint/>", xml, count=1)
@@ -114,14 +122,22 @@ def main(argv: list[str] | None = None) -> int:
     split = {k: statistics.median(r[1][k] for r in runs) for k in STAGES}
     rows = [("gaussim (velocity, accurate friction)", total, max(r[2] for r in runs))]
     acc = [gaussim_cost(args.steps, scheme="acceleration") for _ in range(args.repeats)]
-    rows.append(("gaussim (acceleration scheme)", statistics.median(r[0] for r in acc), max(r[2] for r in acc)))
+    rows.append(
+        ("gaussim (acceleration scheme)", statistics.median(r[0] for r in acc), max(r[2] for r in acc))
+    )
     try:
         import mujoco  # noqa: F401
 
         robot = gaussim.load_robot("solo12")
         for solver in ("Newton", "PGS"):
             peer = [mujoco_cost(robot, args.steps, solver) for _ in range(args.repeats)]
-            rows.append((f"MuJoCo {solver} (pyramidal)", statistics.median(p[0] for p in peer), max(p[1] for p in peer)))
+            rows.append(
+                (
+                    f"MuJoCo {solver} (pyramidal)",
+                    statistics.median(p[0] for p in peer),
+                    max(p[1] for p in peer),
+                )
+            )
     except ImportError:
         print("MuJoCo is not installed (pip install -e '.[bench]'): no peer in this run.\n")
 

@@ -35,8 +35,10 @@ def main(argv: list[str] | None = None) -> int:
     distance = np.linalg.norm(state.q[:2])
     reference = 1.0 / (2 * args.mu * 9.81)
     print(f"friction mode {args.mode}, heading {args.heading:g} deg, dt {args.dt:g} s")
-    print(f"stopped after {state.t:.3f} s, distance {distance:.5f} m (v^2/(2 mu g) = {reference:.5f} m, "
-          f"error {100 * (distance / reference - 1):+.2f} %)")
+    print(
+        f"stopped after {state.t:.3f} s, distance {distance:.5f} m (v^2/(2 mu g) = {reference:.5f} m, "
+        f"error {100 * (distance / reference - 1):+.2f} %)"
+    )
     print(f"largest height change while sliding: {lift:.2e} m")
     return 0
 

@@ -23,7 +23,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--duration", type=float, default=2.0, help="simulated time [s]")
     parser.add_argument("--dt", type=float, default=1e-3, help="time step [s]")
     parser.add_argument("--scheme", default="velocity", choices=gaussim.options.SCHEMES)
-    parser.add_argument("--csv", type=Path, default=Path("out/solo12_forces.csv"), help="contact-force time series")
+    parser.add_argument(
+        "--csv", type=Path, default=Path("out/solo12_forces.csv"), help="contact-force time series"
+    )
     args = parser.parse_args(argv)
 
     robot = gaussim.load_robot("solo12")
@@ -45,7 +47,9 @@ def main(argv: list[str] | None = None) -> int:
             tau = KP * (q_ref[7:] - state.q[7:]) - KD * state.v[6:]
             state = sim.step(state, tau)
             for c in sim.last_step.contacts:
-                writer.writerow([f"{state.t:.6f}", c.name, *np.round(c.point, 6), *np.round(c.force, 6), f"{c.gap:.3e}"])
+                writer.writerow(
+                    [f"{state.t:.6f}", c.name, *np.round(c.point, 6), *np.round(c.force, 6), f"{c.gap:.3e}"]
+                )
             if (k + 1) % max(1, steps // 10) == 0:
                 rate = (k + 1) / (time.perf_counter() - start)
                 print(f"\r  t = {state.t:5.2f} s  ({rate:6.0f} steps/s)", end="", file=sys.stderr, flush=True)

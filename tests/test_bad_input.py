@@ -42,7 +42,9 @@ def test_non_finite_state_and_torque(sim, ball, bad):
 def test_non_unit_quaternion(sim, ball):
     q = at_height(ball, 1.0)
     q[3:7] = [0, 0, 0, 2.0]
-    with pytest.raises(gaussim.InvalidState, match=r"q\[3:7\] of joint 'root_joint' must be a unit quaternion"):
+    with pytest.raises(
+        gaussim.InvalidState, match=r"q\[3:7\] of joint 'root_joint' must be a unit quaternion"
+    ):
         sim.reset(q)
 
 
@@ -73,9 +75,20 @@ def test_unknown_frame_and_geometry_list_choices(ball, solo12):
 
 @pytest.mark.parametrize(
     ("field", "value"),
-    [("dt", -1e-3), ("dt", 0.0), ("dt", np.nan), ("scheme", "implicit"), ("friction_mode", "cone"),
-     ("friction_facets", 2), ("friction_facets", 4.0), ("stabilisation", 0.0), ("eps_abs", -1.0),
-     ("max_iter", 0), ("on_failure", "ignore"), ("contact_margin", -1.0)],
+    [
+        ("dt", -1e-3),
+        ("dt", 0.0),
+        ("dt", np.nan),
+        ("scheme", "implicit"),
+        ("friction_mode", "cone"),
+        ("friction_facets", 2),
+        ("friction_facets", 4.0),
+        ("stabilisation", 0.0),
+        ("eps_abs", -1.0),
+        ("max_iter", 0),
+        ("on_failure", "ignore"),
+        ("contact_margin", -1.0),
+    ],
 )
 def test_bad_options_name_the_field(field, value):
     with pytest.raises(gaussim.InvalidOptions, match=rf"^{field}: "):
@@ -87,9 +100,14 @@ def test_unknown_option_lists_known():
         gaussim.Options().replace(timestep=1e-3)
 
 
-@pytest.mark.parametrize(("field", "kwargs"), [("ground.friction", {"friction": -0.1}),
-                                                ("ground.restitution", {"restitution": 1.5}),
-                                                ("ground.normal", {"normal": (0, 0, 0)})])
+@pytest.mark.parametrize(
+    ("field", "kwargs"),
+    [
+        ("ground.friction", {"friction": -0.1}),
+        ("ground.restitution", {"restitution": 1.5}),
+        ("ground.normal", {"normal": (0, 0, 0)}),
+    ],
+)
 def test_bad_materials_name_the_field(field, kwargs):
     with pytest.raises(gaussim.InvalidOptions, match=rf"^{field}: "):
         gaussim.Ground(**kwargs)

@@ -36,11 +36,23 @@ def test_acceleration_and_forces_equal_direct_kkt(solo12):
         pin.computeAllTerms(model, data, state.q, state.v)
         pin.forwardKinematics(model, data, state.q, state.v, np.zeros(model.nv))
         pin.updateFramePlacements(model, data)
-        J = np.vstack([pin.getFrameJacobian(model, data, solo12.frame_id(f), pin.LOCAL_WORLD_ALIGNED)[:3] for f in FEET])
-        drift = np.concatenate(
-            [pin.getFrameClassicalAcceleration(model, data, solo12.frame_id(f), pin.LOCAL_WORLD_ALIGNED).linear for f in FEET]
+        J = np.vstack(
+            [pin.getFrameJacobian(model, data, solo12.frame_id(f), pin.LOCAL_WORLD_ALIGNED)[:3] for f in FEET]
         )
-        phi = np.concatenate([data.oMf[solo12.frame_id(f)].translation - a.position for f, a in zip(FEET, sim.scene.bilaterals)])
+        drift = np.concatenate(
+            [
+                pin.getFrameClassicalAcceleration(
+                    model, data, solo12.frame_id(f), pin.LOCAL_WORLD_ALIGNED
+                ).linear
+                for f in FEET
+            ]
+        )
+        phi = np.concatenate(
+            [
+                data.oMf[solo12.frame_id(f)].translation - a.position
+                for f, a in zip(FEET, sim.scene.bilaterals)
+            ]
+        )
         rhs = -drift - 2 * k * (J @ state.v) - k**2 * phi
         n, m = model.nv, J.shape[0]
         K = np.block([[data.M, -J.T], [J, np.zeros((m, m))]])

@@ -23,7 +23,12 @@ def _ball_drop(ball, scheme, restitution, height=1.0, steps=3000):
     scene = gaussim.Scene(ball, ground=gaussim.Ground(friction=0.8, restitution=restitution))
     sim = gaussim.Simulator(scene, gaussim.Options(scheme=scheme, dt=1e-3))
     z = []
-    run(sim, sim.reset(at_height(ball, height + RADIUS)), steps, each=lambda s: z.append((s.q[2] - RADIUS, s.v[2])))
+    run(
+        sim,
+        sim.reset(at_height(ball, height + RADIUS)),
+        steps,
+        each=lambda s: z.append((s.q[2] - RADIUS, s.v[2])),
+    )
     return sim, np.array(z)
 
 

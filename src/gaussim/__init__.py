@@ -52,6 +52,7 @@ __all__ = [
     "RobotNotFound",
     "Scene",
     "Simulator",
+    "SolverError",
     "Sphere",
     "State",
     "StepReport",

@@ -50,11 +50,15 @@ def assemble(H: np.ndarray, f: np.ndarray, parts: list[tuple[ConstraintModule, R
         blocks.append((module, rows, slice(start, counts[rows.equality])))
         if rows.force is not None:
             f = f + rows.force
+
     def stack(equality: bool) -> tuple[np.ndarray, np.ndarray]:
         chosen = [rows for _, rows in parts if rows.equality == equality]
         if not chosen:
             return np.zeros((0, nv)), np.zeros(0)
+        if len(chosen) == 1:
+            return chosen[0].J, chosen[0].bound
         return np.vstack([r.J for r in chosen]), np.concatenate([r.bound for r in chosen])
+
     A, b = stack(True)
     C, l = stack(False)
     return GaussProblem(H, -f, A, b, C, l, blocks)

@@ -92,17 +92,27 @@ class ContactDetector:
                 continue  # coal's half-space test is as cheap as this bounding-sphere test
             tf = coal.Transform3s(placement)
             self.result.clear()
-            if not coal.collide(pair.shape, tf, pair.obstacle_shape, pair.obstacle_tf, self.request, self.result):
+            if not coal.collide(
+                pair.shape, tf, pair.obstacle_shape, pair.obstacle_tf, self.request, self.result
+            ):
                 continue
             contact = self.result.getContact(0)
             normal = -np.asarray(contact.normal)  # coal's normal points from the robot to the obstacle
             gap = float(contact.penetration_depth)
             points = [np.asarray(contact.getNearestPoint1())]
             coal.computeContactPatch(
-                pair.shape, tf, pair.obstacle_shape, pair.obstacle_tf, self.result,
-                self.patch_request, self.patch_result,
+                pair.shape,
+                tf,
+                pair.obstacle_shape,
+                pair.obstacle_tf,
+                self.result,
+                self.patch_request,
+                self.patch_result,
             )
-            if self.patch_result.numContactPatches() and (patch := self.patch_result.getContactPatch(0)).size() > 1:
+            if (
+                self.patch_result.numContactPatches()
+                and (patch := self.patch_result.getContactPatch(0)).size() > 1
+            ):
                 # patch points lie midway between the surfaces: move them onto the robot's
                 middle = np.array([patch.getPoint(i) for i in range(patch.size())]) + normal * (gap / 2)
                 if np.ptp(middle, axis=0).max() > PATCH_MIN_EXTENT:
@@ -110,8 +120,15 @@ class ContactDetector:
             for k, point in enumerate(points):
                 contacts.append(
                     Contact(
-                        f"{pair.name}#{k}", pair.geometry, pair.obstacle.name, pair.joint, point,
-                        normal, gap, pair.obstacle.friction, pair.obstacle.restitution,
+                        f"{pair.name}#{k}",
+                        pair.geometry,
+                        pair.obstacle.name,
+                        pair.joint,
+                        point,
+                        normal,
+                        gap,
+                        pair.obstacle.friction,
+                        pair.obstacle.restitution,
                     )
                 )
         return contacts

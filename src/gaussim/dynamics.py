@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -49,12 +50,14 @@ def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
 
 
-def point_placements(data: pin.Data, joints: list[int], points: np.ndarray) -> list[pin.SE3]:
-    """Placements, relative to their joints, of frames at world ``points`` (m, 3) [m] with world axes' orientation."""
+def point_placements(data: pin.Data, joints: list[int], points: Sequence[np.ndarray]) -> list[pin.SE3]:
+    """Placements, relative to their joints, of world-aligned frames at world ``points`` (m, 3) [m]."""
     return [pin.SE3(_IDENTITY, data.oMi[j].actInv(p)) for j, p in zip(joints, points)]
 
 
-def point_jacobians(model: pin.Model, data: pin.Data, joints: list[int], placements: list[pin.SE3]) -> np.ndarray:
+def point_jacobians(
+    model: pin.Model, data: pin.Data, joints: list[int], placements: list[pin.SE3]
+) -> np.ndarray:
     """Jacobians of the world velocities of body points, shape (m, 3, nv).
 
     Args:
@@ -63,9 +66,13 @@ def point_jacobians(model: pin.Model, data: pin.Data, joints: list[int], placeme
     return np.array([pin.getFrameJacobian(model, data, j, M, LWA)[:3] for j, M in zip(joints, placements)])
 
 
-def point_drifts(model: pin.Model, data: pin.Data, joints: list[int], placements: list[pin.SE3]) -> np.ndarray:
+def point_drifts(
+    model: pin.Model, data: pin.Data, joints: list[int], placements: list[pin.SE3]
+) -> np.ndarray:
     """Classical accelerations of body points at zero joint acceleration (Jdot v), shape (m, 3) [m/s^2].
 
     Needs the spatial accelerations of a forward pass with a = 0 (``compute_dynamics(drifts=True)``).
     """
-    return np.array([pin.getFrameClassicalAcceleration(model, data, j, M, LWA).linear for j, M in zip(joints, placements)])
+    return np.array(
+        [pin.getFrameClassicalAcceleration(model, data, j, M, LWA).linear for j, M in zip(joints, placements)]
+    )

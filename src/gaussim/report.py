@@ -7,7 +7,7 @@ from functools import cached_property
 
 import numpy as np
 
-from .constraints import BilateralReaction, ContactForce, LimitReaction
+from .constraints import BilateralReaction, ConstraintModule, ContactForce, LimitReaction, Rows
 from .solver import Certificate
 
 # Relative singular-value threshold under which stacked contact Jacobians count as rank deficient.
@@ -17,6 +17,9 @@ RANK_TOLERANCE = 1e-9
 @dataclass
 class StepReport:
     """The reactions and certificates of one step.
+
+    The reactions are built from the QP multipliers when first read (most steps of a long run are
+    never inspected, so the step itself only records the multipliers).
 
     Attributes:
         t: time at the start of the step [s].
@@ -31,13 +34,39 @@ class StepReport:
     """
 
     t: float
-    contacts: list[ContactForce] = field(default_factory=list)
-    limits: list[LimitReaction] = field(default_factory=list)
-    bilaterals: list[BilateralReaction] = field(default_factory=list)
     impact: StepReport | None = None
     certificates: list[Certificate] = field(default_factory=list)
     timings: dict[str, float] = field(default_factory=dict)
-    contact_jacobian: np.ndarray | None = None
+    # (module, rows, multipliers, scale) of each block of the last QP: the reactions' source
+    blocks: list[tuple[ConstraintModule, Rows, np.ndarray, float]] = field(default_factory=list, repr=False)
+
+    def _reactions(self, family: str) -> list:
+        return [
+            r
+            for m, rows, lam, scale in self.blocks
+            if m.name == family
+            for r in m.reactions(rows, lam, scale)
+        ]
+
+    @cached_property
+    def contacts(self) -> list[ContactForce]:
+        return self._reactions("contact")
+
+    @cached_property
+    def limits(self) -> list[LimitReaction]:
+        return self._reactions("limit")
+
+    @cached_property
+    def bilaterals(self) -> list[BilateralReaction]:
+        return self._reactions("bilateral")
+
+    @property
+    def contact_jacobian(self) -> np.ndarray | None:
+        for m, rows, _, _ in self.blocks:
+            if m.name == "contact":
+                J = rows.data.J  # type: ignore[attr-defined]
+                return J.reshape(-1, J.shape[-1])
+        return None
 
     @property
     def converged(self) -> bool:
@@ -69,10 +98,14 @@ class StepReport:
 
     def table(self) -> str:
         """A plain-text table of the contact forces."""
-        lines = [f"{'contact':<28} {'fx [N]':>9} {'fy [N]':>9} {'fz [N]':>9} {'normal [N]':>11} {'gap [mm]':>9}"]
+        lines = [
+            f"{'contact':<28} {'fx [N]':>9} {'fy [N]':>9} {'fz [N]':>9} {'normal [N]':>11} {'gap [mm]':>9}"
+        ]
         for c in self.contacts:
             fx, fy, fz = c.force
-            lines.append(f"{c.name:<28} {fx:9.3f} {fy:9.3f} {fz:9.3f} {c.normal_force:11.3f} {1e3 * c.gap:9.4f}")
+            lines.append(
+                f"{c.name:<28} {fx:9.3f} {fy:9.3f} {fz:9.3f} {c.normal_force:11.3f} {1e3 * c.gap:9.4f}"
+            )
         total = self.total_contact_force()
         lines.append(f"{'total':<28} {total[0]:9.3f} {total[1]:9.3f} {total[2]:9.3f}")
         return "\n".join(lines)

@@ -142,9 +142,7 @@ def _from_urdf(
     dirs = [str(d) for d in (*package_dirs, path.parent)]
     try:
         if floating:
-            model, collision, visual = pin.buildModelsFromUrdf(
-                str(path), dirs, pin.JointModelFreeFlyer()
-            )
+            model, collision, visual = pin.buildModelsFromUrdf(str(path), dirs, pin.JointModelFreeFlyer())
         else:
             model, collision, visual = pin.buildModelsFromUrdf(str(path), dirs)
     except (RuntimeError, ValueError, OSError) as err:
@@ -167,7 +165,9 @@ def _finish(
     for joint_id in range(1, model.njoints):
         inertia = model.inertias[joint_id]
         if not np.isfinite(inertia.mass) or inertia.mass < 0:
-            raise InvalidRobot(f"{urdf or name}: body of joint '{model.names[joint_id]}' has mass {inertia.mass}")
+            raise InvalidRobot(
+                f"{urdf or name}: body of joint '{model.names[joint_id]}' has mass {inertia.mass}"
+            )
     data = model.createData()
     mass_matrix = pin.crba(model, data, pin.neutral(model))
     if not np.all(np.isfinite(mass_matrix)) or np.linalg.eigvalsh(mass_matrix).min() <= 0:

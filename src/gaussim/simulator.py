@@ -18,7 +18,7 @@ import time
 import numpy as np
 import pinocchio as pin
 
-from .assembly import assemble
+from .assembly import GaussProblem, assemble
 from .collision import Contact, ContactDetector
 from .constraints import BilateralModule, ContactModule, LimitModule
 from .constraints.base import ConstraintModule, Context, Level, Rows
@@ -28,7 +28,7 @@ from .integrator import integrate
 from .options import Options
 from .report import StepReport
 from .scene import Scene
-from .solver import GaussSolver
+from .solver import GaussSolver, Solution
 from .state import State
 
 # A velocity violating an impulse-level row by more than this is an impact [m/s or rad/s].
@@ -61,7 +61,12 @@ class Simulator:
                 planar = any(k in joint.shortname() for k in ("RUB", "Planar"))
                 what, size = ("(cos, sin) pair", 2) if planar else ("quaternion (x, y, z, w)", 4)
                 part = slice(joint.idx_q + joint.nq - size, joint.idx_q + joint.nq)
-                self._unit_parts.append((part, f"q[{part.start}:{part.stop}] of joint '{self.model.names[j]}' must be a unit {what}"))
+                self._unit_parts.append(
+                    (
+                        part,
+                        f"q[{part.start}:{part.stop}] of joint '{self.model.names[j]}' must be a unit {what}",
+                    )
+                )
 
     @staticmethod
     def _modules(scene: Scene, options: Options) -> list[ConstraintModule]:
@@ -92,7 +97,9 @@ class Simulator:
             if arr.shape != (size,):
                 raise InvalidState(f"{name} must have shape ({size},), got {arr.shape}")
             if not np.all(np.isfinite(arr)):
-                raise InvalidState(f"{name} has non-finite entries at {np.flatnonzero(~np.isfinite(arr)).tolist()}")
+                raise InvalidState(
+                    f"{name} has non-finite entries at {np.flatnonzero(~np.isfinite(arr)).tolist()}"
+                )
         if not np.isfinite(state.t):
             raise InvalidState(f"t must be finite, got {state.t}")
         for part, message in self._unit_parts:
@@ -105,7 +112,7 @@ class Simulator:
         if tau is None:
             return np.zeros(nv)
         tau = np.asarray(tau, dtype=float)
-        if self.scene.robot.floating and tau.shape == (nv - 6,):
+        if tau.shape == (nv - 6,) and self.scene.robot.floating:
             tau = np.concatenate([np.zeros(6), tau])
         if tau.shape != (nv,):
             hint = f" or ({nv - 6},) for the actuated joints" if self.scene.robot.floating else ""
@@ -158,7 +165,9 @@ class Simulator:
         """The impulsive Gauss projection of v when v violates an impulse-level row, else v itself."""
         ctx = self._context("impulse", state.q, state.v, state.v, contacts)
         parts = self._rows(ctx)
-        if not any(np.any(rows.J @ state.v < rows.bound - IMPACT_TOLERANCE) for _, rows in parts if not rows.equality):
+        if not any(
+            np.any(rows.J @ state.v < rows.bound - IMPACT_TOLERANCE) for _, rows in parts if not rows.equality
+        ):
             return state.v
         report.impact = StepReport(state.t)
         v = self._solve(ctx, dyn.M, dyn.M @ state.v, parts, report.impact, 1.0)
@@ -166,14 +175,24 @@ class Simulator:
         return v
 
     def _gauss(
-        self, level: Level, q: np.ndarray, v: np.ndarray, M: np.ndarray, f: np.ndarray,
-        x_free: np.ndarray, contacts: list[Contact], report: StepReport, scale: float,
+        self,
+        level: Level,
+        q: np.ndarray,
+        v: np.ndarray,
+        M: np.ndarray,
+        f: np.ndarray,
+        x_free: np.ndarray,
+        contacts: list[Contact],
+        report: StepReport,
+        scale: float,
     ) -> np.ndarray:
         """Minimise the Gauss functional of ``level``; record the reactions in ``report``."""
         ctx = self._context(level, q, v, x_free, contacts)
         return self._solve(ctx, M, f, None, report, scale)
 
-    def _context(self, level: Level, q: np.ndarray, v: np.ndarray, x_free: np.ndarray, contacts: list[Contact]) -> Context:
+    def _context(
+        self, level: Level, q: np.ndarray, v: np.ndarray, x_free: np.ndarray, contacts: list[Contact]
+    ) -> Context:
         return Context(self.model, self.data, q, v, x_free, contacts, self.options, level)
 
     def _rows(self, ctx: Context) -> list[tuple[ConstraintModule, Rows]]:
@@ -181,8 +200,13 @@ class Simulator:
         return [(module, rows) for module, rows in parts if rows is not None]
 
     def _solve(
-        self, ctx: Context, M: np.ndarray, f: np.ndarray,
-        parts: list[tuple[ConstraintModule, Rows]] | None, report: StepReport, scale: float,
+        self,
+        ctx: Context,
+        M: np.ndarray,
+        f: np.ndarray,
+        parts: list[tuple[ConstraintModule, Rows]] | None,
+        report: StepReport,
+        scale: float,
     ) -> np.ndarray:
         """Solve, re-posing the rows while a module's fixed-point iteration asks for it."""
         for _ in range(self.options.friction_iterations):
@@ -207,13 +231,10 @@ class Simulator:
         return solution.x
 
     @staticmethod
-    def _record(problem, solution, report: StepReport, scale: float) -> None:
+    def _record(problem: GaussProblem, solution: Solution, report: StepReport, scale: float) -> None:
         for module, rows, rows_slice in problem.blocks:
             multipliers = (solution.lambda_eq if rows.equality else solution.lambda_in)[rows_slice]
-            reactions = module.reactions(rows, multipliers, scale)
-            getattr(report, {"contact": "contacts", "limit": "limits", "bilateral": "bilaterals"}[module.name]).extend(reactions)
-            if module.name == "contact":
-                report.contact_jacobian = rows.data.J.reshape(-1, rows.data.J.shape[-1])
+            report.blocks.append((module, rows, multipliers, scale))
 
 
 def _lap(report: StepReport, stage: str, start: float) -> float:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import proxsuite
@@ -57,20 +58,26 @@ class GaussSolver:
 
     def __init__(self, options: Options) -> None:
         self.options = options
-        self._qp: _proxqp.dense.QP | None = None
+        self._qp: Any = None  # proxsuite.proxqp.dense.QP
         self._dims: tuple[int, int, int] | None = None
+        self._upper = np.zeros(0)
 
     def solve(self, problem: GaussProblem) -> Solution:
         """Solve the Gauss problem; raise :class:`SolverError` as ``Options.on_failure`` says."""
         dims = (len(problem.g), len(problem.b), len(problem.l))
         args = (
-            problem.H, problem.g,
-            problem.A if dims[1] else None, problem.b if dims[1] else None,
-            problem.C if dims[2] else None, problem.l if dims[2] else None,
-            np.full(dims[2], np.inf) if dims[2] else None,
+            problem.H,
+            problem.g,
+            problem.A if dims[1] else None,
+            problem.b if dims[1] else None,
+            problem.C if dims[2] else None,
+            problem.l if dims[2] else None,
+            self._upper if dims[2] else None,
         )
         if dims != self._dims or self._qp is None:
             self._qp = self._new(*dims)
+            self._upper = np.full(dims[2], np.inf)  # every inequality row is one-sided
+            args = (*args[:-1], self._upper if dims[2] else None)
             self._qp.init(*args)
             self._dims = dims
         else:
@@ -79,14 +86,19 @@ class GaussSolver:
         result = self._qp.results
         info = result.info
         certificate = Certificate(
-            info.status.name, int(info.iter), float(info.pri_res), float(info.dua_res),
-            float(info.duality_gap), float(info.setup_time), float(info.solve_time),
+            info.status.name,
+            int(info.iter),
+            float(info.pri_res),
+            float(info.dua_res),
+            float(info.duality_gap),
+            float(info.setup_time),
+            float(info.solve_time),
         )
         solution = Solution(result.x.copy(), -result.y.copy(), -result.z.copy(), certificate)
         self._check(problem, solution)
         return solution
 
-    def _new(self, n: int, n_eq: int, n_in: int) -> _proxqp.dense.QP:
+    def _new(self, n: int, n_eq: int, n_in: int) -> Any:
         qp = _proxqp.dense.QP(n, n_eq, n_in)
         settings = qp.settings
         settings.eps_abs = self.options.eps_abs
@@ -104,7 +116,11 @@ class GaussSolver:
 
     def _check(self, problem: GaussProblem, solution: Solution) -> None:
         c = solution.certificate
-        finite = np.isfinite(solution.x).all() and np.isfinite(solution.lambda_eq).all() and np.isfinite(solution.lambda_in).all()
+        finite = (
+            np.isfinite(solution.x).all()
+            and np.isfinite(solution.lambda_eq).all()
+            and np.isfinite(solution.lambda_in).all()
+        )
         if c.status in ("PROXQP_PRIMAL_INFEASIBLE", "PROXQP_SOLVED_CLOSEST_PRIMAL_FEASIBLE"):
             rows = self._violated(problem, solution.x)
             raise InfeasibleConstraints(

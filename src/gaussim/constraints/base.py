@@ -11,9 +11,9 @@ level). The QP multipliers of those rows are the reactions (impulses at the firs
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from collections.abc import Callable
-from typing import Literal, Protocol
+from dataclasses import dataclass, field
+from typing import Any, Literal, Protocol
 
 import numpy as np
 import pinocchio as pin
@@ -73,7 +73,7 @@ class Context:
     contacts: list[Contact]
     options: Options
     level: Level
-    lagged: dict[tuple[str, str], np.ndarray] = field(default_factory=dict)
+    lagged: dict[tuple[str, str], Any] = field(default_factory=dict)
 
 
 class ConstraintModule(Protocol):
@@ -85,7 +85,7 @@ class ConstraintModule(Protocol):
         """Rows of the admissible set at ``ctx.level``, or None when nothing restricts x."""
 
     def reactions(self, rows: Rows, multipliers: np.ndarray, scale: float) -> list:
-        """Reports from the multipliers of ``rows`` (multiplied by ``scale``: 1/dt turns impulses into forces)."""
+        """Reports from the multipliers of ``rows``, times ``scale`` (1/dt turns impulses into forces)."""
 
     def refine(self, ctx: Context, rows: Rows, x: np.ndarray, multipliers: np.ndarray) -> bool:
         """Update ``ctx.lagged`` from a solution; True when the step must be solved again."""

@@ -30,12 +30,16 @@ class BilateralReaction:
 class _Side:
     """One frame of a bilateral constraint (or a fixed target when frame is None)."""
 
-    def __init__(self, frame: int | None, position: np.ndarray | None = None, rotation: np.ndarray | None = None):
+    def __init__(
+        self, frame: int | None, position: np.ndarray | None = None, rotation: np.ndarray | None = None
+    ):
         self.frame = frame
         self.position = position
         self.rotation = np.eye(3) if rotation is None else np.asarray(rotation, dtype=float)
 
-    def kinematics(self, ctx: Context, acceleration: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def kinematics(
+        self, ctx: Context, acceleration: bool
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(position (3,), rotation (3, 3), Jacobian (6, nv), drift (6,))."""
         if self.frame is None:
             return self.position, self.rotation, np.zeros((6, ctx.model.nv)), np.zeros(6)  # type: ignore[return-value]

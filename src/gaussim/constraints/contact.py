@@ -166,19 +166,24 @@ class ContactModule:
         J = point_jacobians(model, data, joints, placements)
         U = (J @ ctx.v).tolist()
         if ctx.level != "velocity":
-            u_n = np.array([_dot(u, c.normal) for u, c in zip(U, contacts)])
-            keep = is_active(ctx, np.array([c.gap for c in contacts]), u_n, 0.0).tolist()
+            normal_speed = np.array([_dot(u, c.normal) for u, c in zip(U, contacts)])
+            keep = is_active(ctx, np.array([c.gap for c in contacts]), normal_speed, 0.0).tolist()
             if not any(keep):
                 return None
             contacts = [c for c, k in zip(contacts, keep) if k]
             joints = [c.joint for c in contacts]
             placements = [M for M, k in zip(placements, keep) if k]
             J, U = J[keep], [u for u, k in zip(U, keep) if k]
-        drifts = point_drifts(model, data, joints, placements).tolist() if acceleration else [(0.0, 0.0, 0.0)] * len(contacts)
+        drifts = (
+            point_drifts(model, data, joints, placements).tolist()
+            if acceleration
+            else [(0.0, 0.0, 0.0)] * len(contacts)
+        )
         tendencies = (J @ ctx.x_free).tolist() if self.mode != "pyramid" else [None] * len(contacts)
 
-        generators, phi, rates, drift_rates, shifts, floors = [], [], [], [], [], []
-        starts, frictions, sliding, slipping, normals, slips, slip_speeds = [], [], [], [], [], [], []
+        generators: list[list[float]] = []
+        phi, rates, drift_rates, shifts, floors, slip_speeds = [], [], [], [], [], []  # type: ignore[var-annotated]
+        starts, frictions, sliding, slipping, normals, slips = [], [], [], [], [], []  # type: ignore[var-annotated]
         owner: list[int] = []
         for c, u, drift, tendency in zip(contacts, U, drifts, tendencies):
             n, mu = c.normal.tolist(), c.friction
@@ -197,7 +202,9 @@ class ContactModule:
                 # friction opposes the tangential velocity the contact would have without it
                 direction = None if tendency is None else [-(tendency[i] + drift[i]) for i in range(3)]
                 t1, t2 = _tangent_basis(n, direction)
-                gens = [[n[i] + mu * (cs * t1[i] + sn * t2[i]) for i in range(3)] for cs, sn in self.directions]
+                gens = [
+                    [n[i] + mu * (cs * t1[i] + sn * t2[i]) for i in range(3)] for cs, sn in self.directions
+                ]
             starts.append(len(generators))
             generators += gens
             phi += [c.gap] * len(gens)
@@ -224,11 +231,19 @@ class ContactModule:
             bound = stabilised_bound(ctx, phi_, np.array(rates), np.array(drift_rates), True)
         else:
             bound = stabilised_bound(ctx, phi_, phi_, 0.0, True)
-        bound = np.maximum(bound, floors) - np.array(shifts)
+        bound = np.maximum(bound, np.array(floors)) - np.array(shifts)
         friction_ = np.array(frictions)
         batch = _Batch(
-            contacts, J, G, starts_, friction_, np.array(sliding), np.array(slipping),
-            np.array(normals), np.array(slips), np.array(slip_speeds),
+            contacts,
+            J,
+            G,
+            starts_,
+            friction_,
+            np.array(sliding),
+            np.array(slipping),
+            np.array(normals),
+            np.array(slips),
+            np.array(slip_speeds),
         )
         if len(G) == len(contacts) * len(self.directions):  # every contact has a full pyramid
             rows = np.matmul(G.reshape(len(contacts), -1, 3), J).reshape(len(G), -1)
@@ -255,10 +270,10 @@ class ContactModule:
         if b.sliding.any():
             lam = multipliers[b.starts]
             u_next = _tangential(b.J @ (ctx.v + ctx.options.dt * x), b.normals)
-            for i in np.flatnonzero(b.sliding):
+            for i in np.flatnonzero(b.sliding).tolist():
                 name = b.contacts[i].name
                 if u_next[i] @ b.friction[i] > 0:  # friction would reverse the slip: the contact sticks
-                    ctx.lagged[(name, "stops")] = np.ones(1)
+                    ctx.lagged[(name, "stops")] = True
                     changed = True
                     continue
                 changed |= abs(lam[i] - ctx.lagged.get((name, "normal"), 0.0)) > NORMAL_FORCE_TOLERANCE

@@ -35,7 +35,10 @@ class LimitModule:
             if joint.nq != 1 or joint.nv != 1:
                 continue
             iq, iv = joint.idx_q, joint.idx_v
-            for sign, value, side in ((1.0, model.lowerPositionLimit[iq], "lower"), (-1.0, model.upperPositionLimit[iq], "upper")):
+            for sign, value, side in (
+                (1.0, model.lowerPositionLimit[iq], "lower"),
+                (-1.0, model.upperPositionLimit[iq], "upper"),
+            ):
                 if np.isfinite(value) and abs(value) < 1e10:
                     idx_q.append(iq)
                     idx_v.append(iv)
@@ -56,6 +59,7 @@ class LimitModule:
         J = np.zeros((len(active), ctx.model.nv))
         J[np.arange(len(active)), self.idx_v[active]] = self.signs[active]
         bound = stabilised_bound(ctx, phi[active], rate[active], 0.0, True)
+
         def labels() -> list[str]:
             return [f"limit {self.labels[i][0]} {self.labels[i][1]}" for i in active]
 
@@ -63,7 +67,7 @@ class LimitModule:
 
     def reactions(self, rows: Rows, multipliers: np.ndarray, scale: float) -> list[LimitReaction]:
         return [
-            LimitReaction(*self.labels[i], float(scale * lam * self.signs[i]))
+            LimitReaction(self.labels[i][0], self.labels[i][1], float(scale * lam * self.signs[i]))
             for i, lam in zip(rows.data, multipliers)  # type: ignore[call-overload]
         ]
 
