@@ -158,3 +158,18 @@ def test_ball_rests_on_a_box_obstacle(ball):
     state = run(sim, sim.reset(at_height(ball, 0.5 + RADIUS + 0.05)), 1000)
     assert state.q[2] == pytest.approx(0.5 + RADIUS, abs=RESTING_PENETRATION)
     assert sim.last_step.contacts[0].obstacle == "table"
+
+
+def test_no_stale_contact_force_after_lift_off(ball):
+    """A resting ball pulled up loses its contact force at once (tests/test_solver.py checks the
+    stale warm start of ProxQP 0.8 that would keep it)."""
+    sim = gaussim.Simulator(gaussim.Scene(ball, ground=gaussim.Ground()))
+    state = run(sim, sim.reset(at_height(ball, RADIUS)), 50)
+    assert sim.last_step.contacts[0].normal_force == pytest.approx(G * ball.mass, rel=1e-6)
+    lift = np.array([0, 0, 2 * G * ball.mass, 0, 0, 0])  # a 2 m g upward force on the free flyer
+    for _ in range(3):
+        v_before = state.v[2]
+        state = sim.step(state, lift)
+        if sim.last_step.contacts:  # still within the detection margin
+            assert np.linalg.norm(sim.last_step.contacts[0].force) < 1e-9
+        assert (state.v[2] - v_before) / sim.options.dt == pytest.approx(G, rel=1e-9)

@@ -79,8 +79,8 @@ class StepReport:
 
     @property
     def max_residual(self) -> float:
-        """Largest primal or dual residual of the step's QPs (0 when none was solved)."""
-        return max((max(c.primal_residual, c.dual_residual) for c in self.certificates), default=0.0)
+        """Largest KKT residual (gaussim's own check) of the step's QPs (0 when none was solved)."""
+        return max((c.kkt_residual for c in self.certificates), default=0.0)
 
     @cached_property
     def redundant(self) -> bool:

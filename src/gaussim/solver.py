@@ -15,6 +15,20 @@ from .options import Options
 _proxqp = proxsuite.proxqp
 # A row whose residual exceeds this at ProxQP's closest-feasible point is named as conflicting.
 INFEASIBLE_ROW_TOLERANCE = 1e-6
+# A solution is accepted when its KKT residual is below KKT_RTOL * eps_abs * max(1, |g|_inf).
+KKT_RTOL = 100.0
+
+
+def kkt_residual(problem: GaussProblem, x: np.ndarray, lambda_eq: np.ndarray, lambda_in: np.ndarray) -> float:
+    """Largest violation of the KKT conditions of the Gauss problem at (x, lambda_eq, lambda_in >= 0)."""
+    stationarity = problem.H @ x + problem.g - problem.A.T @ lambda_eq - problem.C.T @ lambda_in
+    slack = problem.C @ x - problem.l
+    residuals = [np.abs(stationarity).max()]
+    if len(problem.b):
+        residuals.append(np.abs(problem.A @ x - problem.b).max())
+    if len(problem.l):
+        residuals += [(-slack).max(), (-lambda_in).max(), np.abs(lambda_in * slack).max()]
+    return float(max(residuals))
 
 
 @dataclass
@@ -28,6 +42,11 @@ class Certificate:
         dual_residual: norm of the stationarity residual H x + g + A^T y + C^T z.
         duality_gap: ProxQP's duality gap.
         setup_time, solve_time: ProxQP's own timings [s].
+        kkt_residual: gaussim's own check of the returned point on the problem as posed: the largest
+            of the primal violation, the stationarity residual |H x + g - A^T y - C^T z|, the sign
+            violation of z and the complementarity |z_i (C x - l)_i|.
+        restarted: True when the warm-started answer failed that check and ProxQP was run again
+            from a cold start.
     """
 
     status: str
@@ -37,6 +56,8 @@ class Certificate:
     duality_gap: float
     setup_time: float
     solve_time: float
+    kkt_residual: float = 0.0
+    restarted: bool = False
 
     @property
     def converged(self) -> bool:
@@ -82,9 +103,25 @@ class GaussSolver:
             self._dims = dims
         else:
             self._qp.update(*args)
+        solution = self._run(problem)
+        certificate = solution.certificate
+        if certificate.converged and certificate.kkt_residual > self._kkt_tolerance(problem):
+            # ProxQP 0.8, warm-started, may return the previous solution after 0 iterations when only
+            # the bounds changed (measured: a stale contact force on a ball that left the ground).
+            self._qp.settings.initial_guess = _proxqp.InitialGuess.NO_INITIAL_GUESS
+            solution = self._run(problem)
+            solution.certificate.restarted = True
+            self._qp.settings.initial_guess = _proxqp.InitialGuess.WARM_START_WITH_PREVIOUS_RESULT
+            if solution.certificate.converged and solution.certificate.kkt_residual > self._kkt_tolerance(problem):
+                solution.certificate.status = "GAUSSIM_KKT_CHECK_FAILED"
+        self._check(problem, solution)
+        return solution
+
+    def _run(self, problem: GaussProblem) -> Solution:
         self._qp.solve()
         result = self._qp.results
         info = result.info
+        x, lambda_eq, lambda_in = result.x.copy(), -result.y, -result.z
         certificate = Certificate(
             info.status.name,
             int(info.iter),
@@ -93,10 +130,12 @@ class GaussSolver:
             float(info.duality_gap),
             float(info.setup_time),
             float(info.solve_time),
+            kkt_residual(problem, x, lambda_eq, lambda_in),
         )
-        solution = Solution(result.x.copy(), -result.y.copy(), -result.z.copy(), certificate)
-        self._check(problem, solution)
-        return solution
+        return Solution(x, lambda_eq, lambda_in, certificate)
+
+    def _kkt_tolerance(self, problem: GaussProblem) -> float:
+        return KKT_RTOL * self.options.eps_abs * max(1.0, float(np.abs(problem.g).max()))
 
     def _new(self, n: int, n_eq: int, n_in: int) -> Any:
         qp = _proxqp.dense.QP(n, n_eq, n_in)
