@@ -112,8 +112,9 @@ class GaussSolver:
             solution = self._run(problem)
             solution.certificate.restarted = True
             self._qp.settings.initial_guess = _proxqp.InitialGuess.WARM_START_WITH_PREVIOUS_RESULT
-            if solution.certificate.converged and solution.certificate.kkt_residual > self._kkt_tolerance(problem):
-                solution.certificate.status = "GAUSSIM_KKT_CHECK_FAILED"
+            certificate = solution.certificate
+            if certificate.converged and certificate.kkt_residual > self._kkt_tolerance(problem):
+                certificate.status = "GAUSSIM_KKT_CHECK_FAILED"
         self._check(problem, solution)
         return solution
 
