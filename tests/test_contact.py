@@ -131,7 +131,8 @@ def test_solo12_dropped_settles_on_its_feet(solo12, scheme):
     weight = solo12.mass * G
     assert report.total_contact_force()[2] == pytest.approx(weight, rel=FORCE_BALANCE_RTOL)
     assert min(c.gap for c in report.contacts) > -RESTING_PENETRATION
-    assert {c.geometry for c in report.contacts} == {"FL_FOOT_0", "FR_FOOT_0", "HL_FOOT_0", "HR_FOOT_0"}
+    loaded = {c.geometry for c in report.contacts if c.normal_force > 1e-6}
+    assert loaded == {"FL_FOOT_0", "FR_FOOT_0", "HL_FOOT_0", "HR_FOOT_0"}, "it stands on its feet"
     for contact in report.contacts:
         assert np.linalg.norm(contact.tangential_force) <= 0.8 * contact.normal_force + 1e-9
 

@@ -26,7 +26,10 @@ from .exceptions import (
 from .options import Options
 from .report import StepReport
 from .robot import Robot, load_robot
+from .runlog import RunLog
+from .runner import run
 from .scene import Anchor, Box, Ground, LoopClosure, Scene, Sphere
+from .scenefile import SceneSpec, load_scene
 from .simulator import Simulator
 from .solver import Certificate
 from .state import State
@@ -49,12 +52,16 @@ __all__ = [
     "LoopClosure",
     "Options",
     "Robot",
+    "RunLog",
     "RobotNotFound",
     "Scene",
+    "SceneSpec",
     "Simulator",
     "SolverError",
     "Sphere",
     "State",
     "StepReport",
     "load_robot",
+    "load_scene",
+    "run",
 ]

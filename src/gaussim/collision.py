@@ -13,8 +13,11 @@ from .scene import Ground, Scene
 # Surface points within this distance of the support plane belong to a contact patch [m].
 PATCH_TOLERANCE = 1e-6
 # A contact patch narrower than this is one point (the rounded foot of a mesh hull touches on a
-# small facet; several points there would only add redundant rows) [m].
-PATCH_MIN_EXTENT = 5e-3
+# ring of nearby vertices; several points there would only add redundant rows) [m].
+PATCH_MIN_EXTENT = 2e-2
+# A flat face on the ground is supported by the vertices extreme along these many directions of
+# the tangent plane (every 360/n degrees): the corners of a box, the outline of a sole.
+SUPPORT_DIRECTIONS = 8
 
 
 @dataclass
@@ -67,6 +70,15 @@ class _Pair:
             self.obstacle_center = obstacle.placement().act(np.asarray(self.obstacle_shape.aabb_center))
         self.radius = self.shape.aabb_radius
         self.center = np.asarray(self.shape.aabb_center)
+        # Polyhedra against the ground: every vertex within the margin is a candidate contact with
+        # its own gap (coal's patch gives one depth for the whole patch, which props a tilted sole).
+        self.vertices = _vertices(self.shape) if isinstance(obstacle, Ground) else None
+        if self.vertices is not None and isinstance(obstacle, Ground):
+            n = np.asarray(obstacle.normal)
+            t1 = np.cross(n, np.eye(3)[int(np.argmin(np.abs(n)))])
+            t1 /= np.linalg.norm(t1)
+            angles = 2 * np.pi * np.arange(SUPPORT_DIRECTIONS) / SUPPORT_DIRECTIONS
+            self.directions = np.outer(np.cos(angles), t1) + np.outer(np.sin(angles), np.cross(n, t1))
 
 
 class ContactDetector:
@@ -88,6 +100,9 @@ class ContactDetector:
         contacts: list[Contact] = []
         for pair in self.pairs:
             placement = data.oMi[pair.joint] * pair.local
+            if pair.vertices is not None:
+                contacts += self._on_ground(pair, placement)
+                continue
             if pair.obstacle_radius < np.inf and not self._near(pair, placement):
                 continue  # coal's half-space test is as cheap as this bounding-sphere test
             tf = coal.Transform3s(placement)
@@ -133,7 +148,47 @@ class ContactDetector:
                 )
         return contacts
 
+    def _on_ground(self, pair: _Pair, placement: pin.SE3) -> list[Contact]:
+        """Contacts of a polyhedron with the ground: its vertices within the margin, reduced to the
+        deepest one when they span less than PATCH_MIN_EXTENT, else to the support outline."""
+        ground: Ground = pair.obstacle  # type: ignore[assignment]
+        n = np.asarray(ground.normal)
+        world = pair.vertices @ placement.rotation.T + placement.translation
+        heights = world @ n - ground.height
+        near = np.flatnonzero(heights <= self.margin)
+        if not len(near):
+            return []
+        if np.ptp(world[near], axis=0).max() <= PATCH_MIN_EXTENT:
+            chosen = [int(near[np.argmin(heights[near])])]
+        else:
+            chosen = sorted(set(near[np.argmax(world[near] @ pair.directions.T, axis=0)].tolist()))
+        return [
+            Contact(
+                f"{pair.name}#{k}",
+                pair.geometry,
+                ground.name,
+                pair.joint,
+                world[i],
+                n,
+                float(heights[i]),
+                ground.friction,
+                ground.restitution,
+            )
+            for k, i in enumerate(chosen)
+        ]
+
     def _near(self, pair: _Pair, placement: pin.SE3) -> bool:
         """Bounding-sphere test that skips the narrow phase for far pairs."""
         gap = np.linalg.norm(placement.act(pair.center) - pair.obstacle_center) - pair.radius
         return gap - pair.obstacle_radius <= self.margin
+
+
+def _vertices(shape: coal.CollisionGeometry) -> np.ndarray | None:
+    """Vertices of a box or convex polyhedron in its own frame, shape (V, 3); None for curved shapes."""
+    if isinstance(shape, coal.Box):
+        half = np.asarray(shape.halfSide)
+        corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=float)
+        return corners * half
+    if isinstance(shape, coal.ConvexBase):
+        return np.asarray(shape.points())
+    return None

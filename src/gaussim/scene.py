@@ -131,7 +131,7 @@ class Anchor:
     """
 
     frame: str
-    position: Sequence[float]
+    position: Sequence[float] | np.ndarray
     rotation: np.ndarray | None = None
 
     def __post_init__(self) -> None:

@@ -107,7 +107,9 @@ class Simulator:
             if abs(norm - 1.0) > UNIT_TOLERANCE:
                 raise InvalidState(f"{message}, got norm {norm:.9g}; normalize it (pinocchio.normalize)")
 
-    def _torque(self, tau: np.ndarray | None) -> np.ndarray:
+    def full_torque(self, tau: np.ndarray | None) -> np.ndarray:
+        """Validate ``tau`` and return it with shape (nv,) (zeros for None; a floating robot's
+        actuated-joint torques (nv - 6,) are padded with zeros on the base)."""
         nv = self.model.nv
         if tau is None:
             return np.zeros(nv)
@@ -133,7 +135,7 @@ class Simulator:
         """
         if state is not self._last_state:
             self._check_state(state)
-        tau = self._torque(tau)
+        tau = self.full_torque(tau)
         o = self.options
         report = StepReport(state.t)
         clock = time.perf_counter()

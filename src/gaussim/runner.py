@@ -1,0 +1,90 @@
+"""Running a scene file: step it for its duration, log every step, never lose what was done."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import TextIO
+
+from .exceptions import GaussimError
+from .runlog import RunLog
+from .scenefile import SceneSpec
+from .simulator import Simulator
+
+# While a run goes on, its log is rewritten (atomically) this often [s of wall time].
+CHECKPOINT_SECONDS = 30.0
+# The progress line is redrawn this often [s]: on a terminal, and when written to a file or pipe.
+PROGRESS_SECONDS = {True: 0.2, False: 5.0}
+
+
+def run(
+    spec: SceneSpec,
+    out: str | Path | None = None,
+    *,
+    progress: TextIO | None = None,
+    checkpoint_seconds: float = CHECKPOINT_SECONDS,
+) -> RunLog:
+    """Simulate ``spec`` for its duration and return the log (also written to ``out`` when given).
+
+    A Ctrl-C or a simulation error stops the run: the log of the steps made so far is written,
+    marked incomplete with the reason, and the exception propagates.
+
+    Args:
+        progress: a stream for a progress line (steps/s, simulated time, active contacts), or None.
+        checkpoint_seconds: rewrite ``out`` this often during long runs.
+    """
+    sim = Simulator(spec.scene, spec.options)
+    state = sim.reset(spec.initial.q, spec.initial.v)
+    log = RunLog(spec.robot.name, spec.text, spec.options, str(spec.path))
+    log.start(state)
+    steps = max(1, round(spec.duration / spec.options.dt))
+    start = last_shown = last_saved = time.perf_counter()
+    step = 0
+    try:
+        for step in range(steps):
+            tau = sim.full_torque(spec.controller(state))
+            state = sim.step(state, tau)
+            report = sim.last_step
+            assert report is not None  # set by every step
+            log.record(state, tau, report)
+            now = time.perf_counter()
+            if progress is not None and (
+                now - last_shown > PROGRESS_SECONDS[progress.isatty()] or step == steps - 1
+            ):
+                last_shown = now
+                _show(progress, step + 1, steps, state.t, len(report.contacts), now - start)
+            if out is not None and now - last_saved > checkpoint_seconds:
+                last_saved = now
+                log.finish(False, f"checkpoint at step {step + 1} (the run was still going)")
+                log.save(out)
+    except KeyboardInterrupt:
+        log.finish(False, f"interrupted (Ctrl-C) at step {step}, t = {state.t:.6g} s")
+        _save_and_close(log, out, progress)
+        raise
+    except GaussimError as err:
+        log.finish(False, f"{type(err).__name__} at step {step}, t = {state.t:.6g} s: {err}")
+        _save_and_close(log, out, progress)
+        raise
+    log.finish(True)
+    log.wall_time = time.perf_counter() - start
+    _save_and_close(log, out, progress)
+    return log
+
+
+def _save_and_close(log: RunLog, out: str | Path | None, progress: TextIO | None) -> None:
+    if progress is not None:
+        print(file=progress)
+    if out is not None:
+        log.save(out)
+
+
+def _show(stream: TextIO, done: int, total: int, t: float, contacts: int, elapsed: float) -> None:
+    width = 30
+    filled = int(width * done / total)
+    bar = "#" * filled + "-" * (width - filled)
+    end = "\r" if stream.isatty() else "\n"
+    rate = done / elapsed
+    stream.write(
+        f"[{bar}] {done}/{total} steps  t = {t:.3f} s  {rate:,.0f} steps/s  contacts: {contacts}{end}"
+    )
+    stream.flush()
