@@ -8,10 +8,10 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from .scene import Ground, Scene
+from .scene import Box, ContactPair, Ground, Scene, Sphere
 
 # Surface points within this distance of the support plane belong to a contact patch [m].
-PATCH_TOLERANCE = 1e-6
+PATCH_TOLERANCE = 1e-3
 # A contact patch narrower than this is one point (the rounded foot of a mesh hull touches on a
 # ring of nearby vertices; several points there would only add redundant rows) [m].
 PATCH_MIN_EXTENT = 2e-2
@@ -32,6 +32,7 @@ class Contact:
         gap: signed distance along the normal, negative when penetrating [m].
         friction: Coulomb coefficient of the obstacle.
         restitution: restitution coefficient of the obstacle.
+        other_joint: joint carrying the obstacle when it is a robot geometry, else 0 (the world).
     """
 
     name: str
@@ -43,38 +44,52 @@ class Contact:
     gap: float
     friction: float
     restitution: float
+    other_joint: int = 0
 
 
 class _Pair:
     """Everything about one declared pair that does not change during a run."""
 
-    def __init__(self, scene: Scene, geometry_id: int, obstacle_id: int, name: str) -> None:
-        geometry = scene.robot.collision_model.geometryObjects[geometry_id]
-        obstacle = scene.obstacles[obstacle_id]
-        shape = geometry.geometry
-        self.shape = shape.convex if isinstance(shape, coal.BVHModelBase) else shape
-        self.shape.computeLocalAABB()
+    def __init__(self, scene: Scene, pair: ContactPair) -> None:
+        geometries = scene.robot.collision_model.geometryObjects
+        geometry = geometries[pair.geometry]
+        self.shape = _convex(geometry.geometry)
         self.local = geometry.placement
         self.joint = int(geometry.parentJoint)
-        self.name = name
+        self.name = pair.name
         self.geometry = geometry.name
-        self.obstacle = obstacle
-        self.obstacle_shape = obstacle.shape()
-        self.obstacle_tf = coal.Transform3s(obstacle.placement())
-        if isinstance(obstacle, Ground):
+        self.other_joint, self.other_local = 0, None
+        if pair.other is not None:  # another robot geometry: it moves, so its placement is per step
+            other = geometries[pair.other]
+            self.obstacle: Ground | Box | Sphere | None = None
+            self.obstacle_name = other.name
+            self.friction, self.restitution = scene.self_contact
+            self.obstacle_shape = _convex(other.geometry)
+            self.other_joint, self.other_local = int(other.parentJoint), other.placement
+            self.obstacle_tf = coal.Transform3s()
+        else:
+            obstacle = scene.obstacles[pair.obstacle]  # type: ignore[index]
+            self.obstacle = obstacle
+            self.obstacle_name = obstacle.name
+            self.friction, self.restitution = obstacle.friction, obstacle.restitution
+            self.obstacle_shape = obstacle.shape()
+            self.obstacle_tf = coal.Transform3s(obstacle.placement())
+        if isinstance(self.obstacle, Ground):
             self.obstacle_radius = np.inf
             self.obstacle_center = np.zeros(3)
         else:
             self.obstacle_shape.computeLocalAABB()
             self.obstacle_radius = self.obstacle_shape.aabb_radius
-            self.obstacle_center = obstacle.placement().act(np.asarray(self.obstacle_shape.aabb_center))
+            self.obstacle_local_center = np.asarray(self.obstacle_shape.aabb_center)
+            if self.obstacle is not None:
+                self.obstacle_center = self.obstacle.placement().act(self.obstacle_local_center)
         self.radius = self.shape.aabb_radius
         self.center = np.asarray(self.shape.aabb_center)
         # Polyhedra against the ground: every vertex within the margin is a candidate contact with
         # its own gap (coal's patch gives one depth for the whole patch, which props a tilted sole).
-        self.vertices = _vertices(self.shape) if isinstance(obstacle, Ground) else None
-        if self.vertices is not None and isinstance(obstacle, Ground):
-            n = np.asarray(obstacle.normal)
+        self.vertices = _vertices(self.shape) if isinstance(self.obstacle, Ground) else None
+        if self.vertices is not None and isinstance(self.obstacle, Ground):
+            n = np.asarray(self.obstacle.normal)
             t1 = np.cross(n, np.eye(3)[int(np.argmin(np.abs(n)))])
             t1 /= np.linalg.norm(t1)
             angles = 2 * np.pi * np.arange(SUPPORT_DIRECTIONS) / SUPPORT_DIRECTIONS
@@ -86,7 +101,7 @@ class ContactDetector:
 
     def __init__(self, scene: Scene, margin: float) -> None:
         self.margin = margin
-        self.pairs = [_Pair(scene, p.geometry, p.obstacle, p.name) for p in scene.pairs]
+        self.pairs = [_Pair(scene, p) for p in scene.pairs]
         self.request = coal.CollisionRequest()
         self.request.security_margin = margin
         self.request.num_max_contacts = 1
@@ -100,6 +115,10 @@ class ContactDetector:
         contacts: list[Contact] = []
         for pair in self.pairs:
             placement = data.oMi[pair.joint] * pair.local
+            if pair.other_local is not None:
+                other = data.oMi[pair.other_joint] * pair.other_local
+                pair.obstacle_tf = coal.Transform3s(other)
+                pair.obstacle_center = other.act(pair.obstacle_local_center)
             if pair.vertices is not None:
                 contacts += self._on_ground(pair, placement)
                 continue
@@ -131,19 +150,23 @@ class ContactDetector:
                 # patch points lie midway between the surfaces: move them onto the robot's
                 middle = np.array([patch.getPoint(i) for i in range(patch.size())]) + normal * (gap / 2)
                 if np.ptp(middle, axis=0).max() > PATCH_MIN_EXTENT:
-                    points = list(middle)
+                    # coal orders a patch's points arbitrarily: order them by their place on the robot's
+                    # body so that a contact keeps its name from step to step
+                    local = np.round((middle - placement.translation) @ placement.rotation, 4)
+                    points = list(middle[np.lexsort(local.T[::-1])])
             for k, point in enumerate(points):
                 contacts.append(
                     Contact(
                         f"{pair.name}#{k}",
                         pair.geometry,
-                        pair.obstacle.name,
+                        pair.obstacle_name,
                         pair.joint,
                         point,
                         normal,
                         gap,
-                        pair.obstacle.friction,
-                        pair.obstacle.restitution,
+                        pair.friction,
+                        pair.restitution,
+                        pair.other_joint,
                     )
                 )
         return contacts
@@ -181,6 +204,13 @@ class ContactDetector:
         """Bounding-sphere test that skips the narrow phase for far pairs."""
         gap = np.linalg.norm(placement.act(pair.center) - pair.obstacle_center) - pair.radius
         return gap - pair.obstacle_radius <= self.margin
+
+
+def _convex(shape: coal.CollisionGeometry) -> coal.CollisionGeometry:
+    """The shape contacts are computed on: the convex hull of a mesh (built at robot load)."""
+    shape = shape.convex if isinstance(shape, coal.BVHModelBase) else shape
+    shape.computeLocalAABB()
+    return shape
 
 
 def _vertices(shape: coal.CollisionGeometry) -> np.ndarray | None:

@@ -57,7 +57,7 @@ class Options:
     limit_margin: float = 1e-2
     active_tolerance: float = 1e-6
     eps_abs: float = 1e-9
-    max_iter: int = 1000
+    max_iter: int = 10000
     on_failure: str = "raise"
 
     def __post_init__(self) -> None:

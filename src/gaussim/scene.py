@@ -160,11 +160,13 @@ Bilateral = Anchor | LoopClosure
 
 @dataclass(frozen=True)
 class ContactPair:
-    """A robot collision geometry that may touch an obstacle (indices resolved at scene build)."""
+    """A robot collision geometry that may touch an obstacle or another robot geometry (indices
+    resolved at scene build: exactly one of ``obstacle`` and ``other`` is set)."""
 
     geometry: int
-    obstacle: int
+    obstacle: int | None
     name: str
+    other: int | None = None
 
 
 class Scene:
@@ -176,8 +178,9 @@ class Scene:
         robot: the robot.
         ground: a ground plane, or None.
         obstacles: fixed boxes and spheres.
-        contacts: the (geometry name, obstacle name) pairs that may touch; default every robot
-            collision geometry against every obstacle and the ground.
+        contacts: the (geometry name, obstacle or geometry name) pairs that may touch; default every
+            robot collision geometry against every obstacle and the ground (no self-contact).
+        self_contact: (friction, restitution) of contacts between two robot geometries.
         joint_limits: enforce the URDF position limits.
         bilaterals: anchors and loop closures.
         gravity: gravity vector [m/s^2], shape (3,).
@@ -193,12 +196,15 @@ class Scene:
         joint_limits: bool = False,
         bilaterals: Sequence[Bilateral] = (),
         gravity: Sequence[float] = (0.0, 0.0, -9.81),
+        self_contact: tuple[float, float] = (0.8, 0.0),
     ) -> None:
         self.robot = robot
         self.obstacles: tuple[Obstacle, ...] = ((ground,) if ground else ()) + tuple(obstacles)
         names = [o.name for o in self.obstacles]
         if len(set(names)) != len(names):
             raise InvalidOptions("obstacles", f"names must be unique, got {names}")
+        _material("self_contact", *self_contact)
+        self.self_contact = (float(self_contact[0]), float(self_contact[1]))
         self.joint_limits = bool(joint_limits)
         self.gravity = _vector("gravity", gravity, 3)
         self.bilaterals = tuple(bilaterals)
@@ -216,11 +222,14 @@ class Scene:
             if len(pair) != 2:
                 raise InvalidOptions(f"contacts[{k}]", f"must be (geometry, obstacle), got {pair!r}")
             geometry, obstacle = pair
-            if obstacle not in names:
-                raise GeometryNotFound(obstacle, names, "obstacle")
-            pairs.append(
-                ContactPair(self.robot.geometry_id(geometry), names.index(obstacle), f"{geometry}/{obstacle}")
-            )
+            first = self.robot.geometry_id(geometry)
+            name = f"{geometry}/{obstacle}"
+            if obstacle in names:
+                pairs.append(ContactPair(first, names.index(obstacle), name))
+            elif obstacle in geometries and obstacle != geometry:
+                pairs.append(ContactPair(first, None, name, self.robot.geometry_id(obstacle)))
+            else:
+                raise GeometryNotFound(obstacle, names + [g for g in geometries if g != geometry], "obstacle")
         return pairs
 
     def summary(self) -> str:

@@ -4,7 +4,8 @@
     [initial]      configuration = "standing" | q = [...];  v = [...];  ground_clearance = 0.01
     [ground]       friction, restitution, height, normal
     [[obstacles]]  type = "box" | "sphere", name, size | radius, position, rpy, friction, restitution
-    [contacts]     pairs = [["FL_FOOT_0", "ground"], ...]    (default: every geometry x obstacle)
+    [contacts]     pairs = [["FL_FOOT_0", "ground"], ["a_0", "b_0"], ...]  (default: every geometry x
+                   obstacle); friction, restitution: of the pairs of two robot geometries
     [limits]       enabled = true
     [[bilaterals]] type = "anchor", frame, position, rpy  |  type = "loop", frames = [a, b], orientation
     [control]      type = "zero" | "constant" (tau = [...]) | "pd" (target = name | [...], kp, kd)
@@ -36,7 +37,7 @@ SECTIONS = {
     "initial": {"configuration", "q", "v", "ground_clearance"},
     "ground": {"friction", "restitution", "height", "normal"},
     "obstacles": {"type", "name", "size", "radius", "position", "rpy", "friction", "restitution"},
-    "contacts": {"pairs"},
+    "contacts": {"pairs", "friction", "restitution"},
     "limits": {"enabled"},
     "bilaterals": {"type", "frame", "position", "rpy", "frames", "orientation"},
     "control": {"type", "tau", "target", "kp", "kd"},
@@ -137,7 +138,12 @@ class _Reader:
         robot = self.robot()
         obstacles = [self.obstacle(i, o) for i, o in enumerate(self.list("obstacles"))]
         ground = self.ground()
-        contacts = self.table("contacts").get("pairs")
+        contacts_section = self.table("contacts")
+        contacts = contacts_section.get("pairs")
+        self_contact = (
+            self.number("contacts.friction", contacts_section.get("friction", 0.8)),
+            self.number("contacts.restitution", contacts_section.get("restitution", 0.0)),
+        )
         if contacts is not None and not (
             isinstance(contacts, list) and all(isinstance(p, list) for p in contacts)
         ):
@@ -155,6 +161,7 @@ class _Reader:
                 contacts=None if contacts is None else [tuple(p) for p in contacts],
                 joint_limits=limits,
                 bilaterals=bilaterals,
+                self_contact=self_contact,
             ),
         )
         options = self.options(overrides)
@@ -164,14 +171,16 @@ class _Reader:
         initial = self.initial(scene)
         return SceneSpec(self.path, text, scene, options, initial, self.controller(robot), duration)
 
-    def wrap(self, key: str, build):  # type: ignore[no-untyped-def]
-        """Run ``build``; a GaussimError it raises is prefixed with the file and key."""
+    def wrap(self, key: str, build, owned: bool = False):  # type: ignore[no-untyped-def]
+        """Run ``build``; a GaussimError it raises is prefixed with the file and key (``owned``: the
+        error's field starts with the owner's name, which ``key`` replaces)."""
         try:
             return build()
         except SceneFileError:
             raise
         except InvalidOptions as err:
-            raise SceneFileError(self.path, f"{key}.{err.field}", str(err)[len(err.field) + 2 :]) from err
+            field = err.field.split(".", 1)[-1] if owned else err.field
+            raise SceneFileError(self.path, f"{key}.{field}", str(err)[len(err.field) + 2 :]) from err
         except GaussimError as err:
             raise SceneFileError(self.path, key, str(err)) from err
 
@@ -204,7 +213,7 @@ class _Reader:
         if "ground" not in self.data:
             return None
         section = self.table("ground")
-        return self.wrap("ground", lambda: Ground(**section))
+        return self.wrap("ground", lambda: Ground(**section), owned=True)
 
     def obstacle(self, i: int, entry: Any) -> Box | Sphere:
         key = f"obstacles[{i}]"
@@ -214,9 +223,9 @@ class _Reader:
         if kind == "box":
             if "radius" in section:
                 self.fail(f"{key}.radius", "a box has a size, not a radius")
-            return self.wrap(key, lambda: Box(rotation=pin.rpy.rpyToMatrix(rpy), **section))
+            return self.wrap(key, lambda: Box(rotation=pin.rpy.rpyToMatrix(rpy), **section), owned=True)
         if kind == "sphere":
-            return self.wrap(key, lambda: Sphere(**section))
+            return self.wrap(key, lambda: Sphere(**section), owned=True)
         self.fail(f"{key}.type", f"{kind!r} is not one of box, sphere")
         raise AssertionError  # unreachable
 

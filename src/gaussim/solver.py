@@ -15,6 +15,7 @@ from .options import Options
 _proxqp = proxsuite.proxqp
 # A row whose residual exceeds this at ProxQP's closest-feasible point is named as conflicting.
 INFEASIBLE_ROW_TOLERANCE = 1e-6
+INFEASIBLE = ("PROXQP_PRIMAL_INFEASIBLE", "PROXQP_SOLVED_CLOSEST_PRIMAL_FEASIBLE", "PROXQP_DUAL_INFEASIBLE")
 # A solution is accepted when its KKT residual is below KKT_RTOL * eps_abs * max(1, |g|_inf).
 KKT_RTOL = 100.0
 
@@ -96,27 +97,31 @@ class GaussSolver:
             self._upper if dims[2] else None,
         )
         if dims != self._dims or self._qp is None:
-            self._qp = self._new(*dims)
             self._upper = np.full(dims[2], np.inf)  # every inequality row is one-sided
             args = (*args[:-1], self._upper if dims[2] else None)
-            self._qp.init(*args)
-            self._dims = dims
+            self._fresh(dims, args)
         else:
             self._qp.update(*args)
         solution = self._run(problem)
-        certificate = solution.certificate
-        if certificate.converged and certificate.kkt_residual > self._kkt_tolerance(problem):
+        if not self._acceptable(problem, solution) and solution.certificate.status not in INFEASIBLE:
             # ProxQP 0.8, warm-started, may return the previous solution after 0 iterations when only
-            # the bounds changed (measured: a stale contact force on a ball that left the ground).
-            self._qp.settings.initial_guess = _proxqp.InitialGuess.NO_INITIAL_GUESS
+            # the bounds changed (measured: a stale contact force on a ball that left the ground), and a
+            # warm start from a much different problem can stall or diverge (measured: a box stack
+            # whose contact patches changed size, and the QP object kept NaNs after it): solve again from
+            # a cold start, in a new QP object.
+            self._fresh(dims, args)
             solution = self._run(problem)
             solution.certificate.restarted = True
-            self._qp.settings.initial_guess = _proxqp.InitialGuess.WARM_START_WITH_PREVIOUS_RESULT
             certificate = solution.certificate
-            if certificate.converged and certificate.kkt_residual > self._kkt_tolerance(problem):
+            if certificate.converged and not self._acceptable(problem, solution):
                 certificate.status = "GAUSSIM_KKT_CHECK_FAILED"
         self._check(problem, solution)
         return solution
+
+    def _fresh(self, dims: tuple[int, int, int], args: tuple) -> None:
+        self._qp = self._new(*dims)
+        self._qp.init(*args)
+        self._dims = dims
 
     def _run(self, problem: GaussProblem) -> Solution:
         self._qp.solve()
@@ -135,8 +140,9 @@ class GaussSolver:
         )
         return Solution(x, lambda_eq, lambda_in, certificate)
 
-    def _kkt_tolerance(self, problem: GaussProblem) -> float:
-        return KKT_RTOL * self.options.eps_abs * max(1.0, float(np.abs(problem.g).max()))
+    def _acceptable(self, problem: GaussProblem, solution: Solution) -> bool:
+        tolerance = KKT_RTOL * self.options.eps_abs * max(1.0, float(np.abs(problem.g).max()))
+        return solution.certificate.converged and solution.certificate.kkt_residual <= tolerance
 
     def _new(self, n: int, n_eq: int, n_in: int) -> Any:
         qp = _proxqp.dense.QP(n, n_eq, n_in)
@@ -151,7 +157,7 @@ class GaussSolver:
         settings.check_duality_gap = True
         settings.eps_duality_gap_abs = self.options.eps_abs
         settings.eps_duality_gap_rel = 0.0
-        settings.primal_infeasibility_solving = True
+        settings.primal_infeasibility_solving = False
         return qp
 
     def _check(self, problem: GaussProblem, solution: Solution) -> None:

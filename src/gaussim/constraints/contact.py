@@ -117,6 +117,22 @@ def _tangential(u: np.ndarray, n: np.ndarray) -> np.ndarray:
     return u - np.einsum("mi,mi->m", u, n)[:, None] * n
 
 
+def _relative(kinematics, model, data, contacts: list[Contact]) -> np.ndarray:  # type: ignore[no-untyped-def]
+    """Point Jacobians (m, 3, nv) or drifts (m, 3) of the robot side of each contact, minus those of
+    the other side's body at the same point when the obstacle is another robot geometry."""
+    joints = [c.joint for c in contacts]
+    points = [c.point for c in contacts]
+    result = kinematics(model, data, joints, point_placements(data, joints, points))
+    others = [i for i, c in enumerate(contacts) if c.other_joint]
+    if others:
+        other_joints = [contacts[i].other_joint for i in others]
+        other_points = [points[i] for i in others]
+        result[others] -= kinematics(
+            model, data, other_joints, point_placements(data, other_joints, other_points)
+        )
+    return result
+
+
 # Per-contact 3-vector algebra runs on Python floats: for the handful of contacts of a robot
 # this is several times faster than numpy calls on (m, 3) arrays (measured in benchmarks/step_cost.py).
 def _dot(a, b) -> float:
@@ -161,9 +177,7 @@ class ContactModule:
             return None
         model, data, options = ctx.model, ctx.data, ctx.options
         acceleration = ctx.level == "acceleration"
-        joints = [c.joint for c in contacts]
-        placements = point_placements(data, joints, [c.point for c in contacts])
-        J = point_jacobians(model, data, joints, placements)
+        J = _relative(point_jacobians, model, data, contacts)
         U = (J @ ctx.v).tolist()
         if ctx.level != "velocity":
             normal_speed = np.array([_dot(u, c.normal) for u, c in zip(U, contacts)])
@@ -171,11 +185,9 @@ class ContactModule:
             if not any(keep):
                 return None
             contacts = [c for c, k in zip(contacts, keep) if k]
-            joints = [c.joint for c in contacts]
-            placements = [M for M, k in zip(placements, keep) if k]
             J, U = J[keep], [u for u, k in zip(U, keep) if k]
         drifts = (
-            point_drifts(model, data, joints, placements).tolist()
+            _relative(point_drifts, model, data, contacts).tolist()
             if acceleration
             else [(0.0, 0.0, 0.0)] * len(contacts)
         )
