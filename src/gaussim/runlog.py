@@ -113,7 +113,7 @@ class RunLog:
 
     @property
     def tau(self) -> np.ndarray:
-        return np.array(self._tau).reshape(len(self._tau), -1)
+        return np.array(self._tau).reshape(len(self._tau), len(self._v[0]) if self._v else 0)
 
     def contact_arrays(self) -> dict[str, np.ndarray]:
         """Per (step, contact) rows: step, contact id, point (3), normal (3), force (3), gap."""

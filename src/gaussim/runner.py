@@ -61,7 +61,7 @@ def run(
         log.finish(False, f"interrupted (Ctrl-C) at step {step}, t = {state.t:.6g} s")
         _save_and_close(log, out, progress)
         raise
-    except GaussimError as err:
+    except Exception as err:  # a GaussimError, or a bug: either way the steps made are kept
         log.finish(False, f"{type(err).__name__} at step {step}, t = {state.t:.6g} s: {err}")
         _save_and_close(log, out, progress)
         raise
