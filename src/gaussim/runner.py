@@ -6,7 +6,6 @@ import time
 from pathlib import Path
 from typing import TextIO
 
-from .exceptions import GaussimError
 from .runlog import RunLog
 from .scenefile import SceneSpec
 from .simulator import Simulator
