@@ -89,7 +89,7 @@ class _Pair:
         # its own gap (coal's patch gives one depth for the whole patch, which props a tilted sole).
         self.vertices = _vertices(self.shape) if isinstance(self.obstacle, Ground) else None
         if self.vertices is not None and isinstance(self.obstacle, Ground):
-            n = np.asarray(self.obstacle.normal)
+            self.ground_normal = n = np.asarray(self.obstacle.normal)
             t1 = np.cross(n, np.eye(3)[int(np.argmin(np.abs(n)))])
             t1 /= np.linalg.norm(t1)
             angles = 2 * np.pi * np.arange(SUPPORT_DIRECTIONS) / SUPPORT_DIRECTIONS
@@ -172,19 +172,24 @@ class ContactDetector:
         return contacts
 
     def _on_ground(self, pair: _Pair, placement: pin.SE3) -> list[Contact]:
-        """Contacts of a polyhedron with the ground: its vertices within the margin, reduced to the
-        deepest one when they span less than PATCH_MIN_EXTENT, else to the support outline."""
+        """Contacts of a polyhedron with the ground: its vertices within the margin and within
+        PATCH_TOLERANCE of the deepest one (or penetrating), reduced to the deepest one when they span
+        less than PATCH_MIN_EXTENT, else to the vertices of their support outline."""
         ground: Ground = pair.obstacle  # type: ignore[assignment]
-        n = np.asarray(ground.normal)
-        world = pair.vertices @ placement.rotation.T + placement.translation
-        heights = world @ n - ground.height
-        near = np.flatnonzero(heights <= self.margin)
-        if not len(near):
+        n = pair.ground_normal
+        R, p = placement.rotation, placement.translation
+        # heights of all vertices with one matrix-vector product; world points only for the near ones
+        heights = pair.vertices @ (R.T @ n) + (p @ n - ground.height)
+        lowest = float(heights.min())
+        if lowest > self.margin:
             return []
-        if np.ptp(world[near], axis=0).max() <= PATCH_MIN_EXTENT:
-            chosen = [int(near[np.argmin(heights[near])])]
+        # penetrating vertices, and those within PATCH_TOLERANCE of the deepest one
+        near = np.flatnonzero(heights <= max(0.0, min(self.margin, lowest + PATCH_TOLERANCE)))
+        world, heights = pair.vertices[near] @ R.T + p, heights[near]
+        if len(near) == 1 or float((world.max(axis=0) - world.min(axis=0)).max()) <= PATCH_MIN_EXTENT:
+            chosen = [int(np.argmin(heights))]
         else:
-            chosen = sorted(set(near[np.argmax(world[near] @ pair.directions.T, axis=0)].tolist()))
+            chosen = sorted(set(np.argmax(world @ pair.directions.T, axis=0).tolist()))
         return [
             Contact(
                 f"{pair.name}#{k}",
