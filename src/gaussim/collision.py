@@ -178,14 +178,15 @@ class ContactDetector:
         ground: Ground = pair.obstacle  # type: ignore[assignment]
         n = pair.ground_normal
         R, p = placement.rotation, placement.translation
+        vertices: np.ndarray = pair.vertices  # type: ignore[assignment]  # set for ground pairs
         # heights of all vertices with one matrix-vector product; world points only for the near ones
-        heights = pair.vertices @ (R.T @ n) + (p @ n - ground.height)
+        heights = vertices @ (R.T @ n) + (p @ n - ground.height)
         lowest = float(heights.min())
         if lowest > self.margin:
             return []
         # penetrating vertices, and those within PATCH_TOLERANCE of the deepest one
         near = np.flatnonzero(heights <= max(0.0, min(self.margin, lowest + PATCH_TOLERANCE)))
-        world, heights = pair.vertices[near] @ R.T + p, heights[near]
+        world, heights = vertices[near] @ R.T + p, heights[near]
         if len(near) == 1 or float((world.max(axis=0) - world.min(axis=0)).max()) <= PATCH_MIN_EXTENT:
             chosen = [int(np.argmin(heights))]
         else:
