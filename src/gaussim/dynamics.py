@@ -43,13 +43,6 @@ def compute_dynamics(
     return Dynamics(data.M.copy(), tau - data.nle, a_free)
 
 
-def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Cross product along the last axis of (..., 3) arrays (numpy's ``cross`` costs ~20 us a call)."""
-    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
-
-
 def point_placements(data: pin.Data, joints: list[int], points: Sequence[np.ndarray]) -> list[pin.SE3]:
     """Placements, relative to their joints, of world-aligned frames at world ``points`` (m, 3) [m]."""
     return [pin.SE3(_IDENTITY, data.oMi[j].actInv(p)) for j, p in zip(joints, points)]

@@ -231,11 +231,3 @@ class Scene:
             else:
                 raise GeometryNotFound(obstacle, names + [g for g in geometries if g != geometry], "obstacle")
         return pairs
-
-    def summary(self) -> str:
-        """One line per declared constraint family."""
-        lines = [f"robot {self.robot.name}: nq={self.robot.model.nq} nv={self.robot.model.nv}"]
-        lines.append(f"contact pairs: {len(self.pairs)}")
-        lines.append(f"joint limits: {'on' if self.joint_limits else 'off'}")
-        lines += [f"bilateral: {b.name}" for b in self.bilaterals]
-        return "\n".join(lines)

@@ -108,11 +108,6 @@ class _Batch:
         return np.add.reduceat(lam[:, None] * self.generators, self.starts, axis=0)
 
 
-def _normalized(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    norm = np.sqrt(np.einsum("...i,...i->...", x, x))
-    return x / np.where(norm > 1e-12, norm, 1.0)[..., None], norm
-
-
 def _tangential(u: np.ndarray, n: np.ndarray) -> np.ndarray:
     return u - np.einsum("mi,mi->m", u, n)[:, None] * n
 
