@@ -286,15 +286,10 @@ class ContactModule:
                 changed |= abs(lam[i] - ctx.lagged.get((name, "normal"), 0.0)) > NORMAL_FORCE_TOLERANCE
                 ctx.lagged[(name, "normal")] = lam[i]
         if b.slipping.any():
-            for i, (u, slips) in enumerate(zip((b.J @ x).tolist(), b.slipping.tolist())):
-                if not slips:
-                    continue
-                n = b.contacts[i].normal.tolist()
-                u_n = _dot(u, n)
-                new = [u[k] - u_n * n[k] for k in range(3)]
-                if max(b.slip_speed[i], _dot(new, new) ** 0.5) <= SLIP_SPEED:
+            new = _tangential(b.J @ x, b.normals)
+            for i in np.flatnonzero(b.slipping).tolist():
+                if max(b.slip_speed[i], float(np.linalg.norm(new[i]))) <= SLIP_SPEED:
                     continue  # a sticking contact has no shift to refine
-                previous = b.slip[i]
-                changed |= max(abs(new[k] - previous[k]) for k in range(3)) > SLIP_TOLERANCE[self.mode]
-                ctx.lagged[(b.contacts[i].name, "slip")] = new
+                changed |= float(np.abs(new[i] - b.slip[i]).max()) > SLIP_TOLERANCE[self.mode]
+                ctx.lagged[(b.contacts[i].name, "slip")] = new[i]
         return changed
