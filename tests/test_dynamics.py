@@ -3,7 +3,7 @@
 import numpy as np
 import pinocchio as pin
 
-from gaussim.dynamics import compute_dynamics, point_drifts, point_jacobians, point_placements
+from gaussim.dynamics import compute_dynamics, point_drifts, point_jacobians, point_placements, support_masks
 
 FD_STEP = 1e-7
 FD_TOLERANCE = 1e-5
@@ -16,6 +16,7 @@ def test_point_jacobians_and_drifts_match_finite_differences(solo12):
     q = solo12.configuration("standing")
     v = rng.normal(size=model.nv)
     joints = [model.getJointId("FL_KFE"), model.getJointId("HR_HAA"), 1]
+    masks, world = support_masks(model), np.zeros(3, int)
     local = rng.normal(scale=0.1, size=(3, 3))
 
     def points(q_):
@@ -26,7 +27,7 @@ def test_point_jacobians_and_drifts_match_finite_differences(solo12):
     compute_dynamics(model, data, q, v, np.zeros(model.nv), drifts=True)
     p = points(q)
     placements = point_placements(data, joints, p)
-    J = point_jacobians(model, data, joints, placements)
+    J = point_jacobians(data, masks, np.array(joints), world, p)
     drift = point_drifts(model, data, joints, placements)
     assert J.shape == (3, 3, model.nv) and drift.shape == (3, 3)
 
@@ -34,8 +35,29 @@ def test_point_jacobians_and_drifts_match_finite_differences(solo12):
     np.testing.assert_allclose(J @ v, (points(q_next) - p) / FD_STEP, atol=FD_TOLERANCE)
     # Jdot v: derivative of the body-point velocity J(q) v along the motion, at constant v
     compute_dynamics(model, data, q_next, v, np.zeros(model.nv), drifts=False)
-    J_next = point_jacobians(model, data, joints, point_placements(data, joints, points(q_next)))
+    J_next = point_jacobians(data, masks, np.array(joints), world, points(q_next))
     np.testing.assert_allclose(drift, (J_next @ v - J @ v) / FD_STEP, atol=FD_TOLERANCE * 10)
+
+
+def test_relative_point_jacobians_are_differences_of_the_two_bodies(solo12):
+    """Two robot bodies at one point: the relative Jacobian is the difference of the two bodies'
+    point Jacobians (their shared ancestors cancel)."""
+    model = solo12.model
+    data = model.createData()
+    rng = np.random.default_rng(5)
+    q = pin.randomConfiguration(model, -np.ones(model.nq), np.ones(model.nq))
+    compute_dynamics(model, data, q, rng.normal(size=model.nv), np.zeros(model.nv), drifts=False)
+    masks = support_masks(model)
+    joints = np.array([model.getJointId("FL_KFE"), model.getJointId("FL_KFE")])
+    others = np.array([model.getJointId("FR_KFE"), model.getJointId("FL_HAA")])
+    p = rng.normal(size=(2, 3))
+    relative = point_jacobians(data, masks, joints, others, p)
+    difference = point_jacobians(data, masks, joints, np.zeros(2, int), p) - point_jacobians(
+        data, masks, others, np.zeros(2, int), p
+    )
+    np.testing.assert_allclose(relative, difference, atol=1e-12)
+    # the FL leg's own hip joint is shared with FL_KFE: no base columns remain in the relative rows
+    assert np.abs(relative[1, :, :6]).max() < 1e-12
 
 
 def test_dynamics_match_pinocchio(solo12):

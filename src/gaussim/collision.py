@@ -18,33 +18,60 @@ PATCH_MIN_EXTENT = 2e-2
 # A flat face on the ground is supported by the vertices extreme along these many directions of
 # the tangent plane (every 360/n degrees): the corners of a box, the outline of a sole.
 SUPPORT_DIRECTIONS = 8
+# A polyhedron on the ground found to touch at one point keeps that verdict while its orientation
+# cannot have brought a vertex this much closer to the ground than the deepest one [m].
+NARROW_SLACK = 2e-3
 
 
 @dataclass
-class Contact:
-    """One contact point between a robot geometry and an obstacle.
+class Contacts:
+    """The m contact points of one step, as arrays (one entry per point).
 
     Attributes:
-        name: ``"geometry/obstacle#k"``, stable while the patch keeps its size.
-        joint: Pinocchio joint carrying the robot geometry.
-        point: point on the robot surface, world frame, shape (3,) [m].
-        normal: unit normal from the obstacle towards the robot, shape (3,).
-        gap: signed distance along the normal, negative when penetrating [m].
-        friction: Coulomb coefficient of the obstacle.
-        restitution: restitution coefficient of the obstacle.
-        other_joint: joint carrying the obstacle when it is a robot geometry, else 0 (the world).
+        names: ``"geometry/obstacle#k"``, stable while a patch keeps its size.
+        geometry, obstacle: robot collision geometry and obstacle of each point.
+        joint: Pinocchio joint carrying the robot geometry, shape (m,).
+        other_joint: joint carrying the obstacle when it is a robot geometry, else 0 (the world), (m,).
+        point: points on the robot surface, world frame, shape (m, 3) [m].
+        normal: unit normals from the obstacle towards the robot, shape (m, 3).
+        gap: signed distances along the normal, negative when penetrating, shape (m,) [m].
+        friction, restitution: coefficients of the obstacle, shape (m,).
     """
 
-    name: str
-    geometry: str
-    obstacle: str
-    joint: int
+    names: list[str]
+    geometry: list[str]
+    obstacle: list[str]
+    joint: np.ndarray
+    other_joint: np.ndarray
     point: np.ndarray
     normal: np.ndarray
-    gap: float
-    friction: float
-    restitution: float
-    other_joint: int = 0
+    gap: np.ndarray
+    friction: np.ndarray
+    restitution: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+    def select(self, keep: np.ndarray) -> Contacts:
+        """The contacts where the boolean mask ``keep`` (m,) is true."""
+        chosen = np.flatnonzero(keep).tolist()
+        return Contacts(
+            [self.names[i] for i in chosen],
+            [self.geometry[i] for i in chosen],
+            [self.obstacle[i] for i in chosen],
+            self.joint[keep],
+            self.other_joint[keep],
+            self.point[keep],
+            self.normal[keep],
+            self.gap[keep],
+            self.friction[keep],
+            self.restitution[keep],
+        )
+
+
+NO_CONTACTS = Contacts(
+    [], [], [], np.zeros(0, int), np.zeros(0, int), *(np.zeros((0, 3)),) * 2, *(np.zeros(0),) * 3
+)
 
 
 class _Pair:
@@ -85,8 +112,7 @@ class _Pair:
                 self.obstacle_center = self.obstacle.placement().act(self.obstacle_local_center)
         self.radius = self.shape.aabb_radius
         self.center = np.asarray(self.shape.aabb_center)
-        # Polyhedra against the ground: every vertex within the margin is a candidate contact with
-        # its own gap (coal's patch gives one depth for the whole patch, which props a tilted sole).
+        # Polyhedra against the ground: the vertices of a wide patch, each with its own gap
         self.vertices = _vertices(self.shape) if isinstance(self.obstacle, Ground) else None
         if self.vertices is not None and isinstance(self.obstacle, Ground):
             self.ground_normal = n = np.asarray(self.obstacle.normal)
@@ -94,10 +120,22 @@ class _Pair:
             t1 /= np.linalg.norm(t1)
             angles = 2 * np.pi * np.arange(SUPPORT_DIRECTIONS) / SUPPORT_DIRECTIONS
             self.directions = np.outer(np.cos(angles), t1) + np.outer(np.sin(angles), np.cross(n, t1))
+            # two vertices' heights differ by at most 2 r |u - u0| more when the ground normal seen
+            # from the body moves from u0 to u (r: largest distance of a vertex from their mean)
+            reach = float(np.linalg.norm(self.vertices - self.vertices.mean(axis=0), axis=1).max())
+            self.narrow_turn = NARROW_SLACK / (2.0 * reach) if reach > 0 else np.inf
+            self.narrow_at: list[float] | None = None  # body-frame normal of the last one-point verdict
 
 
 class ContactDetector:
-    """Finds the contact points of the scene's declared pairs that are closer than ``margin``."""
+    """Finds the contact points of the scene's declared pairs that are closer than ``margin``.
+
+    Every pair goes through coal's narrow phase (the deepest point, the normal and the gap) and its
+    contact patch (the points within PATCH_TOLERANCE of the support plane). A patch narrower than
+    PATCH_MIN_EXTENT is one point; a wider one contributes its points, except for a polyhedron on the
+    ground, which touches at the vertices of its support outline, each with its own gap (coal's patch
+    gives one depth for the whole patch, which props a tilted sole).
+    """
 
     def __init__(self, scene: Scene, margin: float) -> None:
         self.margin = margin
@@ -110,101 +148,130 @@ class ContactDetector:
         self.result = coal.CollisionResult()
         self.patch_result = coal.ContactPatchResult(self.patch_request)
 
-    def detect(self, data: pin.Data) -> list[Contact]:
+    def detect(self, data: pin.Data) -> Contacts:
         """Contacts at the placements held in ``data`` (after forward kinematics)."""
-        contacts: list[Contact] = []
+        found: list[
+            tuple[_Pair, list[str], list, list, list[float]]
+        ] = []  # pair, names, points, normals, gaps
         for pair in self.pairs:
             placement = data.oMi[pair.joint] * pair.local
             if pair.other_local is not None:
                 other = data.oMi[pair.other_joint] * pair.other_local
                 pair.obstacle_tf = coal.Transform3s(other)
                 pair.obstacle_center = other.act(pair.obstacle_local_center)
-            if pair.vertices is not None:
-                contacts += self._on_ground(pair, placement)
-                continue
             if pair.obstacle_radius < np.inf and not self._near(pair, placement):
                 continue  # coal's half-space test is as cheap as this bounding-sphere test
-            tf = coal.Transform3s(placement)
             self.result.clear()
             if not coal.collide(
-                pair.shape, tf, pair.obstacle_shape, pair.obstacle_tf, self.request, self.result
+                pair.shape, placement, pair.obstacle_shape, pair.obstacle_tf, self.request, self.result
             ):
                 continue
+            # copies: coal's arrays are views into its result, which the next pair overwrites
             contact = self.result.getContact(0)
-            normal = -np.asarray(contact.normal)  # coal's normal points from the robot to the obstacle
-            gap = float(contact.penetration_depth)
-            points = [np.asarray(contact.getNearestPoint1())]
-            coal.computeContactPatch(
-                pair.shape,
-                tf,
-                pair.obstacle_shape,
-                pair.obstacle_tf,
-                self.result,
-                self.patch_request,
-                self.patch_result,
-            )
-            if (
-                self.patch_result.numContactPatches()
-                and (patch := self.patch_result.getContactPatch(0)).size() > 1
-            ):
-                # patch points lie midway between the surfaces: move them onto the robot's
-                middle = np.array([patch.getPoint(i) for i in range(patch.size())]) + normal * (gap / 2)
-                if np.ptp(middle, axis=0).max() > PATCH_MIN_EXTENT:
-                    # coal orders a patch's points arbitrarily: order them by their place on the robot's
-                    # body so that a contact keeps its name from step to step
-                    local = np.round((middle - placement.translation) @ placement.rotation, 4)
-                    points = list(middle[np.lexsort(local.T[::-1])])
-            for k, point in enumerate(points):
-                contacts.append(
-                    Contact(
-                        f"{pair.name}#{k}",
-                        pair.geometry,
-                        pair.obstacle_name,
-                        pair.joint,
-                        point,
-                        normal,
-                        gap,
-                        pair.friction,
-                        pair.restitution,
-                        pair.other_joint,
+            normal = -contact.normal  # coal's normal points from the robot to the obstacle
+            point = contact.getNearestPoint1().copy()
+            gap = contact.penetration_depth
+            if pair.vertices is not None:
+                outline = (
+                    None if self._narrow_on_ground(pair, placement) else self._on_ground(pair, placement)
+                )
+                found.append(outline or (pair, [f"{pair.name}#0"], [point], [normal], [gap]))
+                continue
+            points = self._patch(pair, placement, normal, gap)
+            if points is None:
+                found.append((pair, [f"{pair.name}#0"], [point], [normal], [gap]))
+            else:
+                found.append(
+                    (
+                        pair,
+                        [f"{pair.name}#{k}" for k in range(len(points))],
+                        list(points),
+                        [normal] * len(points),
+                        [gap] * len(points),
                     )
                 )
-        return contacts
+        if not found:
+            return NO_CONTACTS
+        names = [name for f in found for name in f[1]]
+        counts = [len(f[1]) for f in found]
+        return Contacts(
+            names,
+            [f[0].geometry for f, c in zip(found, counts) for _ in range(c)],
+            [f[0].obstacle_name for f, c in zip(found, counts) for _ in range(c)],
+            np.array([f[0].joint for f, c in zip(found, counts) for _ in range(c)]),
+            np.array([f[0].other_joint for f, c in zip(found, counts) for _ in range(c)]),
+            np.array([p for f in found for p in f[2]]),
+            np.array([n for f in found for n in f[3]]),
+            np.array([g for f in found for g in f[4]]),
+            np.array([f[0].friction for f, c in zip(found, counts) for _ in range(c)]),
+            np.array([f[0].restitution for f, c in zip(found, counts) for _ in range(c)]),
+        )
 
-    def _on_ground(self, pair: _Pair, placement: pin.SE3) -> list[Contact]:
-        """Contacts of a polyhedron with the ground: its vertices within the margin and within
-        PATCH_TOLERANCE of the deepest one (or penetrating), reduced to the deepest one when they span
-        less than PATCH_MIN_EXTENT, else to the vertices of their support outline."""
+    def _patch(self, pair: _Pair, placement: pin.SE3, normal: np.ndarray, gap: float) -> np.ndarray | None:
+        """The points (k, 3) of the pair's contact patch on the robot's surface when it spans more than
+        PATCH_MIN_EXTENT, ordered by their place on the robot's body, else None (one point)."""
+        patch_result = self.patch_result
+        coal.computeContactPatch(
+            pair.shape,
+            placement,
+            pair.obstacle_shape,
+            pair.obstacle_tf,
+            self.result,
+            self.patch_request,
+            patch_result,
+        )
+        if not patch_result.numContactPatches():
+            return None
+        patch = patch_result.getContactPatch(0)
+        size = patch.size()
+        if size < 2:
+            return None
+        # patch points lie midway between the surfaces: move them onto the robot's
+        middle = np.array([patch.getPoint(i) for i in range(size)]) + normal * (gap / 2)
+        if np.ptp(middle, axis=0).max() <= PATCH_MIN_EXTENT:
+            return None
+        # coal orders a patch's points arbitrarily: order them by their place on the robot's body so
+        # that a contact keeps its name from step to step
+        local = np.round((middle - placement.translation) @ placement.rotation, 4)
+        return middle[np.lexsort(local.T[::-1])]
+
+    def _narrow_on_ground(self, pair: _Pair, placement: pin.SE3) -> bool:
+        """True when a polyhedron's vertices near the ground span less than PATCH_MIN_EXTENT, so that it
+        touches at its deepest vertex alone. The verdict is computed with NARROW_SLACK more tolerance
+        and kept while the body has turned too little to change it (most steps of a rounded foot)."""
+        u = (pair.ground_normal @ placement.rotation).tolist()  # the ground normal in the body frame
+        if pair.narrow_at is not None:
+            du = [a - b for a, b in zip(u, pair.narrow_at)]
+            if (du[0] * du[0] + du[1] * du[1] + du[2] * du[2]) ** 0.5 <= pair.narrow_turn:
+                return True
+        heights = pair.vertices @ np.array(u)  # type: ignore[operator]
+        near = pair.vertices[heights <= heights.min() + PATCH_TOLERANCE + NARROW_SLACK]  # type: ignore[index]
+        pair.narrow_at = u if np.ptp(near, axis=0).max() <= PATCH_MIN_EXTENT else None
+        return pair.narrow_at is not None
+
+    def _on_ground(
+        self, pair: _Pair, placement: pin.SE3
+    ) -> tuple[_Pair, list[str], list, list, list[float]] | None:
+        """A polyhedron on the ground: its vertices within PATCH_TOLERANCE of the deepest one (or
+        penetrating), reduced to the vertices of their support outline, each with its own gap; None when
+        they span less than PATCH_MIN_EXTENT (one point)."""
         ground: Ground = pair.obstacle  # type: ignore[assignment]
         n = pair.ground_normal
         R, p = placement.rotation, placement.translation
         vertices: np.ndarray = pair.vertices  # type: ignore[assignment]  # set for ground pairs
-        # heights of all vertices with one matrix-vector product; world points only for the near ones
         heights = vertices @ (R.T @ n) + (p @ n - ground.height)
-        lowest = float(heights.min())
-        if lowest > self.margin:
-            return []
-        # penetrating vertices, and those within PATCH_TOLERANCE of the deepest one
-        near = np.flatnonzero(heights <= max(0.0, min(self.margin, lowest + PATCH_TOLERANCE)))
+        near = np.flatnonzero(heights <= max(0.0, min(self.margin, float(heights.min()) + PATCH_TOLERANCE)))
         world, heights = vertices[near] @ R.T + p, heights[near]
-        if len(near) == 1 or float((world.max(axis=0) - world.min(axis=0)).max()) <= PATCH_MIN_EXTENT:
-            chosen = [int(np.argmin(heights))]
-        else:
-            chosen = sorted(set(np.argmax(world @ pair.directions.T, axis=0).tolist()))
-        return [
-            Contact(
-                f"{pair.name}#{k}",
-                pair.geometry,
-                ground.name,
-                pair.joint,
-                world[i],
-                n,
-                float(heights[i]),
-                ground.friction,
-                ground.restitution,
-            )
-            for k, i in enumerate(chosen)
-        ]
+        if np.ptp(world, axis=0).max() <= PATCH_MIN_EXTENT:
+            return None
+        chosen = sorted(set(np.argmax(world @ pair.directions.T, axis=0).tolist()))
+        return (
+            pair,
+            [f"{pair.name}#{k}" for k in range(len(chosen))],
+            list(world[chosen]),
+            [n] * len(chosen),
+            heights[chosen].tolist(),
+        )
 
     def _near(self, pair: _Pair, placement: pin.SE3) -> bool:
         """Bounding-sphere test that skips the narrow phase for far pairs."""

@@ -43,20 +43,47 @@ def compute_dynamics(
     return Dynamics(data.M.copy(), tau - data.nle, a_free)
 
 
-def point_placements(data: pin.Data, joints: list[int], points: Sequence[np.ndarray]) -> list[pin.SE3]:
+def point_placements(
+    data: pin.Data, joints: list[int], points: Sequence[np.ndarray] | np.ndarray
+) -> list[pin.SE3]:
     """Placements, relative to their joints, of world-aligned frames at world ``points`` (m, 3) [m]."""
     return [pin.SE3(_IDENTITY, data.oMi[j].actInv(p)) for j, p in zip(joints, points)]
 
 
-def point_jacobians(
-    model: pin.Model, data: pin.Data, joints: list[int], placements: list[pin.SE3]
-) -> np.ndarray:
-    """Jacobians of the world velocities of body points, shape (m, 3, nv).
+def support_masks(model: pin.Model) -> np.ndarray:
+    """Which velocity entries move each joint's body: mask[j, k] = 1 when v[k] belongs to joint j or
+    to one of its ancestors, shape (njoints, nv) (row 0, the world, is all zero)."""
+    masks = np.zeros((model.njoints, model.nv))
+    for j in range(1, model.njoints):
+        for ancestor in model.supports[j][1:]:
+            joint = model.joints[ancestor]
+            masks[j, joint.idx_v : joint.idx_v + joint.nv] = 1.0
+    return masks
 
-    Args:
-        placements: the points as :func:`point_placements` gives them.
+
+def point_jacobians(
+    data: pin.Data, masks: np.ndarray, joints: np.ndarray, other_joints: np.ndarray, points: np.ndarray
+) -> np.ndarray:
+    """Jacobians of the relative world velocities of body points, shape (m, 3, nv).
+
+    Row i maps v to the velocity of the point ``points[i]`` (world frame, (m, 3)) of the body of
+    ``joints[i]`` minus that of the same point moving with ``other_joints[i]`` (0, the world, for a
+    fixed obstacle). Read from the joint Jacobians in data.J (WORLD frame, from computeAllTerms):
+    the point moves at v_O + w x p over the columns of the joint's ancestors, and the ancestors the
+    two bodies share cancel.
     """
-    return np.array([pin.getFrameJacobian(model, data, j, M, LWA)[:3] for j, M in zip(joints, placements)])
+    J = data.J
+    lever = _cross_matrices(points)  # p x . as matrices, (m, 3, 3)
+    moving = masks[joints] - masks[other_joints] if other_joints.any() else masks[joints]
+    return (J[:3] - lever @ J[3:]) * moving[:, None, :]
+
+
+def _cross_matrices(p: np.ndarray) -> np.ndarray:
+    """[p]x for each row of p (m, 3), shape (m, 3, 3)."""
+    S = np.zeros((len(p), 3, 3))
+    S[:, 0, 1], S[:, 0, 2], S[:, 1, 2] = -p[:, 2], p[:, 1], -p[:, 0]
+    S[:, 1, 0], S[:, 2, 0], S[:, 2, 1] = p[:, 2], -p[:, 1], p[:, 0]
+    return S
 
 
 def point_drifts(

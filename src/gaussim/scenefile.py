@@ -306,7 +306,7 @@ def place_on_ground(scene: Scene, q: np.ndarray, clearance: float) -> np.ndarray
     data = robot.model.createData()
     pin.forwardKinematics(robot.model, data, q)
     contacts = ContactDetector(scene, margin=1e3).detect(data)
-    gaps = [c.gap for c in contacts if c.obstacle == grounds[0].name]
+    gaps = [gap for gap, obstacle in zip(contacts.gap, contacts.obstacle) if obstacle == grounds[0].name]
     if not gaps:
         raise InvalidOptions("ground_clearance", "no declared contact pair involves the ground")
     q = q.copy()

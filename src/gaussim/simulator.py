@@ -19,7 +19,7 @@ import numpy as np
 import pinocchio as pin
 
 from .assembly import GaussProblem, assemble
-from .collision import Contact, ContactDetector
+from .collision import NO_CONTACTS, ContactDetector, Contacts
 from .constraints import BilateralModule, ContactModule, LimitModule
 from .constraints.base import ConstraintModule, Context, Level, Rows
 from .dynamics import Dynamics, compute_dynamics
@@ -73,7 +73,7 @@ class Simulator:
         """One module per constraint family the scene declares, and no other."""
         modules: list[ConstraintModule] = []
         if scene.pairs:
-            modules.append(ContactModule(options.friction_facets, options.friction_mode))
+            modules.append(ContactModule(scene.robot.model, options.friction_facets, options.friction_mode))
         if scene.joint_limits:
             modules.append(LimitModule(scene.robot.model))
         if scene.bilaterals:
@@ -142,7 +142,7 @@ class Simulator:
         acceleration = o.scheme == "acceleration"
         dyn = compute_dynamics(self.model, self.data, state.q, state.v, tau, acceleration)
         clock = _lap(report, "dynamics", clock)
-        contacts = self.detector.detect(self.data) if self.detector else []
+        contacts = self.detector.detect(self.data) if self.detector else NO_CONTACTS
         clock = _lap(report, "collision", clock)
         if acceleration:
             v = self._impact(state, dyn, contacts, report)
@@ -163,7 +163,7 @@ class Simulator:
         self._last_state = State(state.t + o.dt, q_next, v_next)
         return self._last_state
 
-    def _impact(self, state: State, dyn: Dynamics, contacts: list[Contact], report: StepReport) -> np.ndarray:
+    def _impact(self, state: State, dyn: Dynamics, contacts: Contacts, report: StepReport) -> np.ndarray:
         """The impulsive Gauss projection of v when v violates an impulse-level row, else v itself."""
         ctx = self._context("impulse", state.q, state.v, state.v, contacts)
         parts = self._rows(ctx)
@@ -184,7 +184,7 @@ class Simulator:
         M: np.ndarray,
         f: np.ndarray,
         x_free: np.ndarray,
-        contacts: list[Contact],
+        contacts: Contacts,
         report: StepReport,
         scale: float,
     ) -> np.ndarray:
@@ -193,7 +193,7 @@ class Simulator:
         return self._solve(ctx, M, f, None, report, scale)
 
     def _context(
-        self, level: Level, q: np.ndarray, v: np.ndarray, x_free: np.ndarray, contacts: list[Contact]
+        self, level: Level, q: np.ndarray, v: np.ndarray, x_free: np.ndarray, contacts: Contacts
     ) -> Context:
         return Context(self.model, self.data, q, v, x_free, contacts, self.options, level)
 

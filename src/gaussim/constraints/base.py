@@ -13,12 +13,12 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Literal, Protocol
+from typing import Literal, Protocol
 
 import numpy as np
 import pinocchio as pin
 
-from ..collision import Contact
+from ..collision import Contacts
 from ..options import Options
 
 Level = Literal["velocity", "impulse", "acceleration"]
@@ -61,8 +61,9 @@ class Context:
         contacts: detected contact points.
         options: the step options.
         level: which Gauss problem is posed.
-        lagged: per-contact values carried between fixed-point iterations of one step
-            (slip velocity for exact friction, normal force for acceleration-level sliding).
+        lagged: per-contact arrays carried between fixed-point iterations of one step, aligned with
+            the contacts that produced rows (slip velocity for the De Saxce shift, normal force and
+            stick decisions for acceleration-level sliding).
     """
 
     model: pin.Model
@@ -70,10 +71,10 @@ class Context:
     q: np.ndarray
     v: np.ndarray
     x_free: np.ndarray
-    contacts: list[Contact]
+    contacts: Contacts
     options: Options
     level: Level
-    lagged: dict[tuple[str, str], Any] = field(default_factory=dict)
+    lagged: dict[str, np.ndarray] = field(default_factory=dict)
 
 
 class ConstraintModule(Protocol):

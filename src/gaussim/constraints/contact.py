@@ -21,6 +21,9 @@ At the acceleration level a sliding contact (|u_t| > SLIP_SPEED) cannot be posed
 the normal row and receives the friction force -mu lambda_n u_t/|u_t| outside the QP, with lambda_n
 iterated to a fixed point (``Options.friction_iterations``); a contact whose slip that force would
 reverse within the step sticks instead.
+
+All contacts of a step are handled at once, as arrays; ``Context.lagged`` holds the fixed-point
+values ("slip", "normal", "stops") aligned with the contacts that produced rows.
 """
 
 from __future__ import annotations
@@ -28,9 +31,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import pinocchio as pin
 
-from ..collision import Contact
-from ..dynamics import point_drifts, point_jacobians, point_placements
+from ..collision import Contacts
+from ..dynamics import point_drifts, point_jacobians, point_placements, support_masks
 from .base import Context, Rows, is_active, stabilised_bound
 
 # Below this tangential speed a contact sticks at the acceleration level [m/s].
@@ -88,18 +92,16 @@ class _Batch:
         friction: friction force applied outside the QP, shape (m, 3) (acceleration-level sliding).
         sliding: which contacts get that force, shape (m,).
         slipping: which contacts iterate the De Saxce shift, shape (m,).
-        normals: contact normals, shape (m, 3).
         slip: the slip the De Saxce shift used, shape (m, 3) [m/s], and its norm slip_speed (m,).
     """
 
-    contacts: list[Contact]
+    contacts: Contacts
     J: np.ndarray
     generators: np.ndarray
     starts: np.ndarray
     friction: np.ndarray
     sliding: np.ndarray
     slipping: np.ndarray
-    normals: np.ndarray
     slip: np.ndarray
     slip_speed: np.ndarray
 
@@ -108,52 +110,39 @@ class _Batch:
         return np.add.reduceat(lam[:, None] * self.generators, self.starts, axis=0)
 
 
+def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise dot products of (m, 3) arrays, shape (m,)."""
+    return np.einsum("mi,mi->m", a, b)
+
+
 def _tangential(u: np.ndarray, n: np.ndarray) -> np.ndarray:
-    return u - np.einsum("mi,mi->m", u, n)[:, None] * n
+    return u - _dot(u, n)[:, None] * n
 
 
-def _relative(kinematics, model, data, contacts: list[Contact]) -> np.ndarray:  # type: ignore[no-untyped-def]
-    """Point Jacobians (m, 3, nv) or drifts (m, 3) of the robot side of each contact, minus those of
-    the other side's body at the same point when the obstacle is another robot geometry."""
-    joints = [c.joint for c in contacts]
-    points = [c.point for c in contacts]
-    result = kinematics(model, data, joints, point_placements(data, joints, points))
-    others = [i for i, c in enumerate(contacts) if c.other_joint]
-    if others:
-        other_joints = [contacts[i].other_joint for i in others]
-        other_points = [points[i] for i in others]
-        result[others] -= kinematics(
-            model, data, other_joints, point_placements(data, other_joints, other_points)
-        )
-    return result
-
-
-# Per-contact 3-vector algebra runs on Python floats: for the handful of contacts of a robot
-# this is several times faster than numpy calls on (m, 3) arrays (measured in benchmarks/step_cost.py).
-def _dot(a, b) -> float:
+# Per-contact 3-vector algebra runs on Python floats: for the handful of contacts of a robot this
+# is several times faster than numpy calls on (m, 3) arrays (measured in benchmarks/step_cost.py).
+def _dot3(a, b) -> float:  # type: ignore[no-untyped-def]
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
-def _tangent_basis(n, direction) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
-    """Unit tangents (t1, t2) at normal n; t1 along ``direction`` projected on the tangent plane
-    when it has a component there, else along a fixed axis."""
-    if direction is not None:
-        d_n = _dot(direction, n)
-        t = (direction[0] - d_n * n[0], direction[1] - d_n * n[1], direction[2] - d_n * n[2])
-        norm = _dot(t, t) ** 0.5
-    if direction is None or norm <= 1e-12:
-        # n x (axis of n's smallest component)
-        k = min(range(3), key=lambda i: abs(n[i]))
-        axis = [0.0, 0.0, 0.0]
-        axis[k] = 1.0
-        t = _cross(n, axis)
-        norm = _dot(t, t) ** 0.5
-    t1 = (t[0] / norm, t[1] / norm, t[2] / norm)
-    return t1, _cross(n, t1)
-
-
-def _cross(a, b) -> tuple[float, float, float]:
+def _cross3(a, b) -> tuple[float, float, float]:  # type: ignore[no-untyped-def]
     return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+
+def _tangent_basis(n, direction) -> tuple[tuple[float, float, float], tuple[float, float, float]]:  # type: ignore[no-untyped-def]
+    """Unit tangents (t1, t2) at normal n; t1 along ``direction`` projected on the tangent plane
+    when it has a component there, else along n x (the axis of n's smallest component)."""
+    norm = 0.0
+    if direction is not None:
+        d_n = _dot3(direction, n)
+        t = (direction[0] - d_n * n[0], direction[1] - d_n * n[1], direction[2] - d_n * n[2])
+        norm = _dot3(t, t) ** 0.5
+    if norm <= 1e-12:
+        k = min(range(3), key=lambda i: abs(n[i]))
+        t = _cross3(n, [float(i == k) for i in range(3)])
+        norm = _dot3(t, t) ** 0.5
+    t1 = (t[0] / norm, t[1] / norm, t[2] / norm)
+    return t1, _cross3(n, t1)
 
 
 class ContactModule:
@@ -161,135 +150,158 @@ class ContactModule:
 
     name = "contact"
 
-    def __init__(self, facets: int, mode: str) -> None:
+    def __init__(self, model: pin.Model, facets: int, mode: str) -> None:
         self.mode = mode
+        self.facets = facets
         angles = 2.0 * np.pi * np.arange(facets) / facets
         self.directions = list(zip(np.cos(angles).tolist(), np.sin(angles).tolist()))
+        self.masks = support_masks(model)
 
     def rows(self, ctx: Context) -> Rows | None:
         contacts = ctx.contacts
-        if not contacts:
+        if not len(contacts):
             return None
-        model, data, options = ctx.model, ctx.data, ctx.options
         acceleration = ctx.level == "acceleration"
-        J = _relative(point_jacobians, model, data, contacts)
-        U = (J @ ctx.v).tolist()
+        lagged, options = ctx.lagged, ctx.options
+        J = point_jacobians(ctx.data, self.masks, contacts.joint, contacts.other_joint, contacts.point)
         if ctx.level != "velocity":
-            normal_speed = np.array([_dot(u, c.normal) for u, c in zip(U, contacts)])
-            keep = is_active(ctx, np.array([c.gap for c in contacts]), normal_speed, 0.0).tolist()
-            if not any(keep):
+            keep = is_active(ctx, contacts.gap, _dot(J @ ctx.v, contacts.normal), 0.0)
+            if not keep.any():
                 return None
-            contacts = [c for c, k in zip(contacts, keep) if k]
-            J, U = J[keep], [u for u, k in zip(U, keep) if k]
-        drifts = (
-            _relative(point_drifts, model, data, contacts).tolist()
-            if acceleration
-            else [(0.0, 0.0, 0.0)] * len(contacts)
-        )
-        tendencies = (J @ ctx.x_free).tolist() if self.mode != "pyramid" else [None] * len(contacts)
+            if not keep.all():
+                contacts, J = contacts.select(keep), J[keep]
+        m = len(contacts)
+        drifts = _drifts(ctx, contacts).tolist() if acceleration else [(0.0, 0.0, 0.0)] * m
+        # contact velocities J v and the velocities J x_free the contacts would have without friction
+        motion = (J @ np.stack((ctx.v, ctx.x_free), axis=1)).transpose(0, 2, 1).tolist()
+        slips: list = lagged["slip"].tolist() if "slip" in lagged else [None] * m
+        stops = lagged["stops"].tolist() if "stops" in lagged else [False] * m
+        normal_forces = lagged["normal"].tolist() if "normal" in lagged else [0.0] * m
+        pyramid = self.mode == "pyramid"
 
-        generators: list[list[float]] = []
-        phi, rates, drift_rates, shifts, floors, slip_speeds = [], [], [], [], [], []  # type: ignore[var-annotated]
-        starts, frictions, sliding, slipping, normals, slips = [], [], [], [], [], []  # type: ignore[var-annotated]
-        owner: list[int] = []
-        for c, u, drift, tendency in zip(contacts, U, drifts, tendencies):
-            n, mu = c.normal.tolist(), c.friction
-            u_n = _dot(u, n)
-            u_t = [u[i] - u_n * n[i] for i in range(3)]
-            slip = u_t if acceleration else ctx.lagged.get((c.name, "slip"), u_t)
-            speed = _dot(slip, slip) ** 0.5
-            slides = acceleration and mu > 0 and speed > SLIP_SPEED and (c.name, "stops") not in ctx.lagged
+        generators: list = []
+        phi, rates, drift_rates, floors, shifts, owner = [], [], [], [], [], []  # type: ignore[var-annotated]
+        starts, frictions, sliding, slipping, slip_used, speeds = [], [], [], [], [], []  # type: ignore[var-annotated]
+        for i, (n, gap, mu, e, (u, tendency), drift) in enumerate(
+            zip(
+                contacts.normal.tolist(),
+                contacts.gap.tolist(),
+                contacts.friction.tolist(),
+                contacts.restitution.tolist(),
+                motion,
+                drifts,
+            )
+        ):
+            u_n = _dot3(u, n)
+            u_t = [u[0] - u_n * n[0], u[1] - u_n * n[1], u[2] - u_n * n[2]]
+            slip: list[float] = u_t if acceleration or slips[i] is None else slips[i]
+            speed = _dot3(slip, slip) ** 0.5
+            slides = acceleration and mu > 0 and speed > SLIP_SPEED and not stops[i]
             friction = [0.0, 0.0, 0.0]
             if mu == 0 or slides:
                 gens = [n]
                 if slides:  # explicit Coulomb force opposite the slip, lambda_n iterated (module docstring)
-                    f = -mu * float(ctx.lagged.get((c.name, "normal"), 0.0)) / speed
-                    friction = [f * slip[i] for i in range(3)]
+                    f = -mu * normal_forces[i] / speed
+                    friction = [f * slip[0], f * slip[1], f * slip[2]]
             else:
                 # friction opposes the tangential velocity the contact would have without it
-                direction = None if tendency is None else [-(tendency[i] + drift[i]) for i in range(3)]
+                direction = None if pyramid else [-(tendency[j] + drift[j]) for j in range(3)]
                 t1, t2 = _tangent_basis(n, direction)
-                gens = [
-                    [n[i] + mu * (cs * t1[i] + sn * t2[i]) for i in range(3)] for cs, sn in self.directions
-                ]
+                gens = [[n[j] + mu * (c * t1[j] + s * t2[j]) for j in range(3)] for c, s in self.directions]
             starts.append(len(generators))
             generators += gens
-            phi += [c.gap] * len(gens)
+            owner += [i] * len(gens)
             if acceleration:  # the velocity and impulse levels' bounds use neither
-                rates += [_dot(g, u) for g in gens]
-                drift_rates += [_dot(g, drift) for g in gens]
-            owner += [len(starts) - 1] * len(gens)
-            # restitution: an approaching contact leaves at -e u_n at least (velocity and impulse levels)
-            bounce = not acceleration and c.restitution > 0 and -u_n > options.restitution_threshold
-            floors += [-c.restitution * u_n if bounce else -np.inf] * len(gens)
-            shift = mu * speed if not acceleration and self.mode != "pyramid" else 0.0
-            shifts += [shift] * len(gens)  # De Saxce: no lift-off while sliding
+                phi += [gap] * len(gens)
+                rates += [_dot3(g, u) for g in gens]
+                drift_rates += [_dot3(g, drift) for g in gens]
+            else:
+                phi.append(gap)
+                # restitution: an approaching contact leaves at -e u_n at least
+                floors.append(-e * u_n if e > 0 and -u_n > options.restitution_threshold else -np.inf)
+                shifts.append(0.0 if pyramid else mu * speed)  # De Saxce: no lift-off while sliding
             frictions.append(friction)
             sliding.append(slides)
-            slipping.append(len(gens) > 1 and not acceleration and self.mode != "pyramid")
-            normals.append(n)
-            slips.append(slip)
-            slip_speeds.append(speed)
+            slipping.append(len(gens) > 1 and not acceleration and not pyramid)
+            slip_used.append(slip)
+            speeds.append(speed)
 
         G = np.array(generators)
-        starts_ = np.array(starts)
-        phi_ = np.array(phi)
+        index = np.array(owner)
         if acceleration:
-            bound = stabilised_bound(ctx, phi_, np.array(rates), np.array(drift_rates), True)
+            bound = stabilised_bound(ctx, np.array(phi), np.array(rates), np.array(drift_rates), True)
         else:
-            bound = stabilised_bound(ctx, phi_, phi_, 0.0, True)
-        bound = np.maximum(bound, np.array(floors)) - np.array(shifts)
+            gaps = np.array(phi)
+            bound = (np.maximum(stabilised_bound(ctx, gaps, gaps, 0.0, True), floors) - shifts)[index]
+        if len(G) == m * self.facets:  # every contact has a full pyramid
+            rows = np.matmul(G.reshape(m, self.facets, 3), J).reshape(len(G), -1)
+        else:
+            rows = np.einsum("ri,rin->rn", G, J[index])
         friction_ = np.array(frictions)
         batch = _Batch(
             contacts,
             J,
             G,
-            starts_,
+            np.array(starts),
             friction_,
             np.array(sliding),
             np.array(slipping),
-            np.array(normals),
-            np.array(slips),
-            np.array(slip_speeds),
+            np.array(slip_used),
+            np.array(speeds),
         )
-        if len(G) == len(contacts) * len(self.directions):  # every contact has a full pyramid
-            rows = np.matmul(G.reshape(len(contacts), -1, 3), J).reshape(len(G), -1)
-        else:
-            rows = np.einsum("ri,rin->rn", G, J[owner])
 
         def labels() -> list[str]:
-            return [f"contact {contacts[i].name} row {r - starts[i]}" for r, i in enumerate(owner)]
+            return [f"contact {contacts.names[i]} row {r - starts[i]}" for r, i in enumerate(owner)]
 
         force = np.einsum("min,mi->n", J, friction_) if any(sliding) else None
         return Rows(rows, bound, False, labels, batch, force)
 
     def reactions(self, rows: Rows, multipliers: np.ndarray, scale: float) -> list[ContactForce]:
         b: _Batch = rows.data  # type: ignore[assignment]
+        c = b.contacts
         forces = scale * b.forces(multipliers) + b.friction
         return [
-            ContactForce(c.name, c.geometry, c.obstacle, c.point, c.normal, c.gap, f)
-            for c, f in zip(b.contacts, forces)
+            ContactForce(
+                c.names[i], c.geometry[i], c.obstacle[i], c.point[i], c.normal[i], float(c.gap[i]), forces[i]
+            )
+            for i in range(len(c))
         ]
 
     def refine(self, ctx: Context, rows: Rows, x: np.ndarray, multipliers: np.ndarray) -> bool:
         b: _Batch = rows.data  # type: ignore[assignment]
+        lagged, normals, m = ctx.lagged, b.contacts.normal, len(b.contacts)
         changed = False
         if b.sliding.any():
-            lam = multipliers[b.starts]
-            u_next = _tangential(b.J @ (ctx.v + ctx.options.dt * x), b.normals)
-            for i in np.flatnonzero(b.sliding).tolist():
-                name = b.contacts[i].name
-                if u_next[i] @ b.friction[i] > 0:  # friction would reverse the slip: the contact sticks
-                    ctx.lagged[(name, "stops")] = True
-                    changed = True
-                    continue
-                changed |= abs(lam[i] - ctx.lagged.get((name, "normal"), 0.0)) > NORMAL_FORCE_TOLERANCE
-                ctx.lagged[(name, "normal")] = lam[i]
+            u_next = _tangential(b.J @ (ctx.v + ctx.options.dt * x), normals)
+            reverse = b.sliding & (_dot(u_next, b.friction) > 0)  # such a contact sticks instead
+            if reverse.any():
+                lagged["stops"] = lagged.get("stops", np.zeros(m, bool)) | reverse
+                changed = True
+            slides = b.sliding & ~reverse
+            lam, previous = multipliers[b.starts], lagged.get("normal", np.zeros(m))
+            changed |= bool((np.abs(lam - previous) > NORMAL_FORCE_TOLERANCE)[slides].any())
+            lagged["normal"] = np.where(slides, lam, previous)
         if b.slipping.any():
-            new = _tangential(b.J @ x, b.normals)
-            for i in np.flatnonzero(b.slipping).tolist():
-                if max(b.slip_speed[i], float(np.linalg.norm(new[i]))) <= SLIP_SPEED:
-                    continue  # a sticking contact has no shift to refine
-                changed |= float(np.abs(new[i] - b.slip[i]).max()) > SLIP_TOLERANCE[self.mode]
-                ctx.lagged[(b.contacts[i].name, "slip")] = new[i]
+            new = _tangential(b.J @ x, normals)
+            # a sticking contact has no shift to refine
+            moving = b.slipping & (np.maximum(b.slip_speed, np.sqrt(_dot(new, new))) > SLIP_SPEED)
+            if moving.any():
+                changed |= bool((np.abs(new - b.slip).max(axis=1) > SLIP_TOLERANCE[self.mode])[moving].any())
+                lagged["slip"] = np.where(moving[:, None], new, b.slip)
         return changed
+
+
+def _drifts(ctx: Context, contacts: Contacts) -> np.ndarray:
+    """Jdot v of the contact points, shape (m, 3), relative to the other body's point when the
+    obstacle is another robot geometry."""
+    model, data = ctx.model, ctx.data
+    joints = contacts.joint.tolist()
+    result = point_drifts(model, data, joints, point_placements(data, joints, contacts.point))
+    others = np.flatnonzero(contacts.other_joint)
+    if len(others):
+        other_joints = contacts.other_joint[others].tolist()
+        points = contacts.point[others]
+        result[others] -= point_drifts(
+            model, data, other_joints, point_placements(data, other_joints, points)
+        )
+    return result
