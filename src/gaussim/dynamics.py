@@ -78,12 +78,20 @@ def point_jacobians(
     return (J[:3] - lever @ J[3:]) * moving[:, None, :]
 
 
+def _levi_civita() -> np.ndarray:
+    eps = np.zeros((3, 3, 3))
+    eps[0, 1, 2] = eps[1, 2, 0] = eps[2, 0, 1] = 1.0
+    eps[0, 2, 1] = eps[2, 1, 0] = eps[1, 0, 2] = -1.0
+    return eps
+
+
+# [p]x[i, j] = -eps_ijk p_k: the cross-product matrices of many points are one matrix product
+_CROSS = -_levi_civita().transpose(2, 0, 1).reshape(3, 9)
+
+
 def _cross_matrices(p: np.ndarray) -> np.ndarray:
     """[p]x for each row of p (m, 3), shape (m, 3, 3)."""
-    S = np.zeros((len(p), 3, 3))
-    S[:, 0, 1], S[:, 0, 2], S[:, 1, 2] = -p[:, 2], p[:, 1], -p[:, 0]
-    S[:, 1, 0], S[:, 2, 0], S[:, 2, 1] = p[:, 2], -p[:, 1], p[:, 0]
-    return S
+    return (p @ _CROSS).reshape(len(p), 3, 3)
 
 
 def point_drifts(

@@ -29,6 +29,16 @@ class State:
             object.__setattr__(self, name, arr)
         object.__setattr__(self, "t", float(self.t))
 
+    @classmethod
+    def adopt(cls, t: float, q: np.ndarray, v: np.ndarray) -> State:
+        """A state that takes ownership of fresh float arrays q and v (made read-only, not copied)."""
+        state = object.__new__(cls)
+        q.setflags(write=False)
+        v.setflags(write=False)
+        for name, value in (("t", float(t)), ("q", q), ("v", v)):
+            object.__setattr__(state, name, value)
+        return state
+
     def copy(self) -> State:
         """Return an independent copy (arrays are already read-only, so this is cheap)."""
         return State(self.t, self.q.copy(), self.v.copy())

@@ -154,8 +154,9 @@ class ContactModule:
         self.mode = mode
         self.facets = facets
         angles = 2.0 * np.pi * np.arange(facets) / facets
-        self.directions = list(zip(np.cos(angles).tolist(), np.sin(angles).tolist()))
+        self.cos, self.sin = np.cos(angles)[None, :, None], np.sin(angles)[None, :, None]
         self.masks = support_masks(model)
+        self._layouts: dict[int, tuple[np.ndarray, np.ndarray]] = {}
 
     def rows(self, ctx: Context) -> Rows | None:
         contacts = ctx.contacts
@@ -171,25 +172,25 @@ class ContactModule:
             if not keep.all():
                 contacts, J = contacts.select(keep), J[keep]
         m = len(contacts)
-        drifts = _drifts(ctx, contacts).tolist() if acceleration else [(0.0, 0.0, 0.0)] * m
-        # contact velocities J v and the velocities J x_free the contacts would have without friction
-        motion = (J @ np.stack((ctx.v, ctx.x_free), axis=1)).transpose(0, 2, 1).tolist()
+        drift = _drifts(ctx, contacts) if acceleration else np.zeros((m, 3))
+        # contact velocities J v, and J x_free + Jdot v: where the contacts would go without friction
+        motion = J @ np.stack((ctx.v, ctx.x_free), axis=1)
+        U = motion[:, :, 0]
         slips: list = lagged["slip"].tolist() if "slip" in lagged else [None] * m
         stops = lagged["stops"].tolist() if "stops" in lagged else [False] * m
         normal_forces = lagged["normal"].tolist() if "normal" in lagged else [0.0] * m
         pyramid = self.mode == "pyramid"
 
-        generators: list = []
-        phi, rates, drift_rates, floors, shifts, owner = [], [], [], [], [], []  # type: ignore[var-annotated]
-        starts, frictions, sliding, slipping, slip_used, speeds = [], [], [], [], [], []  # type: ignore[var-annotated]
-        for i, (n, gap, mu, e, (u, tendency), drift) in enumerate(
+        counts, cone, tangents, bounds = [], [], [], []  # type: ignore[var-annotated]
+        frictions, sliding, slip_used, speeds = [], [], [], []  # type: ignore[var-annotated]
+        for i, (n, gap, mu, e, u, tendency) in enumerate(
             zip(
                 contacts.normal.tolist(),
                 contacts.gap.tolist(),
                 contacts.friction.tolist(),
                 contacts.restitution.tolist(),
-                motion,
-                drifts,
+                U.tolist(),
+                (motion[:, :, 1] + drift).tolist(),
             )
         ):
             u_n = _dot3(u, n)
@@ -198,63 +199,69 @@ class ContactModule:
             speed = _dot3(slip, slip) ** 0.5
             slides = acceleration and mu > 0 and speed > SLIP_SPEED and not stops[i]
             friction = [0.0, 0.0, 0.0]
-            if mu == 0 or slides:
-                gens = [n]
-                if slides:  # explicit Coulomb force opposite the slip, lambda_n iterated (module docstring)
-                    f = -mu * normal_forces[i] / speed
-                    friction = [f * slip[0], f * slip[1], f * slip[2]]
-            else:
-                # friction opposes the tangential velocity the contact would have without it
-                direction = None if pyramid else [-(tendency[j] + drift[j]) for j in range(3)]
-                t1, t2 = _tangent_basis(n, direction)
-                gens = [[n[j] + mu * (c * t1[j] + s * t2[j]) for j in range(3)] for c, s in self.directions]
-            starts.append(len(generators))
-            generators += gens
-            owner += [i] * len(gens)
-            if acceleration:  # the velocity and impulse levels' bounds use neither
-                phi += [gap] * len(gens)
-                rates += [_dot3(g, u) for g in gens]
-                drift_rates += [_dot3(g, drift) for g in gens]
-            else:
-                phi.append(gap)
-                # restitution: an approaching contact leaves at -e u_n at least
-                floors.append(-e * u_n if e > 0 and -u_n > options.restitution_threshold else -np.inf)
-                shifts.append(0.0 if pyramid else mu * speed)  # De Saxce: no lift-off while sliding
+            if slides:  # explicit Coulomb force opposite the slip, lambda_n iterated (module docstring)
+                f = -mu * normal_forces[i] / speed
+                friction = [f * slip[0], f * slip[1], f * slip[2]]
+            if mu == 0 or slides:  # the normal row alone
+                counts.append(1)
+                cone.append(0.0)
+                tangents.append(((0.0, 0.0, 0.0), (0.0, 0.0, 0.0)))
+            else:  # friction opposes the tangential velocity the contact would have without it
+                counts.append(self.facets)
+                cone.append(mu)
+                tangents.append(_tangent_basis(n, None if pyramid else [-x for x in tendency]))
+            if not acceleration:
+                # restitution: an approaching contact leaves at -e u_n at least; De Saxce shift mu |slip|
+                floor = -e * u_n if e > 0 and -u_n > options.restitution_threshold else -np.inf
+                bounds.append((gap, floor, 0.0 if pyramid else mu * speed))
             frictions.append(friction)
             sliding.append(slides)
-            slipping.append(len(gens) > 1 and not acceleration and not pyramid)
             slip_used.append(slip)
             speeds.append(speed)
 
-        G = np.array(generators)
-        index = np.array(owner)
+        # generators n + mu (cos a_k t1 + sin a_k t2) of every contact's pyramid, (m, k, 3)
+        t = np.array(tangents)
+        generators = contacts.normal[:, None, :] + np.array(cone)[:, None, None] * (
+            self.cos * t[:, None, 0, :] + self.sin * t[:, None, 1, :]
+        )
+        if sum(counts) == m * self.facets:  # every contact has a full pyramid
+            G = generators.reshape(-1, 3)
+            rows = np.matmul(generators, J).reshape(len(G), -1)
+            owner, starts = self._layout(m)
+        else:
+            chosen = np.arange(self.facets) < np.array(counts)[:, None]
+            G, owner = generators[chosen], np.nonzero(chosen)[0]
+            rows = np.einsum("ri,rin->rn", G, J[owner])
+            starts = np.searchsorted(owner, np.arange(m))
         if acceleration:
-            bound = stabilised_bound(ctx, np.array(phi), np.array(rates), np.array(drift_rates), True)
+            bound = stabilised_bound(ctx, contacts.gap[owner], _dot(G, U[owner]), _dot(G, drift[owner]), True)
         else:
-            gaps = np.array(phi)
-            bound = (np.maximum(stabilised_bound(ctx, gaps, gaps, 0.0, True), floors) - shifts)[index]
-        if len(G) == m * self.facets:  # every contact has a full pyramid
-            rows = np.matmul(G.reshape(m, self.facets, 3), J).reshape(len(G), -1)
-        else:
-            rows = np.einsum("ri,rin->rn", G, J[index])
+            gap_, floor_, shift_ = np.array(bounds).T
+            bound = (np.maximum(stabilised_bound(ctx, gap_, gap_, 0.0, True), floor_) - shift_)[owner]
         friction_ = np.array(frictions)
         batch = _Batch(
             contacts,
             J,
             G,
-            np.array(starts),
+            starts,
             friction_,
             np.array(sliding),
-            np.array(slipping),
+            (np.array(counts) > 1) & (not acceleration and not pyramid),
             np.array(slip_used),
             np.array(speeds),
         )
 
         def labels() -> list[str]:
-            return [f"contact {contacts.names[i]} row {r - starts[i]}" for r, i in enumerate(owner)]
+            return [f"contact {contacts.names[i]} row {r - starts[i]}" for r, i in enumerate(owner.tolist())]
 
         force = np.einsum("min,mi->n", J, friction_) if any(sliding) else None
         return Rows(rows, bound, False, labels, batch, force)
+
+    def _layout(self, m: int) -> tuple[np.ndarray, np.ndarray]:
+        """Owner contact of each row and first row of each contact when m contacts have full pyramids."""
+        if m not in self._layouts:
+            self._layouts[m] = np.repeat(np.arange(m), self.facets), np.arange(0, m * self.facets, self.facets)
+        return self._layouts[m]
 
     def reactions(self, rows: Rows, multipliers: np.ndarray, scale: float) -> list[ContactForce]:
         b: _Batch = rows.data  # type: ignore[assignment]
@@ -283,8 +290,9 @@ class ContactModule:
             lagged["normal"] = np.where(slides, lam, previous)
         if b.slipping.any():
             new = _tangential(b.J @ x, normals)
+            speed = np.sqrt(_dot(new, new))
             # a sticking contact has no shift to refine
-            moving = b.slipping & (np.maximum(b.slip_speed, np.sqrt(_dot(new, new))) > SLIP_SPEED)
+            moving = b.slipping & ((b.slip_speed > SLIP_SPEED) | (speed > SLIP_SPEED))
             if moving.any():
                 changed |= bool((np.abs(new - b.slip).max(axis=1) > SLIP_TOLERANCE[self.mode])[moving].any())
                 lagged["slip"] = np.where(moving[:, None], new, b.slip)
