@@ -260,7 +260,8 @@ class ContactModule:
     def _layout(self, m: int) -> tuple[np.ndarray, np.ndarray]:
         """Owner contact of each row and first row of each contact when m contacts have full pyramids."""
         if m not in self._layouts:
-            self._layouts[m] = np.repeat(np.arange(m), self.facets), np.arange(0, m * self.facets, self.facets)
+            k = self.facets
+            self._layouts[m] = np.repeat(np.arange(m), k), np.arange(0, m * k, k)
         return self._layouts[m]
 
     def reactions(self, rows: Rows, multipliers: np.ndarray, scale: float) -> list[ContactForce]:
