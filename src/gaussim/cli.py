@@ -29,6 +29,25 @@ def main(argv: list[str] | None = None) -> int:
     run.add_argument("--friction-mode", choices=FRICTION_MODES)
     run.add_argument("--duration", type=float, help="simulated time [s]")
     run.add_argument("--quiet", action="store_true", help="no progress line")
+    run.add_argument("--view", action="store_true", help="show the run live in the browser (meshcat)")
+    run.add_argument("--speed", type=float, default=1.0, help="with --view: times real time (default 1)")
+    run.add_argument("--html", type=Path, help="also write the replay page (self-contained HTML)")
+    run.add_argument("--plot", type=Path, help="also write the contact-force plot (PNG, PDF or SVG)")
+    _arrow_option(run)
+
+    replay = commands.add_parser("replay", help="replay a run log in the browser, live or as an HTML page")
+    replay.add_argument("log", type=Path)
+    replay.add_argument("--html", type=Path, help="write a self-contained page instead of serving it live")
+    replay.add_argument("--speed", type=float, default=1.0, help="times real time (default 1)")
+    replay.add_argument("--fps", type=float, default=30.0, help="animation frames per second (default 30)")
+    _arrow_option(replay)
+
+    plot = commands.add_parser(
+        "plot", help="plot a run log: contact forces, friction, gaps, solver; or energy"
+    )
+    plot.add_argument("log", type=Path)
+    plot.add_argument("-o", "--output", type=Path, required=True, help="image file (PNG, PDF or SVG)")
+    plot.add_argument("--what", choices=("forces", "energy"), default="forces")
 
     inspect = commands.add_parser("inspect", help="describe a scene's robot, constraints and QP size")
     inspect.add_argument("scene", type=Path)
@@ -41,7 +60,8 @@ def main(argv: list[str] | None = None) -> int:
 
     args = parser.parse_args(argv)
     try:
-        return {"run": _run, "inspect": _inspect, "forces": _forces}[args.command](args)
+        commands_ = {"run": _run, "inspect": _inspect, "forces": _forces, "replay": _replay, "plot": _plot}
+        return commands_[args.command](args)
     except KeyboardInterrupt:
         print("gaussim: interrupted; the log of the steps made was written", file=sys.stderr)
         return EXIT_FAILURE
@@ -63,13 +83,96 @@ def _run(args: argparse.Namespace) -> int:
             raise InvalidOptions("--duration", f"must be > 0, got {args.duration}")
         spec.duration = args.duration
     out = args.out or Path("out") / f"{args.scene.stem}.npz"
+    viewer = None
+    if args.view:
+        from .viewer import Viewer, follow
+
+        _positive("--speed", args.speed)
+        viewer = Viewer(spec.scene, force_scale=args.force_scale)
+        print(f"gaussim: watch the run at {viewer.url}", file=sys.stderr)
     try:
-        log = run(spec, out, progress=None if args.quiet else sys.stderr)
+        log = run(
+            spec,
+            out,
+            progress=None if args.quiet else sys.stderr,
+            observer=follow(viewer, args.speed) if viewer else None,
+        )
     except SolverError as err:
         print(f"gaussim: simulation failed: {err}\ngaussim: the steps made are in {out}", file=sys.stderr)
         return EXIT_FAILURE
+    finally:
+        if viewer is not None:
+            viewer.close()
     print(log.summary())
     print(f"\nrun log: {out}")
+    if args.html:
+        print(f"replay page: {_write_replay(log, spec.scene, args.html, args.force_scale)}")
+    if args.plot:
+        from .plots import save_plot
+
+        print(f"force plot: {save_plot(log, spec.scene, args.plot)}")
+    return EXIT_OK
+
+
+def _arrow_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--force-scale", type=float, help="force arrow length per newton [m/N]; default: the weight is 0.25 m"
+    )
+
+
+def _positive(flag: str, value: float) -> None:
+    if not value > 0:
+        raise InvalidOptions(flag, f"must be > 0, got {value}")
+
+
+def _log_and_scene(path: Path):  # type: ignore[no-untyped-def]
+    """A run log and the scene it was made from (its scene text is stored in it)."""
+    from .runlog import RunLog
+    from .scenefile import load_scene_text
+
+    log = RunLog.load(path)
+    if log.steps == 0:
+        raise GaussimError(f"{path}: the run log holds no step")
+    return log, load_scene_text(log.scene_text, log.scene_path or path).scene
+
+
+def _write_replay(
+    log, scene, html: Path, force_scale: float | None, fps: float = 30.0, speed: float = 1.0
+) -> Path:  # type: ignore[no-untyped-def]
+    from .viewer import Viewer
+
+    with Viewer(scene, force_scale=force_scale) as viewer:
+        viewer.replay(log, fps=fps, speed=speed)
+        return viewer.save_html(html)
+
+
+def _replay(args: argparse.Namespace) -> int:
+    import time
+
+    from .viewer import Viewer
+
+    _positive("--fps", args.fps)
+    _positive("--speed", args.speed)
+    log, scene = _log_and_scene(args.log)
+    if args.html:
+        print(f"replay page: {_write_replay(log, scene, args.html, args.force_scale, args.fps, args.speed)}")
+        return EXIT_OK
+    with Viewer(scene, force_scale=args.force_scale) as viewer:
+        viewer.replay(log, fps=args.fps, speed=args.speed)
+        print(f"replaying {args.log} at {viewer.url} (Ctrl-C to stop)", flush=True)
+        try:
+            while True:
+                time.sleep(1.0)
+        except KeyboardInterrupt:
+            print("gaussim: viewer stopped", file=sys.stderr)
+    return EXIT_OK
+
+
+def _plot(args: argparse.Namespace) -> int:
+    from .plots import save_plot
+
+    log, scene = _log_and_scene(args.log)
+    print(f"{args.what} plot: {save_plot(log, scene, args.output, args.what)}")
     return EXIT_OK
 
 

@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import TextIO
 
+from .report import StepReport
 from .runlog import RunLog
 from .scenefile import SceneSpec
 from .simulator import Simulator
+from .state import State
 
 # While a run goes on, its log is rewritten (atomically) this often [s of wall time].
 CHECKPOINT_SECONDS = 30.0
@@ -22,6 +25,7 @@ def run(
     *,
     progress: TextIO | None = None,
     checkpoint_seconds: float = CHECKPOINT_SECONDS,
+    observer: Callable[[State, StepReport], None] | None = None,
 ) -> RunLog:
     """Simulate ``spec`` for its duration and return the log (also written to ``out`` when given).
 
@@ -31,6 +35,8 @@ def run(
     Args:
         progress: a stream for a progress line (steps/s, simulated time, active contacts), or None.
         checkpoint_seconds: rewrite ``out`` this often during long runs.
+        observer: called with the state and the report after every step (e.g. a live viewer,
+            :func:`gaussim.viewer.follow`).
     """
     sim = Simulator(spec.scene, spec.options)
     state = sim.reset(spec.initial.q, spec.initial.v)
@@ -46,6 +52,8 @@ def run(
             report = sim.last_step
             assert report is not None  # set by every step
             log.record(state, tau, report)
+            if observer is not None:
+                observer(state, report)
             now = time.perf_counter()
             if progress is not None and (
                 now - last_shown > PROGRESS_SECONDS[progress.isatty()] or step == steps - 1

@@ -92,6 +92,13 @@ def load_scene(path: str | Path, **overrides: Any) -> SceneSpec:
         text = path.read_text()
     except OSError as err:
         raise SceneFileError(path, "file", f"cannot read it: {err.strerror}") from err
+    return load_scene_text(text, path, **overrides)
+
+
+def load_scene_text(text: str, path: str | Path, **overrides: Any) -> SceneSpec:
+    """Like :func:`load_scene`, for scene text said to come from ``path`` (relative robot paths are
+    resolved against its folder; a run log keeps its scene this way)."""
+    path = Path(path)
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:

@@ -1,0 +1,102 @@
+"""Plots of a run log (matplotlib, headless Agg unless a backend was chosen): contact forces,
+friction use, gaps, the solver's work, and energy."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from .runlog import RunLog
+from .scene import Scene
+
+WHATS = ("forces", "energy")
+
+
+def _pyplot() -> Any:
+    """pyplot, on the headless Agg backend unless in an interactive session (Python prompt, Jupyter)."""
+    import sys
+
+    import matplotlib
+
+    if not (hasattr(sys, "ps1") or "ipykernel" in sys.modules):
+        matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def force_figure(log: RunLog, scene: Scene) -> Any:
+    """Four panels over time: the normal force of each contact, its friction ratio |f_t| / f_n against
+    the friction coefficient mu, its gap, and the solver's KKT residual and iterations."""
+    plt = _pyplot()
+    figure, axes = plt.subplots(4, 1, figsize=(9, 11), sharex=True, constrained_layout=True)
+    normal_ax, ratio_ax, gap_ax, solver_ax = axes
+    c = log.contact_arrays()
+    t = log.t
+    friction = {o.name: o.friction for o in scene.obstacles}
+    coefficients = set()
+    for i, name in enumerate(log.contact_names):
+        rows = c["id"] == i
+        times = t[c["step"][rows] + 1]
+        force, normal = c["force"][rows], c["normal"][rows]
+        f_n = np.einsum("ij,ij->i", force, normal)
+        f_t = np.linalg.norm(force - f_n[:, None] * normal, axis=1)
+        normal_ax.plot(times, f_n, ".", ms=2, label=name)
+        loaded = f_n > 1e-9
+        ratio_ax.plot(times[loaded], f_t[loaded] / f_n[loaded], ".", ms=2)
+        gap_ax.plot(times, 1e3 * c["gap"][rows], ".", ms=2)
+        coefficients.add(friction.get(log.contact_obstacle[i], scene.self_contact[0]))
+    for mu in sorted(coefficients):
+        ratio_ax.axhline(mu, color="k", ls="--", lw=1)
+        ratio_ax.annotate(f"mu = {mu:g}", (t[0], mu), xytext=(2, 2), textcoords="offset points")
+    normal_ax.set_ylabel("normal force [N]")
+    if log.contact_names and len(log.contact_names) <= 12:
+        normal_ax.legend(fontsize="small", markerscale=4, ncol=2)
+    ratio_ax.set_ylabel("|f_t| / f_n")
+    gap_ax.set_ylabel("gap [mm]")
+    gap_ax.axhline(0.0, color="k", lw=0.5)
+    s = log.solver_arrays()
+    steps_t = t[1:]
+    solved = s["qps"] > 0
+    solver_ax.semilogy(steps_t[solved], np.maximum(s["kkt_residual"][solved], 1e-300), ".", ms=2, color="C0")
+    solver_ax.set_ylabel("KKT residual", color="C0")
+    iterations_ax = solver_ax.twinx()
+    iterations_ax.plot(steps_t, s["iterations"], lw=0.8, color="C3")
+    iterations_ax.set_ylabel("ProxQP iterations", color="C3")
+    solver_ax.set_xlabel("t [s]")
+    figure.suptitle(f"{log.robot}: contact forces and solver")
+    return figure
+
+
+def energy_figure(log: RunLog, scene: Scene) -> Any:
+    """Kinetic, potential (gravity) and total energy over time [J]."""
+    plt = _pyplot()
+    model = scene.robot.model.copy()
+    model.gravity.linear = scene.gravity
+    data = model.createData()
+    kinetic = np.array([pin.computeKineticEnergy(model, data, q, v) for q, v in zip(log.q, log.v)])
+    potential = np.array([pin.computePotentialEnergy(model, data, q) for q in log.q])
+    figure, axis = plt.subplots(figsize=(9, 4), constrained_layout=True)
+    axis.plot(log.t, kinetic, label="kinetic")
+    axis.plot(log.t, potential - potential[0], label="potential (from t0)")
+    axis.plot(log.t, kinetic + potential - potential[0], label="total", color="k")
+    axis.set_xlabel("t [s]")
+    axis.set_ylabel("energy [J]")
+    axis.legend()
+    figure.suptitle(f"{log.robot}: energy")
+    return figure
+
+
+def save_plot(log: RunLog, scene: Scene, path: str | Path, what: str = "forces") -> Path:
+    """Write the ``what`` figure ("forces" or "energy") of a run to an image file."""
+    if what not in WHATS:
+        raise ValueError(f"what must be one of {', '.join(WHATS)}, got {what!r}")
+    figure = (force_figure if what == "forces" else energy_figure)(log, scene)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    figure.savefig(path, dpi=110)
+    _pyplot().close(figure)
+    return path

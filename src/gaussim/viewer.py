@@ -1,0 +1,360 @@
+"""Browser viewer (meshcat): the robot, the world, the contact points and the force arrows, live or
+as a self-contained replay page.
+
+Force arrows start at the contact point. Each contact force is drawn as two arrows: its normal
+component (blue) and its friction component (orange), ``force_scale`` metres long per newton. The
+default scale draws the robot's weight m g as DEFAULT_WEIGHT_LENGTH metres, so the arrows of a
+standing robot add up to about that length. Contact points are red dots.
+
+meshcat is imported here only, when a viewer is made; its server binds to 127.0.0.1.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import subprocess
+import tempfile
+import time
+import warnings
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from .constraints import ContactForce
+from .exceptions import GaussimError
+from .report import StepReport
+from .runlog import RunLog
+from .scene import Box, Ground, Scene, Sphere
+from .state import State
+
+# The robot's weight is drawn this long by default [m].
+DEFAULT_WEIGHT_LENGTH = 0.25
+NORMAL_COLOR, FRICTION_COLOR, POINT_COLOR = 0x1F77B4, 0xFF7F0E, 0xD62728
+GROUND_COLOR, OBSTACLE_COLOR = 0xB0B0B0, 0x8FBC8F
+ARROW_RADIUS = 0.004  # [m]
+POINT_RADIUS = 0.008  # [m]
+GROUND_SIZE = 4.0  # side of the drawn ground square [m]
+# Arrows shorter than this are hidden [m].
+MIN_ARROW = 1e-4
+# Node names: the robot, the world and the contacts (one folder per contact, by name).
+ROBOT, WORLD, CONTACTS = "robot", "world", "contacts"
+
+
+class Viewer:
+    """A meshcat view of a scene. Attach it to a run (:meth:`show` each frame) or replay a log.
+
+    Args:
+        scene: the scene to draw (robot, ground, obstacles).
+        force_scale: arrow length per force [m/N]; default: the robot's weight is DEFAULT_WEIGHT_LENGTH.
+        zmq_url: an already running meshcat server; by default a new one is started on 127.0.0.1.
+
+    In Jupyter, ``viewer.meshcat.jupyter_cell()`` embeds the live view.
+    """
+
+    def __init__(self, scene: Scene, *, force_scale: float | None = None, zmq_url: str | None = None) -> None:
+        import meshcat
+        from pinocchio.visualize import MeshcatVisualizer
+
+        robot = scene.robot
+        self.scene = scene
+        with contextlib.redirect_stdout(io.StringIO()):  # meshcat prints its URL; we print it when useful
+            self.meshcat = meshcat.Visualizer(zmq_url=zmq_url)
+        visual = _visual_model(robot.visual_model, robot.collision_model)
+        self._robot = MeshcatVisualizer(robot.model, robot.collision_model, visual)
+        self._robot.initViewer(viewer=self.meshcat)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # missing meshes were reported by _visual_model
+            self._robot.loadViewerModel(rootNodeName=ROBOT)
+        self.visual = visual
+        self.data = robot.model.createData()
+        self.visual_data = pin.GeometryData(visual)
+        weight = pin.computeTotalMass(robot.model) * float(np.linalg.norm(scene.gravity))
+        self.force_scale = (
+            force_scale if force_scale is not None else DEFAULT_WEIGHT_LENGTH / max(weight, 1e-9)
+        )
+        if not (np.isfinite(self.force_scale) and self.force_scale > 0):
+            raise GaussimError(f"force_scale must be a positive number, got {force_scale}")
+        self._contacts: set[str] = set()
+        self._aimed = False
+        self._draw_world()
+
+    @property
+    def url(self) -> str:
+        """The page of the live view (http://127.0.0.1:PORT/static/)."""
+        return str(self.meshcat.url())
+
+    # -- live ------------------------------------------------------------------------------------------
+
+    def show(self, q: np.ndarray, contacts: Sequence[ContactForce] = ()) -> None:
+        """Draw the robot at configuration q and the given contact forces (others are hidden)."""
+        self._aim(q)
+        self._robot.display(q)
+        shown = set()
+        for c in contacts:
+            node = self._contact_node(c.name)
+            for part, vector in zip(("normal", "friction"), _components(c.force, c.normal)):
+                pose, length = _arrow(c.point, vector, self.force_scale)
+                arrow = self.meshcat[node][part]
+                arrow.set_property("visible", length > MIN_ARROW)
+                if length > MIN_ARROW:
+                    arrow.set_transform(pose @ np.diag([1.0, length, 1.0, 1.0]))
+            self.meshcat[node]["point"].set_transform(pin.SE3(np.eye(3), c.point).homogeneous)
+            self.meshcat[node].set_property("visible", True)
+            shown.add(c.name)
+        for name in self._contacts - shown:
+            self.meshcat[_node_name(name)].set_property("visible", False)
+
+    # -- replay ----------------------------------------------------------------------------------------
+
+    def replay(self, log: RunLog, fps: float = 30.0, speed: float = 1.0) -> None:
+        """Load the run as a meshcat animation (robot motion and force arrows) at ``fps`` frames per
+        second of wall time, ``speed`` times real time; the page plays it and has its controls."""
+        from meshcat.animation import Animation
+
+        if not (fps > 0 and speed > 0):
+            raise GaussimError(f"fps and speed must be > 0, got {fps} and {speed}")
+        animation = Animation(default_framerate=fps)
+        self._aim(log.q[0])
+        t = log.t
+        frames = np.arange(0.0, t[-1] - t[0] + 1e-12, speed / fps)
+        states = np.minimum(np.searchsorted(t - t[0], frames - 1e-12), len(t) - 1)
+        contacts = log.contact_arrays()
+        names = log.contact_names
+        for name in names:
+            self._contact_node(name)
+        # the contacts of state k (k >= 1) are those of the step that led to it, step k - 1
+        first = np.searchsorted(contacts["step"], states - 1, side="left")
+        last = np.searchsorted(contacts["step"], states - 1, side="right")
+        model, visual = self.data, self.visual_data
+        nodes = [
+            self._robot.getViewerNodeName(g, pin.GeometryType.VISUAL) for g in self.visual.geometryObjects
+        ]
+        for frame, (k, lo, hi) in enumerate(zip(states.tolist(), first.tolist(), last.tolist())):
+            pin.forwardKinematics(self._robot.model, model, log.q[k])
+            pin.updateGeometryPlacements(self._robot.model, model, self.visual, visual)
+            with animation.at_frame(self.meshcat, frame) as f:
+                for node, placement in zip(nodes, visual.oMg):
+                    f[node].set_transform(placement.homogeneous)
+                visible = set()
+                for row in range(lo, hi) if k > 0 else ():
+                    name = names[contacts["id"][row]]
+                    node = _node_name(name)
+                    point, normal, force = (
+                        contacts["point"][row],
+                        contacts["normal"][row],
+                        contacts["force"][row],
+                    )
+                    for part, vector in zip(("normal", "friction"), _components(force, normal)):
+                        pose, length = _arrow(point, vector, self.force_scale)
+                        f[node][part].set_transform(pose)
+                        f[node][part].set_property("scale", "vector3", [1.0, max(length, MIN_ARROW), 1.0])
+                        f[node][part].set_property("visible", "boolean", length > MIN_ARROW)
+                    f[node]["point"].set_transform(pin.SE3(np.eye(3), point).homogeneous)
+                    visible.add(name)
+                for name in names:
+                    f[_node_name(name)].set_property("visible", "boolean", name in visible)
+        self.meshcat.set_animation(animation, play=True, repetitions=1)
+
+    def static_html(self) -> str:
+        """A self-contained page of the current view and animation (no server, no network needed)."""
+        return str(self.meshcat.static_html())
+
+    def save_html(self, path: str | Path) -> Path:
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(self.static_html())
+        return path
+
+    def close(self) -> None:
+        """Stop the meshcat server this viewer started (an external one, given by zmq_url, keeps running)."""
+        window = self.meshcat.window
+        window.zmq_socket.close(linger=0)
+        if window.server_proc is not None and window.server_proc.poll() is None:
+            window.server_proc.terminate()
+            window.server_proc.communicate(timeout=10)
+
+    def __enter__(self) -> Viewer:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- drawing ---------------------------------------------------------------------------------------
+
+    def _aim(self, q: np.ndarray) -> None:
+        """Point the camera at the robot in configuration q once, from a distance that frames it."""
+        if self._aimed:
+            return
+        self._aimed = True
+        model, data = self._robot.model, self.data
+        pin.forwardKinematics(model, data, q)
+        origins = np.array([placement.translation for placement in data.oMi[1:]])
+        center = origins.mean(axis=0)
+        distance = 3.0 * max(0.15, float(np.linalg.norm(origins - center, axis=1).max()))
+        self.meshcat["/Cameras/default"].set_transform(pin.SE3(np.eye(3), center).homogeneous)
+        # the camera node is y-up: in front of the robot (x), to its side and above it
+        self.meshcat["/Cameras/default/rotated/<object>"].set_property(
+            "position", [0.75 * distance, 0.45 * distance, 0.5 * distance]
+        )
+        self.meshcat["/Grid"].set_property("visible", False)
+        self.meshcat["/Axes"].set_property("visible", False)
+
+    def _draw_world(self) -> None:
+        import meshcat.geometry as mg
+
+        for obstacle in self.scene.obstacles:
+            node = self.meshcat[WORLD][obstacle.name]
+            if isinstance(obstacle, Ground):
+                thickness = 0.01
+                node.set_object(mg.Box([GROUND_SIZE, GROUND_SIZE, thickness]), _material(GROUND_COLOR, 0.6))
+                n = np.asarray(obstacle.normal)
+                rotation = _frame_along(n, axis=2)
+                node.set_transform(pin.SE3(rotation, n * (obstacle.height - thickness / 2)).homogeneous)
+            elif isinstance(obstacle, Box):
+                node.set_object(mg.Box(list(obstacle.size)), _material(OBSTACLE_COLOR, 0.8))
+                node.set_transform(obstacle.placement().homogeneous)
+            elif isinstance(obstacle, Sphere):
+                node.set_object(mg.Sphere(obstacle.radius), _material(OBSTACLE_COLOR, 0.8))
+                node.set_transform(obstacle.placement().homogeneous)
+
+    def _contact_node(self, name: str) -> str:
+        """The folder of a contact's arrows and point, created on first use."""
+        node = _node_name(name)
+        if name not in self._contacts:
+            import meshcat.geometry as mg
+
+            for part, color in (("normal", NORMAL_COLOR), ("friction", FRICTION_COLOR)):
+                # a unit cylinder along y whose base is at the origin: scaled along y to the arrow's length
+                self.meshcat[node][part]["shaft"].set_object(mg.Cylinder(1.0, ARROW_RADIUS), _material(color))
+                self.meshcat[node][part]["shaft"].set_transform(
+                    pin.SE3(np.eye(3), np.array([0, 0.5, 0])).homogeneous
+                )
+            self.meshcat[node]["point"].set_object(mg.Sphere(POINT_RADIUS), _material(POINT_COLOR))
+            self._contacts.add(name)
+        return node
+
+
+def _node_name(contact: str) -> str:
+    return f"{CONTACTS}/{contact.replace('/', ':')}"  # meshcat paths use '/'
+
+
+def _components(force: np.ndarray, normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    normal_part = float(force @ normal) * normal
+    return normal_part, force - normal_part
+
+
+def _arrow(point: np.ndarray, vector: np.ndarray, scale: float) -> tuple[np.ndarray, float]:
+    """(pose, length): the placement (4, 4) whose y axis runs along ``vector`` from ``point``, and the
+    arrow length scale * |vector| [m]."""
+    norm = float(np.linalg.norm(vector))
+    rotation = _frame_along(vector / norm, axis=1) if norm > 0 else np.eye(3)
+    return pin.SE3(rotation, np.asarray(point, dtype=float)).homogeneous, scale * norm
+
+
+def _frame_along(direction: np.ndarray, axis: int) -> np.ndarray:
+    """A rotation whose column ``axis`` is the unit vector ``direction`` (the next two columns follow
+    cyclically, so that the frame is right-handed)."""
+    helper = np.eye(3)[int(np.argmin(np.abs(direction)))]
+    a = np.cross(direction, helper)
+    a /= np.linalg.norm(a)
+    rotation = np.empty((3, 3))
+    rotation[:, axis], rotation[:, (axis + 1) % 3], rotation[:, (axis + 2) % 3] = (
+        direction,
+        a,
+        np.cross(direction, a),
+    )
+    return rotation
+
+
+def _material(color: int, opacity: float = 1.0) -> Any:
+    import meshcat.geometry as mg
+
+    return mg.MeshLambertMaterial(color=color, opacity=opacity, transparent=opacity < 1.0)
+
+
+def _visual_model(visual: pin.GeometryModel, collision: pin.GeometryModel) -> pin.GeometryModel:
+    """The visual geometry, or the collision geometry when visual meshes are missing (with a warning
+    naming the files)."""
+    missing = [
+        f"{g.name}: {g.meshPath}"
+        for g in visual.geometryObjects
+        if g.meshPath and not Path(g.meshPath).is_file()
+    ]
+    if not visual.ngeoms or missing:
+        if missing:
+            warnings.warn(
+                "missing visual meshes, showing the collision geometry instead: " + "; ".join(missing),
+                stacklevel=3,
+            )
+        return collision
+    return visual
+
+
+def follow(viewer: Viewer, speed: float = 1.0, fps: float = 30.0):  # type: ignore[no-untyped-def]
+    """An observer for :func:`gaussim.runner.run` that shows the run live at ``speed`` times real time
+    (frames every 1/fps s of wall time; the run waits when it is ahead)."""
+    start = time.perf_counter()
+    last = [-np.inf]
+
+    def observe(state: State, report: StepReport) -> None:
+        if state.t - last[0] < speed / fps:
+            return
+        last[0] = state.t
+        ahead = state.t / speed - (time.perf_counter() - start)
+        if ahead > 0:
+            time.sleep(ahead)
+        viewer.show(state.q, report.contacts)
+
+    return observe
+
+
+def screenshot(
+    html: str | Path, png: str | Path, size: tuple[int, int] = (960, 640), wait_ms: int = 4000
+) -> Path:
+    """Render a page with headless Chromium (Debian's ``chromium``) into a PNG; raises GaussimError when
+    Chromium is missing or fails."""
+    png = Path(png).resolve()
+    png.parent.mkdir(parents=True, exist_ok=True)
+    png.unlink(missing_ok=True)
+    _chromium(html, f"--screenshot={png}", f"--window-size={size[0]},{size[1]}", f"--timeout={wait_ms}")
+    if not png.is_file():
+        raise GaussimError(f"chromium wrote no screenshot of {html}")
+    return png
+
+
+def page_dom(html: str | Path, wait_ms: int = 4000) -> str:
+    """The DOM of a page after it ran for ``wait_ms`` (headless Chromium), as HTML text."""
+    return _chromium(html, f"--timeout={wait_ms}", "--dump-dom")
+
+
+def _chromium(html: str | Path, *options: str, timeout: float = 120.0) -> str:
+    """Run headless Chromium on a page in a fresh profile; its standard output. (Measured with Chromium
+    150: ``--virtual-time-budget`` hangs on meshcat's animated page 2 runs in 5, and a Chromium started
+    in a new session hangs too; ``--timeout`` in our session has not.)"""
+    import shutil
+
+    binary = next(
+        (p for n in ("chromium", "chromium-browser", "google-chrome") if (p := shutil.which(n))), None
+    )
+    if binary is None:
+        raise GaussimError("headless rendering needs Chromium: apt-get install chromium")
+    with tempfile.TemporaryDirectory(ignore_cleanup_errors=True) as profile:
+        # software WebGL: no GPU on a server
+        command = [binary, "--headless", "--no-sandbox", "--disable-gpu", "--enable-unsafe-swiftshader"]
+        command += [
+            "--use-angle=swiftshader",
+            f"--user-data-dir={profile}",
+            *options,
+            Path(html).resolve().as_uri(),
+        ]
+        try:
+            result = subprocess.run(command, capture_output=True, text=True, timeout=timeout)
+        except subprocess.TimeoutExpired as error:
+            raise GaussimError(f"chromium did not finish rendering {html} within {timeout:.0f} s") from error
+    if result.returncode != 0:
+        raise GaussimError(f"chromium could not render {html}: {result.stderr.strip()[-500:]}")
+    return result.stdout
