@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -44,3 +46,15 @@ def run(sim: gaussim.Simulator, state: gaussim.State, steps: int, tau=None, each
         if each is not None:
             each(state)
     return state
+
+
+SOLO12_SCENE = "robots/scenes/solo12_standing.toml"
+
+
+@pytest.fixture(scope="session")
+def solo12_run(tmp_path_factory) -> tuple[gaussim.RunLog, gaussim.SceneSpec]:
+    """A short logged run of the shipped Solo-12 scene: it drops 1 cm and lands on its four feet."""
+    spec = gaussim.load_scene(Path(__file__).parent.parent / SOLO12_SCENE)
+    spec.duration = 0.15
+    out = tmp_path_factory.mktemp("solo12") / "run.npz"
+    return gaussim.run(spec, out), spec

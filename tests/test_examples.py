@@ -28,3 +28,9 @@ def test_solo12_drop(tmp_path):
 def test_sliding_block(mode):
     stdout = _run(str(EXAMPLES / "sliding_block.py"), "--mode", mode, "--heading", "15")
     assert "stopped after" in stdout
+
+
+def test_watch_box_stack(tmp_path):
+    stdout = _run(str(EXAMPLES / "watch_box_stack.py"), "--duration", "0.1", "--out", str(tmp_path / "stack"))
+    assert "replay page:" in stdout
+    assert (tmp_path / "stack.html").stat().st_size > 0 and (tmp_path / "stack.png").stat().st_size > 0
