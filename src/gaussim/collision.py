@@ -150,9 +150,7 @@ class ContactDetector:
 
     def detect(self, data: pin.Data) -> Contacts:
         """Contacts at the placements held in ``data`` (after forward kinematics)."""
-        found: list[
-            tuple[_Pair, list[str], list, list, list[float]]
-        ] = []  # pair, names, points, normals, gaps
+        found: list[tuple[_Pair, np.ndarray, list, list[float]]] = []  # pair, normal, points, gaps
         for pair in self.pairs:
             placement = data.oMi[pair.joint] * pair.local
             if pair.other_local is not None:
@@ -169,42 +167,28 @@ class ContactDetector:
             # copies: coal's arrays are views into its result, which the next pair overwrites
             contact = self.result.getContact(0)
             normal = -contact.normal  # coal's normal points from the robot to the obstacle
-            point = contact.getNearestPoint1().copy()
             gap = contact.penetration_depth
             if pair.vertices is not None:
-                outline = (
-                    None if self._narrow_on_ground(pair, placement) else self._on_ground(pair, placement)
-                )
-                found.append(outline or (pair, [f"{pair.name}#0"], [point], [normal], [gap]))
-                continue
-            points = self._patch(pair, placement, normal, gap)
-            if points is None:
-                found.append((pair, [f"{pair.name}#0"], [point], [normal], [gap]))
+                wide = None if self._narrow_on_ground(pair, placement) else self._on_ground(pair, placement)
             else:
-                found.append(
-                    (
-                        pair,
-                        [f"{pair.name}#{k}" for k in range(len(points))],
-                        list(points),
-                        [normal] * len(points),
-                        [gap] * len(points),
-                    )
-                )
+                patch = self._patch(pair, placement, normal, gap)
+                wide = None if patch is None else (list(patch), [gap] * len(patch))
+            points, gaps = wide or ([contact.getNearestPoint1().copy()], [gap])
+            found.append((pair, normal, points, gaps))
         if not found:
             return NO_CONTACTS
-        names = [name for f in found for name in f[1]]
-        counts = [len(f[1]) for f in found]
+        owners = [pair for pair, _, points, _ in found for _ in points]
         return Contacts(
-            names,
-            [f[0].geometry for f, c in zip(found, counts) for _ in range(c)],
-            [f[0].obstacle_name for f, c in zip(found, counts) for _ in range(c)],
-            np.array([f[0].joint for f, c in zip(found, counts) for _ in range(c)]),
-            np.array([f[0].other_joint for f, c in zip(found, counts) for _ in range(c)]),
-            np.array([p for f in found for p in f[2]]),
-            np.array([n for f in found for n in f[3]]),
-            np.array([g for f in found for g in f[4]]),
-            np.array([f[0].friction for f, c in zip(found, counts) for _ in range(c)]),
-            np.array([f[0].restitution for f, c in zip(found, counts) for _ in range(c)]),
+            [f"{pair.name}#{k}" for pair, _, points, _ in found for k in range(len(points))],
+            [pair.geometry for pair in owners],
+            [pair.obstacle_name for pair in owners],
+            np.array([pair.joint for pair in owners]),
+            np.array([pair.other_joint for pair in owners]),
+            np.array([p for _, _, points, _ in found for p in points]),
+            np.array([normal for _, normal, points, _ in found for _ in points]),
+            np.array([g for _, _, _, gaps in found for g in gaps]),
+            np.array([pair.friction for pair in owners]),
+            np.array([pair.restitution for pair in owners]),
         )
 
     def _patch(self, pair: _Pair, placement: pin.SE3, normal: np.ndarray, gap: float) -> np.ndarray | None:
@@ -249,12 +233,10 @@ class ContactDetector:
         pair.narrow_at = u if np.ptp(near, axis=0).max() <= PATCH_MIN_EXTENT else None
         return pair.narrow_at is not None
 
-    def _on_ground(
-        self, pair: _Pair, placement: pin.SE3
-    ) -> tuple[_Pair, list[str], list, list, list[float]] | None:
+    def _on_ground(self, pair: _Pair, placement: pin.SE3) -> tuple[list, list[float]] | None:
         """A polyhedron on the ground: its vertices within PATCH_TOLERANCE of the deepest one (or
-        penetrating), reduced to the vertices of their support outline, each with its own gap; None when
-        they span less than PATCH_MIN_EXTENT (one point)."""
+        penetrating), reduced to the vertices of their support outline: (points, gaps), each with its own
+        gap; None when they span less than PATCH_MIN_EXTENT (one point). coal's normal is the ground's."""
         ground: Ground = pair.obstacle  # type: ignore[assignment]
         n = pair.ground_normal
         R, p = placement.rotation, placement.translation
@@ -265,13 +247,7 @@ class ContactDetector:
         if np.ptp(world, axis=0).max() <= PATCH_MIN_EXTENT:
             return None
         chosen = sorted(set(np.argmax(world @ pair.directions.T, axis=0).tolist()))
-        return (
-            pair,
-            [f"{pair.name}#{k}" for k in range(len(chosen))],
-            list(world[chosen]),
-            [n] * len(chosen),
-            heights[chosen].tolist(),
-        )
+        return list(world[chosen]), heights[chosen].tolist()
 
     def _near(self, pair: _Pair, placement: pin.SE3) -> bool:
         """Bounding-sphere test that skips the narrow phase for far pairs."""

@@ -17,7 +17,7 @@ import subprocess
 import tempfile
 import time
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -129,15 +129,15 @@ class Viewer:
         # the contacts of state k (k >= 1) are those of the step that led to it, step k - 1
         first = np.searchsorted(contacts["step"], states - 1, side="left")
         last = np.searchsorted(contacts["step"], states - 1, side="right")
-        model, visual = self.data, self.visual_data
+        model = self._robot.model
         nodes = [
             self._robot.getViewerNodeName(g, pin.GeometryType.VISUAL) for g in self.visual.geometryObjects
         ]
         for frame, (k, lo, hi) in enumerate(zip(states.tolist(), first.tolist(), last.tolist())):
-            pin.forwardKinematics(self._robot.model, model, log.q[k])
-            pin.updateGeometryPlacements(self._robot.model, model, self.visual, visual)
+            pin.forwardKinematics(model, self.data, log.q[k])
+            pin.updateGeometryPlacements(model, self.data, self.visual, self.visual_data)
             with animation.at_frame(self.meshcat, frame) as f:
-                for node, placement in zip(nodes, visual.oMg):
+                for node, placement in zip(nodes, self.visual_data.oMg):
                     f[node].set_transform(placement.homogeneous)
                 visible = set()
                 for row in range(lo, hi) if k > 0 else ():
@@ -294,16 +294,17 @@ def _visual_model(visual: pin.GeometryModel, collision: pin.GeometryModel) -> pi
     return visual
 
 
-def follow(viewer: Viewer, speed: float = 1.0, fps: float = 30.0):  # type: ignore[no-untyped-def]
+def follow(viewer: Viewer, speed: float = 1.0, fps: float = 30.0) -> Callable[[State, StepReport], None]:
     """An observer for :func:`gaussim.runner.run` that shows the run live at ``speed`` times real time
     (frames every 1/fps s of wall time; the run waits when it is ahead)."""
     start = time.perf_counter()
-    last = [-np.inf]
+    last = -np.inf  # simulated time of the last frame shown
 
     def observe(state: State, report: StepReport) -> None:
-        if state.t - last[0] < speed / fps:
+        nonlocal last
+        if state.t - last < speed / fps:
             return
-        last[0] = state.t
+        last = state.t
         ahead = state.t / speed - (time.perf_counter() - start)
         if ahead > 0:
             time.sleep(ahead)

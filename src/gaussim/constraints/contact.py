@@ -165,16 +165,16 @@ class ContactModule:
         acceleration = ctx.level == "acceleration"
         lagged, options = ctx.lagged, ctx.options
         J = point_jacobians(ctx.data, self.masks, contacts.joint, contacts.other_joint, contacts.point)
+        # contact velocities J v, and J x_free: where the contacts would go without friction
+        motion = J @ np.stack((ctx.v, ctx.x_free), axis=1)
         if ctx.level != "velocity":
-            keep = is_active(ctx, contacts.gap, _dot(J @ ctx.v, contacts.normal), 0.0)
+            keep = is_active(ctx, contacts.gap, _dot(motion[:, :, 0], contacts.normal), 0.0)
             if not keep.any():
                 return None
             if not keep.all():
-                contacts, J = contacts.select(keep), J[keep]
+                contacts, J, motion = contacts.select(keep), J[keep], motion[keep]
         m = len(contacts)
         drift = _drifts(ctx, contacts) if acceleration else np.zeros((m, 3))
-        # contact velocities J v, and J x_free + Jdot v: where the contacts would go without friction
-        motion = J @ np.stack((ctx.v, ctx.x_free), axis=1)
         U = motion[:, :, 0]
         slips: list = lagged["slip"].tolist() if "slip" in lagged else [None] * m
         stops = lagged["stops"].tolist() if "stops" in lagged else [False] * m
