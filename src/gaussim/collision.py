@@ -169,6 +169,7 @@ class ContactDetector:
             normal = -contact.normal  # coal's normal points from the robot to the obstacle
             gap = contact.penetration_depth
             if pair.vertices is not None:
+                normal = pair.ground_normal
                 wide = None if self._narrow_on_ground(pair, placement) else self._on_ground(pair, placement)
             else:
                 patch = self._patch(pair, placement, normal, gap)
