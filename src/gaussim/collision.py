@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import coal
 import numpy as np
 import pinocchio as pin
+from numba import njit
 
 from .scene import Box, ContactPair, Ground, Scene, Sphere
 
@@ -120,26 +121,120 @@ class _Pair:
             t1 /= np.linalg.norm(t1)
             angles = 2 * np.pi * np.arange(SUPPORT_DIRECTIONS) / SUPPORT_DIRECTIONS
             self.directions = np.outer(np.cos(angles), t1) + np.outer(np.sin(angles), np.cross(n, t1))
-            # two vertices' heights differ by at most 2 r |u - u0| more when the ground normal seen
-            # from the body moves from u0 to u (r: largest distance of a vertex from their mean)
-            reach = float(np.linalg.norm(self.vertices - self.vertices.mean(axis=0), axis=1).max())
-            self.narrow_turn = NARROW_SLACK / (2.0 * reach) if reach > 0 else np.inf
-            self.narrow_at: list[float] | None = None  # body-frame normal of the last one-point verdict
+        self.names = [f"{self.name}#0"]  # contact names "name#k", grown on demand
+
+    def contact_names(self, count: int) -> list[str]:
+        """The names of this pair's first ``count`` contact points."""
+        while len(self.names) < count:
+            self.names.append(f"{self.name}#{len(self.names)}")
+        return self.names[:count]
+
+
+class _GroundHulls:
+    """All the pairs of a polyhedron (a box or a mesh's convex hull) with a ground plane, handled in
+    one compiled pass (:func:`_ground_hulls`): the deepest vertex along the ground's normal is the
+    exact closest point of a convex polyhedron to a half-space (the support point coal's narrow phase
+    finds), so these pairs need no narrow-phase call each.
+
+    A polyhedron touches at its deepest vertex alone while the vertices near the ground span less
+    than PATCH_MIN_EXTENT. That verdict is computed with NARROW_SLACK more tolerance and kept while
+    the ground normal seen from the body stays within ``turn`` of where it was decided: two vertices'
+    heights differ by at most 2 r |u - u0| more when that normal moves from u0 to u (r: the largest
+    distance of a vertex from their mean), so a turn that small cannot bring another vertex close.
+    """
+
+    def __init__(self, pairs: list[_Pair]) -> None:
+        self.index = np.array([k for k, pair in enumerate(pairs) if pair.vertices is not None], dtype=int)
+        chosen = [pairs[k] for k in self.index]
+        self.pairs = chosen
+        self.joints = [pair.joint for pair in chosen]
+        size = max((len(pair.vertices) for pair in chosen), default=0)  # type: ignore[arg-type]
+        # the vertices in their joint's frame, homogeneous, as columns, shape (P, 4, size); padded with
+        # copies of the first, so that every hull has `size` of them
+        columns = []
+        for pair in chosen:
+            vertices = pair.vertices @ pair.local.rotation.T + pair.local.translation  # type: ignore[operator]
+            vertices = np.vstack([vertices, np.repeat(vertices[:1], size - len(vertices), axis=0)])
+            columns.append(np.vstack([vertices.T, np.ones(size)]))
+        self.columns = np.array(columns).reshape(len(chosen), 4, size)
+        # the ground plane (n, -height) of each pair: its product with a joint placement gives the
+        # signed distance of the joint frame's points to the ground, shape (P, 4)
+        self.plane = np.array([[*p.ground_normal, -p.obstacle.height] for p in chosen]).reshape(-1, 4)  # type: ignore[union-attr]
+        self.normal = self.plane[:, :3].copy()
+        reach = [np.linalg.norm(p.vertices - p.vertices.mean(axis=0), axis=1).max() for p in chosen]  # type: ignore[operator]
+        self.turn2 = np.array([(NARROW_SLACK / (2.0 * r)) ** 2 if r > 0 else np.inf for r in reach])
+        self.narrow_at = np.full((len(chosen), 3), np.nan)  # ground normal, joint frame, of each verdict
+
+    def detect(self, data: pin.Data, margin: float) -> tuple[np.ndarray, ...]:
+        """(joint placements (P, 4, 4), gaps (P,), deepest vertex in the world (P, 3), the hulls that
+        touch at that vertex alone, the hulls that touch more widely) of the hulls within ``margin``."""
+        placements = np.array([data.oMi[j].homogeneous for j in self.joints])
+        return placements, *_ground_hulls(
+            placements, self.plane, self.columns, self.narrow_at, self.turn2, margin
+        )
+
+
+@njit(cache=True)
+def _ground_hulls(placements, plane, columns, narrow_at, turn2, margin):  # type: ignore[no-untyped-def]
+    """The compiled pass of :class:`_GroundHulls` (updates ``narrow_at``)."""
+    count, size = columns.shape[0], columns.shape[2]
+    gaps, points = np.empty(count), np.empty((count, 3))
+    narrow = np.zeros(count, np.bool_)
+    touching = np.zeros(count, np.bool_)
+    c = np.empty(4)  # the ground seen from the joint: (n^T R, n^T p - height)
+    for k in range(count):
+        H, X = placements[k], columns[k]
+        for j in range(4):
+            c[j] = (
+                plane[k, 0] * H[0, j] + plane[k, 1] * H[1, j] + plane[k, 2] * H[2, j] + plane[k, 3] * H[3, j]
+            )
+        lowest, deepest = np.inf, 0
+        for i in range(size):
+            height = c[0] * X[0, i] + c[1] * X[1, i] + c[2] * X[2, i] + c[3]
+            if height < lowest:
+                lowest, deepest = height, i
+        gaps[k] = lowest
+        for j in range(3):
+            points[k, j] = (
+                H[j, 0] * X[0, deepest] + H[j, 1] * X[1, deepest] + H[j, 2] * X[2, deepest] + H[j, 3]
+            )
+        touching[k] = lowest <= margin
+        if not touching[k]:
+            continue
+        turned = (c[0] - narrow_at[k, 0]) ** 2 + (c[1] - narrow_at[k, 1]) ** 2 + (c[2] - narrow_at[k, 2]) ** 2
+        if turned <= turn2[k]:  # False where no verdict was kept (NaN)
+            narrow[k] = True
+            continue
+        low, high = np.full(3, np.inf), np.full(3, -np.inf)
+        for i in range(size):
+            if (
+                c[0] * X[0, i] + c[1] * X[1, i] + c[2] * X[2, i] + c[3]
+                <= lowest + PATCH_TOLERANCE + NARROW_SLACK
+            ):
+                for j in range(3):
+                    low[j], high[j] = min(low[j], X[j, i]), max(high[j], X[j, i])
+        narrow[k] = (high - low).max() <= PATCH_MIN_EXTENT
+        for j in range(3):
+            narrow_at[k, j] = c[j] if narrow[k] else np.nan
+    return gaps, points, np.flatnonzero(touching & narrow), np.flatnonzero(touching & ~narrow)
 
 
 class ContactDetector:
     """Finds the contact points of the scene's declared pairs that are closer than ``margin``.
 
-    Every pair goes through coal's narrow phase (the deepest point, the normal and the gap) and its
-    contact patch (the points within PATCH_TOLERANCE of the support plane). A patch narrower than
-    PATCH_MIN_EXTENT is one point; a wider one contributes its points, except for a polyhedron on the
-    ground, which touches at the vertices of its support outline, each with its own gap (coal's patch
-    gives one depth for the whole patch, which props a tilted sole).
+    A polyhedron on a ground plane touches at its deepest vertex, or, when its vertices near the
+    ground span more than PATCH_MIN_EXTENT, at the vertices of their support outline, each with its
+    own gap (see :class:`_GroundHulls`). Every other pair goes through coal's narrow phase (the
+    deepest point, the normal and the gap) and its contact patch (the points within PATCH_TOLERANCE
+    of the support plane): a patch narrower than PATCH_MIN_EXTENT is one point, a wider one
+    contributes its points.
     """
 
     def __init__(self, scene: Scene, margin: float) -> None:
         self.margin = margin
         self.pairs = [_Pair(scene, p) for p in scene.pairs]
+        self.hulls = _GroundHulls(self.pairs)
+        self.others = [k for k, pair in enumerate(self.pairs) if pair.vertices is None]
         self.request = coal.CollisionRequest()
         self.request.security_margin = margin
         self.request.num_max_contacts = 1
@@ -147,50 +242,94 @@ class ContactDetector:
         self.patch_request.setPatchTolerance(PATCH_TOLERANCE)
         self.result = coal.CollisionResult()
         self.patch_result = coal.ContactPatchResult(self.patch_request)
+        self.friction = np.array([pair.friction for pair in self.pairs])
+        self.restitution = np.array([pair.restitution for pair in self.pairs])
+        self.joint = np.array([pair.joint for pair in self.pairs], dtype=int)
+        self.other_joint = np.array([pair.other_joint for pair in self.pairs], dtype=int)
 
     def detect(self, data: pin.Data) -> Contacts:
-        """Contacts at the placements held in ``data`` (after forward kinematics)."""
-        found: list[tuple[_Pair, np.ndarray, list, list[float]]] = []  # pair, normal, points, gaps
-        for pair in self.pairs:
-            placement = data.oMi[pair.joint] * pair.local
-            if pair.other_local is not None:
-                other = data.oMi[pair.other_joint] * pair.other_local
-                pair.obstacle_tf = coal.Transform3s(other)
-                pair.obstacle_center = other.act(pair.obstacle_local_center)
-            if pair.obstacle_radius < np.inf and not self._near(pair, placement):
-                continue  # coal's half-space test is as cheap as this bounding-sphere test
-            self.result.clear()
-            if not coal.collide(
-                pair.shape, placement, pair.obstacle_shape, pair.obstacle_tf, self.request, self.result
-            ):
-                continue
-            # copies: coal's arrays are views into its result, which the next pair overwrites
-            contact = self.result.getContact(0)
-            normal = -contact.normal  # coal's normal points from the robot to the obstacle
-            gap = contact.penetration_depth
-            if pair.vertices is not None:
-                normal = pair.ground_normal
-                wide = None if self._narrow_on_ground(pair, placement) else self._on_ground(pair, placement)
-            else:
-                patch = self._patch(pair, placement, normal, gap)
-                wide = None if patch is None else (list(patch), [gap] * len(patch))
-            points, gaps = wide or ([contact.getNearestPoint1().copy()], [gap])
-            found.append((pair, normal, points, gaps))
-        if not found:
+        """Contacts at the placements held in ``data`` (after forward kinematics), in the order of the
+        declared pairs."""
+        # pieces of (pair of each point (k,), points (k, 3), normals (k, 3), gaps (k,), names)
+        pieces: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list[str]]] = []
+        if len(self.hulls.pairs):
+            placements, gaps, points, one, wide = self.hulls.detect(data, self.margin)
+            if len(one):
+                pair_ids = self.hulls.index[one]
+                names = [self.pairs[k].names[0] for k in pair_ids.tolist()]
+                pieces.append((pair_ids, points[one], self.hulls.normal[one], gaps[one], names))
+            for h in wide.tolist():
+                k = int(self.hulls.index[h])
+                wide = self._on_ground(h, placements[h])
+                hit = (
+                    (self.hulls.normal[h], *wide)
+                    if wide
+                    else (self.hulls.normal[h], points[h : h + 1], gaps[h : h + 1])
+                )
+                pieces.append(self._piece(k, *hit))
+        for k in self.others:
+            hit = self._collide(self.pairs[k], data)
+            if hit is not None:
+                pieces.append(self._piece(k, *hit))
+        if not pieces:
             return NO_CONTACTS
-        owners = [pair for pair, _, points, _ in found for _ in points]
+        if len(pieces) == 1:
+            owner, points, normals, gaps, names = pieces[0]
+        else:
+            owner, points, normals, gaps = (np.concatenate([p[i] for p in pieces]) for i in range(4))
+            names = [name for p in pieces for name in p[4]]
+            order = np.argsort(owner, kind="stable")  # the declared order of the pairs
+            owner, points, normals, gaps = owner[order], points[order], normals[order], gaps[order]
+            names = [names[i] for i in order.tolist()]
+        pairs = [self.pairs[k] for k in owner.tolist()]
         return Contacts(
-            [f"{pair.name}#{k}" for pair, _, points, _ in found for k in range(len(points))],
-            [pair.geometry for pair in owners],
-            [pair.obstacle_name for pair in owners],
-            np.array([pair.joint for pair in owners]),
-            np.array([pair.other_joint for pair in owners]),
-            np.array([p for _, _, points, _ in found for p in points]),
-            np.array([normal for _, normal, points, _ in found for _ in points]),
-            np.array([g for _, _, _, gaps in found for g in gaps]),
-            np.array([pair.friction for pair in owners]),
-            np.array([pair.restitution for pair in owners]),
+            names,
+            [pair.geometry for pair in pairs],
+            [pair.obstacle_name for pair in pairs],
+            self.joint[owner],
+            self.other_joint[owner],
+            points,
+            normals,
+            gaps,
+            self.friction[owner],
+            self.restitution[owner],
         )
+
+    def _piece(
+        self, k: int, normal: np.ndarray, points: np.ndarray, gaps: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list[str]]:
+        count = len(points)
+        return (
+            np.full(count, k),
+            points,
+            np.repeat(normal[None, :], count, axis=0),
+            gaps,
+            self.pairs[k].contact_names(count),
+        )
+
+    def _collide(self, pair: _Pair, data: pin.Data) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """coal's narrow phase and contact patch for one pair: (normal, points (k, 3), gaps (k,)), or
+        None when the pair is farther apart than the margin."""
+        placement = data.oMi[pair.joint] * pair.local
+        if pair.other_local is not None:
+            other = data.oMi[pair.other_joint] * pair.other_local
+            pair.obstacle_tf = coal.Transform3s(other)
+            pair.obstacle_center = other.act(pair.obstacle_local_center)
+        if pair.obstacle_radius < np.inf and not self._near(pair, placement):
+            return None  # coal's half-space test is as cheap as this bounding-sphere test
+        self.result.clear()
+        if not coal.collide(
+            pair.shape, placement, pair.obstacle_shape, pair.obstacle_tf, self.request, self.result
+        ):
+            return None
+        # copies: coal's arrays are views into its result, which the next pair overwrites
+        contact = self.result.getContact(0)
+        normal = -contact.normal.copy()  # coal's normal points from the robot to the obstacle
+        gap = contact.penetration_depth
+        patch = self._patch(pair, placement, normal, gap)
+        if patch is None:
+            return normal, contact.getNearestPoint1().copy()[None, :], np.array([gap])
+        return normal, patch, np.full(len(patch), gap)
 
     def _patch(self, pair: _Pair, placement: pin.SE3, normal: np.ndarray, gap: float) -> np.ndarray | None:
         """The points (k, 3) of the pair's contact patch on the robot's surface when it spans more than
@@ -220,35 +359,18 @@ class ContactDetector:
         local = np.round((middle - placement.translation) @ placement.rotation, 4)
         return middle[np.lexsort(local.T[::-1])]
 
-    def _narrow_on_ground(self, pair: _Pair, placement: pin.SE3) -> bool:
-        """True when a polyhedron's vertices near the ground span less than PATCH_MIN_EXTENT, so that it
-        touches at its deepest vertex alone. The verdict is computed with NARROW_SLACK more tolerance
-        and kept while the body has turned too little to change it (most steps of a rounded foot)."""
-        u = (pair.ground_normal @ placement.rotation).tolist()  # the ground normal in the body frame
-        if pair.narrow_at is not None:
-            du = [a - b for a, b in zip(u, pair.narrow_at)]
-            if (du[0] * du[0] + du[1] * du[1] + du[2] * du[2]) ** 0.5 <= pair.narrow_turn:
-                return True
-        heights = pair.vertices @ np.array(u)  # type: ignore[operator]
-        near = pair.vertices[heights <= heights.min() + PATCH_TOLERANCE + NARROW_SLACK]  # type: ignore[index]
-        pair.narrow_at = u if np.ptp(near, axis=0).max() <= PATCH_MIN_EXTENT else None
-        return pair.narrow_at is not None
-
-    def _on_ground(self, pair: _Pair, placement: pin.SE3) -> tuple[list, list[float]] | None:
-        """A polyhedron on the ground: its vertices within PATCH_TOLERANCE of the deepest one (or
-        penetrating), reduced to the vertices of their support outline: (points, gaps), each with its own
-        gap; None when they span less than PATCH_MIN_EXTENT (one point). coal's normal is the ground's."""
-        ground: Ground = pair.obstacle  # type: ignore[assignment]
-        n = pair.ground_normal
-        R, p = placement.rotation, placement.translation
-        vertices: np.ndarray = pair.vertices  # type: ignore[assignment]  # set for ground pairs
-        heights = vertices @ (R.T @ n) + (p @ n - ground.height)
+    def _on_ground(self, hull: int, placement: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        """Hull ``hull`` (its joint's placement (4, 4)) on the ground: its vertices within PATCH_TOLERANCE
+        of the deepest one (or penetrating), reduced to the vertices of their support outline: (points
+        (k, 3), gaps (k,)), each with its own gap; None when they span less than PATCH_MIN_EXTENT."""
+        pair, columns = self.hulls.pairs[hull], self.hulls.columns[hull]
+        heights = self.hulls.plane[hull] @ placement @ columns
         near = np.flatnonzero(heights <= max(0.0, min(self.margin, float(heights.min()) + PATCH_TOLERANCE)))
-        world, heights = vertices[near] @ R.T + p, heights[near]
+        world, heights = (placement[:3] @ columns[:, near]).T, heights[near]
         if np.ptp(world, axis=0).max() <= PATCH_MIN_EXTENT:
             return None
         chosen = sorted(set(np.argmax(world @ pair.directions.T, axis=0).tolist()))
-        return list(world[chosen]), heights[chosen].tolist()
+        return world[chosen], heights[chosen]
 
     def _near(self, pair: _Pair, placement: pin.SE3) -> bool:
         """Bounding-sphere test that skips the narrow phase for far pairs."""

@@ -1,0 +1,81 @@
+"""Contact detection: the compiled polyhedron-on-ground pass agrees with coal's narrow phase."""
+
+from __future__ import annotations
+
+import coal
+import numpy as np
+import pinocchio as pin
+import pytest
+
+import gaussim
+from gaussim.collision import PATCH_MIN_EXTENT, PATCH_TOLERANCE, ContactDetector
+
+FEET = ("FL", "FR", "HL", "HR")
+# Both compute the same support point in floating point; they may round differently.
+AGREEMENT = 1e-9
+
+
+def _coal_deepest(pair, placement: pin.SE3, margin: float) -> tuple[float, np.ndarray]:
+    """coal's signed distance and robot-side nearest point for one pair."""
+    request = coal.CollisionRequest()
+    request.security_margin = margin
+    result = coal.CollisionResult()
+    assert coal.collide(pair.shape, placement, pair.obstacle_shape, pair.obstacle_tf, request, result)
+    contact = result.getContact(0)
+    return contact.penetration_depth, contact.getNearestPoint1().copy()
+
+
+@pytest.mark.parametrize("normal", [(0.0, 0.0, 1.0), (0.3, -0.2, 1.0)])
+def test_polyhedra_on_ground_match_coal(solo12, normal):
+    """Random poses of Solo-12 above a (tilted) ground: a foot touching at one point touches at coal's
+    deepest point with coal's gap; a foot touching more widely touches at vertices within
+    PATCH_TOLERANCE of that depth."""
+    ground = gaussim.Ground(normal=normal, height=-2.0)
+    scene = gaussim.Scene(solo12, ground=ground, contacts=[(f"{leg}_FOOT_0", "ground") for leg in FEET])
+    margin = 10.0  # every foot is "in contact": all of them are compared
+    detector = ContactDetector(scene, margin)
+    model, data = solo12.model, solo12.model.createData()
+    compared = 0
+    pin.seed(0)
+    for _ in range(20):
+        q = pin.randomConfiguration(model, -np.ones(model.nq), np.ones(model.nq))
+        q[3:7] /= np.linalg.norm(q[3:7])
+        pin.forwardKinematics(model, data, q)
+        contacts = detector.detect(data)
+        for pair in detector.pairs:
+            placement = data.oMi[pair.joint] * pair.local
+            gap, point = _coal_deepest(pair, placement, margin)
+            mine = [i for i, name in enumerate(contacts.names) if name.startswith(pair.name + "#")]
+            assert mine, f"{pair.name} not detected"
+            assert gap - AGREEMENT <= contacts.gap[mine].min() <= gap + PATCH_TOLERANCE
+            if len(mine) == 1:
+                assert contacts.gap[mine[0]] == pytest.approx(gap, abs=AGREEMENT)
+                np.testing.assert_allclose(contacts.point[mine[0]], point, atol=AGREEMENT)
+                np.testing.assert_allclose(contacts.normal[mine[0]], ground.normal, atol=1e-15)
+                compared += 1
+    assert compared >= 40, compared  # most random poses touch at one vertex
+
+
+def test_box_flat_on_ground_touches_at_its_corners(box):
+    """A box resting flat: four corner contacts, each with its own gap; tilted slightly, the same
+    four with gaps that differ by the tilt; far above: nothing."""
+    scene = gaussim.Scene(box, ground=gaussim.Ground())
+    detector = ContactDetector(scene, 1e-3)
+    model, data = box.model, box.model.createData()
+    half = np.asarray(box.collision_model.geometryObjects[0].geometry.halfSide)
+    q = box.neutral()
+    q[2] = half[2] + 1e-4
+    pin.forwardKinematics(model, data, q)
+    contacts = detector.detect(data)
+    assert len(contacts) == 4
+    np.testing.assert_allclose(contacts.gap, 1e-4, atol=1e-12)
+    np.testing.assert_allclose(np.abs(contacts.point[:, :2]), np.tile(half[:2], (4, 1)), atol=1e-12)
+    assert np.ptp(contacts.point[:, :2], axis=0).min() > PATCH_MIN_EXTENT
+    q[3:7] = pin.Quaternion(pin.rpy.rpyToMatrix(2e-4, 0, 0)).coeffs()
+    pin.forwardKinematics(model, data, q)
+    tilted = detector.detect(data)
+    assert len(tilted) == 4
+    assert np.ptp(tilted.gap) == pytest.approx(2 * half[1] * np.sin(2e-4), rel=1e-6)
+    q[2] = 1.0
+    pin.forwardKinematics(model, data, q)
+    assert len(detector.detect(data)) == 0
