@@ -259,14 +259,8 @@ class ContactDetector:
                 names = [self.pairs[k].names[0] for k in pair_ids.tolist()]
                 pieces.append((pair_ids, points[one], self.hulls.normal[one], gaps[one], names))
             for h in wide.tolist():
-                k = int(self.hulls.index[h])
-                wide = self._on_ground(h, placements[h])
-                hit = (
-                    (self.hulls.normal[h], *wide)
-                    if wide
-                    else (self.hulls.normal[h], points[h : h + 1], gaps[h : h + 1])
-                )
-                pieces.append(self._piece(k, *hit))
+                outline = self._on_ground(h, placements[h]) or (points[h : h + 1], gaps[h : h + 1])
+                pieces.append(self._piece(int(self.hulls.index[h]), self.hulls.normal[h], *outline))
         for k in self.others:
             hit = self._collide(self.pairs[k], data)
             if hit is not None:
