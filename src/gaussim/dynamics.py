@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
+from numba import njit
 
 LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 _IDENTITY = np.eye(3)
@@ -72,26 +73,22 @@ def point_jacobians(
     the point moves at v_O + w x p over the columns of the joint's ancestors, and the ancestors the
     two bodies share cancel.
     """
-    J = data.J
-    lever = _cross_matrices(points)  # p x . as matrices, (m, 3, 3)
-    moving = masks[joints] - masks[other_joints] if other_joints.any() else masks[joints]
-    return (J[:3] - lever @ J[3:]) * moving[:, None, :]
+    return _point_jacobians(data.J, masks, joints, other_joints, points)
 
 
-def _levi_civita() -> np.ndarray:
-    eps = np.zeros((3, 3, 3))
-    eps[0, 1, 2] = eps[1, 2, 0] = eps[2, 0, 1] = 1.0
-    eps[0, 2, 1] = eps[2, 1, 0] = eps[1, 0, 2] = -1.0
-    return eps
-
-
-# [p]x[i, j] = -eps_ijk p_k: the cross-product matrices of many points are one matrix product
-_CROSS = -_levi_civita().transpose(2, 0, 1).reshape(3, 9)
-
-
-def _cross_matrices(p: np.ndarray) -> np.ndarray:
-    """[p]x for each row of p (m, 3), shape (m, 3, 3)."""
-    return (p @ _CROSS).reshape(len(p), 3, 3)
+@njit(cache=True)
+def _point_jacobians(J, masks, joints, other_joints, points):  # type: ignore[no-untyped-def]
+    m, nv = len(joints), J.shape[1]
+    result = np.zeros((m, 3, nv))
+    for i in range(m):
+        px, py, pz = points[i, 0], points[i, 1], points[i, 2]
+        for k in range(nv):
+            moving = masks[joints[i], k] - masks[other_joints[i], k]
+            if moving != 0.0:  # v_O + w x p, with v_O at the world origin
+                result[i, 0, k] = moving * (J[0, k] + J[4, k] * pz - J[5, k] * py)
+                result[i, 1, k] = moving * (J[1, k] + J[5, k] * px - J[3, k] * pz)
+                result[i, 2, k] = moving * (J[2, k] + J[3, k] * py - J[4, k] * px)
+    return result
 
 
 def point_drifts(

@@ -32,6 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
+from numba import njit
 
 from ..collision import Contacts
 from ..dynamics import point_drifts, point_jacobians, point_placements, support_masks
@@ -119,30 +120,81 @@ def _tangential(u: np.ndarray, n: np.ndarray) -> np.ndarray:
     return u - _dot(u, n)[:, None] * n
 
 
-# Per-contact 3-vector algebra runs on Python floats: for the handful of contacts of a robot this
-# is several times faster than numpy calls on (m, 3) arrays (measured in benchmarks/step_cost.py).
-def _dot3(a, b) -> float:  # type: ignore[no-untyped-def]
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+# Levels as the compiled kernels see them.
+_LEVELS = {"velocity": 0, "impulse": 1, "acceleration": 2}
 
 
-def _cross3(a, b) -> tuple[float, float, float]:  # type: ignore[no-untyped-def]
-    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+@njit(cache=True)
+def _pyramids(  # type: ignore[no-untyped-def]
+    J, U, tendency, normal, gap, mu, e, slips, stops, normal_forces, level, cos, sin, pyramid, bounds
+):
+    """Every contact's rows, as the module docstring poses them; the per-contact work in one pass.
 
+    Args:
+        J: point Jacobians (m, 3, nv); U: contact velocities J v (m, 3); tendency: where the contacts
+            would go without friction, J x_free (+ drift), (m, 3).
+        slips: the lagged slip of each contact (m, 3), NaN where there is none (use the current one).
+        stops, normal_forces: acceleration-level sliding: contacts that stick instead, lagged lambda_n.
+        level: 0 velocity, 1 impulse, 2 acceleration; pyramid: fixed basis and no De Saxce shift.
+        bounds: (dt, stabilisation, restitution_threshold).
 
-def _tangent_basis(n, direction) -> tuple[tuple[float, float, float], tuple[float, float, float]]:  # type: ignore[no-untyped-def]
-    """Unit tangents (t1, t2) at normal n; t1 along ``direction`` projected on the tangent plane
-    when it has a component there, else along n x (the axis of n's smallest component)."""
-    norm = 0.0
-    if direction is not None:
-        d_n = _dot3(direction, n)
-        t = (direction[0] - d_n * n[0], direction[1] - d_n * n[1], direction[2] - d_n * n[2])
-        norm = _dot3(t, t) ** 0.5
-    if norm <= 1e-12:
-        k = min(range(3), key=lambda i: abs(n[i]))
-        t = _cross3(n, [float(i == k) for i in range(3)])
-        norm = _dot3(t, t) ** 0.5
-    t1 = (t[0] / norm, t[1] / norm, t[2] / norm)
-    return t1, _cross3(n, t1)
+    Returns:
+        rows (R, nv), bound (R,) (acceleration level: without its per-row terms, see ``rows``),
+        generators (R, 3), owner contact of each row (R,), first row and number of rows of each contact
+        (m,), explicit friction force (m, 3), sliding (m,), slip used (m, 3) and its norm (m,).
+    """
+    dt, stabilisation, threshold = bounds
+    m, nv = J.shape[0], J.shape[2]
+    acceleration = level == 2
+    counts = np.empty(m, np.int64)
+    friction, slip_used = np.zeros((m, 3)), np.empty((m, 3))
+    speeds, sliding = np.empty(m), np.zeros(m, np.bool_)
+    contact_bound = np.zeros(m)
+    for i in range(m):
+        n = normal[i]
+        u_n = U[i, 0] * n[0] + U[i, 1] * n[1] + U[i, 2] * n[2]
+        slip = U[i] - u_n * n if acceleration or np.isnan(slips[i, 0]) else slips[i]
+        speed = np.sqrt(slip[0] ** 2 + slip[1] ** 2 + slip[2] ** 2)
+        slides = acceleration and mu[i] > 0 and speed > SLIP_SPEED and not stops[i]
+        if slides:  # explicit Coulomb force opposite the slip, lambda_n iterated (module docstring)
+            friction[i] = -mu[i] * normal_forces[i] / speed * slip
+        counts[i] = 1 if mu[i] == 0 or slides else len(cos)
+        sliding[i], slip_used[i], speeds[i] = slides, slip, speed
+        if level == 0:  # a gap closes within the step, a penetration at the rate stabilisation / dt
+            contact_bound[i] = -gap[i] / dt if gap[i] >= 0 else -stabilisation / dt * gap[i]
+        if not acceleration:
+            # restitution: an approaching contact leaves at -e u_n at least; De Saxce shift mu |slip|
+            if e[i] > 0 and -u_n > threshold:
+                contact_bound[i] = max(contact_bound[i], -e[i] * u_n)
+            if not pyramid:
+                contact_bound[i] -= mu[i] * speed
+    starts = np.zeros(m, np.int64)
+    starts[1:] = np.cumsum(counts)[:-1]
+    total = counts.sum()
+    generators, owner = np.empty((total, 3)), np.empty(total, np.int64)
+    for i in range(m):
+        n, r = normal[i], starts[i]
+        if counts[i] == 1:  # the normal row alone
+            generators[r] = n
+        else:  # friction opposes the tangential velocity the contact would have without it
+            t = -tendency[i] + (tendency[i, 0] * n[0] + tendency[i, 1] * n[1] + tendency[i, 2] * n[2]) * n
+            norm = np.sqrt(t[0] ** 2 + t[1] ** 2 + t[2] ** 2)
+            if pyramid or norm <= 1e-12:  # a fixed basis: n x (the axis of n's smallest component)
+                axis = np.zeros(3)
+                axis[np.argmin(np.abs(n))] = 1.0
+                t = np.cross(n, axis)
+                norm = np.sqrt(t[0] ** 2 + t[1] ** 2 + t[2] ** 2)
+            t1 = t / norm
+            t2 = np.cross(n, t1)
+            for k in range(counts[i]):
+                generators[r + k] = n + mu[i] * (cos[k] * t1 + sin[k] * t2)
+        owner[r : r + counts[i]] = i
+    rows, bound = np.zeros((total, nv)), contact_bound[owner]
+    for r in range(total):
+        g, Ji = generators[r], J[owner[r]]
+        for k in range(nv):
+            rows[r, k] = g[0] * Ji[0, k] + g[1] * Ji[1, k] + g[2] * Ji[2, k]
+    return rows, bound, generators, owner, starts, counts, friction, sliding, slip_used, speeds
 
 
 class ContactModule:
@@ -154,115 +206,63 @@ class ContactModule:
         self.mode = mode
         self.facets = facets
         angles = 2.0 * np.pi * np.arange(facets) / facets
-        self.cos, self.sin = np.cos(angles)[None, :, None], np.sin(angles)[None, :, None]
+        self.cos, self.sin = np.cos(angles), np.sin(angles)
         self.masks = support_masks(model)
-        self._layouts: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._nan = np.zeros((0, 3))
 
     def rows(self, ctx: Context) -> Rows | None:
         contacts = ctx.contacts
         if not len(contacts):
             return None
-        acceleration = ctx.level == "acceleration"
-        lagged, options = ctx.lagged, ctx.options
+        level, lagged, options = ctx.level, ctx.lagged, ctx.options
         J = point_jacobians(ctx.data, self.masks, contacts.joint, contacts.other_joint, contacts.point)
         # contact velocities J v, and J x_free: where the contacts would go without friction
         motion = J @ np.stack((ctx.v, ctx.x_free), axis=1)
-        if ctx.level != "velocity":
+        if level != "velocity":
             keep = is_active(ctx, contacts.gap, _dot(motion[:, :, 0], contacts.normal), 0.0)
             if not keep.any():
                 return None
             if not keep.all():
                 contacts, J, motion = contacts.select(keep), J[keep], motion[keep]
         m = len(contacts)
-        drift = _drifts(ctx, contacts) if acceleration else np.zeros((m, 3))
-        U = motion[:, :, 0]
-        slips: list = lagged["slip"].tolist() if "slip" in lagged else [None] * m
-        stops = lagged["stops"].tolist() if "stops" in lagged else [False] * m
-        normal_forces = lagged["normal"].tolist() if "normal" in lagged else [0.0] * m
-        pyramid = self.mode == "pyramid"
-
-        counts, cone, tangents, bounds = [], [], [], []  # type: ignore[var-annotated]
-        frictions, sliding, slip_used, speeds = [], [], [], []  # type: ignore[var-annotated]
-        for i, (n, gap, mu, e, u, tendency) in enumerate(
-            zip(
-                contacts.normal.tolist(),
-                contacts.gap.tolist(),
-                contacts.friction.tolist(),
-                contacts.restitution.tolist(),
-                U.tolist(),
-                (motion[:, :, 1] + drift).tolist(),
-            )
-        ):
-            u_n = _dot3(u, n)
-            u_t = [u[0] - u_n * n[0], u[1] - u_n * n[1], u[2] - u_n * n[2]]
-            slip: list[float] = u_t if acceleration or slips[i] is None else slips[i]
-            speed = _dot3(slip, slip) ** 0.5
-            slides = acceleration and mu > 0 and speed > SLIP_SPEED and not stops[i]
-            friction = [0.0, 0.0, 0.0]
-            if slides:  # explicit Coulomb force opposite the slip, lambda_n iterated (module docstring)
-                f = -mu * normal_forces[i] / speed
-                friction = [f * slip[0], f * slip[1], f * slip[2]]
-            if mu == 0 or slides:  # the normal row alone
-                counts.append(1)
-                cone.append(0.0)
-                tangents.append(((0.0, 0.0, 0.0), (0.0, 0.0, 0.0)))
-            else:  # friction opposes the tangential velocity the contact would have without it
-                counts.append(self.facets)
-                cone.append(mu)
-                tangents.append(_tangent_basis(n, None if pyramid else [-x for x in tendency]))
-            if not acceleration:
-                # restitution: an approaching contact leaves at -e u_n at least; De Saxce shift mu |slip|
-                floor = -e * u_n if e > 0 and -u_n > options.restitution_threshold else -np.inf
-                bounds.append((gap, floor, 0.0 if pyramid else mu * speed))
-            frictions.append(friction)
-            sliding.append(slides)
-            slip_used.append(slip)
-            speeds.append(speed)
-
-        # generators n + mu (cos a_k t1 + sin a_k t2) of every contact's pyramid, (m, k, 3)
-        t = np.array(tangents)
-        generators = contacts.normal[:, None, :] + np.array(cone)[:, None, None] * (
-            self.cos * t[:, None, 0, :] + self.sin * t[:, None, 1, :]
-        )
-        if sum(counts) == m * self.facets:  # every contact has a full pyramid
-            G = generators.reshape(-1, 3)
-            rows = np.matmul(generators, J).reshape(len(G), -1)
-            owner, starts = self._layout(m)
-        else:
-            chosen = np.arange(self.facets) < np.array(counts)[:, None]
-            G, owner = generators[chosen], np.nonzero(chosen)[0]
-            rows = np.einsum("ri,rin->rn", G, J[owner])
-            starts = np.searchsorted(owner, np.arange(m))
-        if acceleration:
-            bound = stabilised_bound(ctx, contacts.gap[owner], _dot(G, U[owner]), _dot(G, drift[owner]), True)
-        else:
-            gap_, floor_, shift_ = np.array(bounds).T
-            bound = (np.maximum(stabilised_bound(ctx, gap_, gap_, 0.0, True), floor_) - shift_)[owner]
-        friction_ = np.array(frictions)
-        batch = _Batch(
-            contacts,
+        U, tendency = motion[:, :, 0], motion[:, :, 1]
+        if level == "acceleration":
+            drift = _drifts(ctx, contacts)
+            tendency = tendency + drift
+        rows, bound, G, owner, starts, counts, friction, sliding, slip, speed = _pyramids(
             J,
-            G,
-            starts,
-            friction_,
-            np.array(sliding),
-            (np.array(counts) > 1) & (not acceleration and not pyramid),
-            np.array(slip_used),
-            np.array(speeds),
+            U,
+            tendency,
+            contacts.normal,
+            contacts.gap,
+            contacts.friction,
+            contacts.restitution,
+            lagged.get("slip", self._no_slip(m)),
+            lagged.get("stops", np.zeros(m, bool)),
+            lagged.get("normal", np.zeros(m)),
+            _LEVELS[level],
+            self.cos,
+            self.sin,
+            self.mode == "pyramid",
+            (options.dt, options.stabilisation, options.restitution_threshold),
         )
+        if level == "acceleration":
+            bound = stabilised_bound(ctx, contacts.gap[owner], _dot(G, U[owner]), _dot(G, drift[owner]), True)
+        # contacts with a full pyramid refine their De Saxce shift at the velocity and impulse levels
+        slipping = counts > 1 if level != "acceleration" and self.mode != "pyramid" else np.zeros(m, bool)
+        batch = _Batch(contacts, J, G, starts, friction, sliding, slipping, slip, speed)
 
         def labels() -> list[str]:
             return [f"contact {contacts.names[i]} row {r - starts[i]}" for r, i in enumerate(owner.tolist())]
 
-        force = np.einsum("min,mi->n", J, friction_) if any(sliding) else None
+        force = np.einsum("min,mi->n", J, friction) if sliding.any() else None
         return Rows(rows, bound, False, labels, batch, force)
 
-    def _layout(self, m: int) -> tuple[np.ndarray, np.ndarray]:
-        """Owner contact of each row and first row of each contact when m contacts have full pyramids."""
-        if m not in self._layouts:
-            k = self.facets
-            self._layouts[m] = np.repeat(np.arange(m), k), np.arange(0, m * k, k)
-        return self._layouts[m]
+    def _no_slip(self, m: int) -> np.ndarray:
+        """No lagged slip for m contacts (NaN: each uses its current one)."""
+        if len(self._nan) < m:
+            self._nan = np.full((m, 3), np.nan)
+        return self._nan[:m]
 
     def reactions(self, rows: Rows, multipliers: np.ndarray, scale: float) -> list[ContactForce]:
         b: _Batch = rows.data  # type: ignore[assignment]
@@ -290,14 +290,27 @@ class ContactModule:
             changed |= bool((np.abs(lam - previous) > NORMAL_FORCE_TOLERANCE)[slides].any())
             lagged["normal"] = np.where(slides, lam, previous)
         if b.slipping.any():
-            new = _tangential(b.J @ x, normals)
-            speed = np.sqrt(_dot(new, new))
-            # a sticking contact has no shift to refine
-            moving = b.slipping & ((b.slip_speed > SLIP_SPEED) | (speed > SLIP_SPEED))
-            if moving.any():
-                changed |= bool((np.abs(new - b.slip).max(axis=1) > SLIP_TOLERANCE[self.mode])[moving].any())
-                lagged["slip"] = np.where(moving[:, None], new, b.slip)
+            moved, slip = _slips(b.J, x, normals, b.slip, b.slip_speed, b.slipping, SLIP_TOLERANCE[self.mode])
+            changed |= moved
+            lagged["slip"] = slip
         return changed
+
+
+@njit(cache=True)
+def _slips(J, x, normal, slip, speed, slipping, tolerance):  # type: ignore[no-untyped-def]
+    """The slips of solution x for the contacts that refine their shift and are moving (a sticking
+    contact has no shift to refine), the others' unchanged: (True when one moved more than
+    ``tolerance``, slips (m, 3))."""
+    result, moved = slip.copy(), False
+    for i in range(len(slip)):
+        if not slipping[i]:
+            continue
+        u = J[i] @ x
+        u -= (u[0] * normal[i, 0] + u[1] * normal[i, 1] + u[2] * normal[i, 2]) * normal[i]
+        if speed[i] > SLIP_SPEED or np.sqrt(u[0] ** 2 + u[1] ** 2 + u[2] ** 2) > SLIP_SPEED:
+            moved |= np.abs(u - slip[i]).max() > tolerance
+            result[i] = u
+    return moved, result
 
 
 def _drifts(ctx: Context, contacts: Contacts) -> np.ndarray:
