@@ -32,3 +32,16 @@ def test_kkt_residual_measures_complementarity():
     x = np.array([0.0, 0.0, 0.0])
     assert kkt_residual(problem, x, np.zeros(0), np.array([9.81e-3])) == pytest.approx(0.5 * 9.81e-3)
     assert kkt_residual(problem, np.array([0, 0, -9.81e-3]), np.zeros(0), np.zeros(1)) == 0.0
+
+
+def test_kkt_residual_is_nan_when_anything_is_not_finite():
+    """A NaN in the solution, a multiplier or a bound must not hide behind a max."""
+    problem = _problem(-0.5)
+    solution = np.array([0, 0, -9.81e-3])
+    assert kkt_residual(problem, solution, np.zeros(0), np.zeros(1)) == 0.0
+    assert np.isnan(kkt_residual(problem, np.array([np.nan, 0, 0]), np.zeros(0), np.zeros(1)))
+    assert np.isnan(kkt_residual(problem, solution, np.zeros(0), np.array([np.nan])))
+    assert np.isnan(kkt_residual(_problem(np.nan), solution, np.zeros(0), np.zeros(1)))
+    anchored = GaussProblem(np.eye(3), problem.g, np.eye(3)[:1], np.zeros(1), problem.C, problem.l, [])
+    assert kkt_residual(anchored, solution, np.zeros(1), np.zeros(1)) == 0.0
+    assert np.isnan(kkt_residual(anchored, solution, np.array([np.inf]), np.zeros(1)))

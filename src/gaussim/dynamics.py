@@ -31,7 +31,8 @@ class Dynamics:
 def compute_dynamics(
     model: pin.Model, data: pin.Data, q: np.ndarray, v: np.ndarray, tau: np.ndarray, drifts: bool
 ) -> Dynamics:
-    """Compute M, b, placements and joint Jacobians in one Pinocchio pass.
+    """Compute M, b, joint placements and joint Jacobians in one Pinocchio pass (frame placements are
+    left to the modules that use frames).
 
     With ``drifts`` the spatial accelerations at a = 0 are computed too, for the acceleration-level
     constraint terms Jdot v (see :func:`point_drifts`).
@@ -40,7 +41,6 @@ def compute_dynamics(
     pin.computeAllTerms(model, data, q, v)
     if drifts:
         pin.forwardKinematics(model, data, q, v, np.zeros(model.nv))
-    pin.updateFramePlacements(model, data)
     return Dynamics(data.M.copy(), tau - data.nle, a_free)
 
 

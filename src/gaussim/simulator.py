@@ -53,6 +53,7 @@ class Simulator:
             level: GaussSolver(self.options) for level in ("velocity", "impulse", "acceleration")
         }
         self.last_step: StepReport | None = None
+        self._floating, self._zeros6 = scene.robot.floating, np.zeros(6)
         self._last_state: State | None = None  # the state the last step returned: already valid
         # (slice, what) of each joint whose configuration ends with a unit quaternion or (cos, sin)
         self._unit_parts = []
@@ -115,13 +116,15 @@ class Simulator:
         if tau is None:
             return np.zeros(nv)
         tau = np.asarray(tau, dtype=float)
-        if tau.shape == (nv - 6,) and self.scene.robot.floating:
-            tau = np.concatenate([np.zeros(6), tau])
+        if tau.shape == (nv - 6,) and self._floating:
+            tau = np.concatenate([self._zeros6, tau])
         if tau.shape != (nv,):
-            hint = f" or ({nv - 6},) for the actuated joints" if self.scene.robot.floating else ""
+            hint = f" or ({nv - 6},) for the actuated joints" if self._floating else ""
             raise InvalidState(f"tau must have shape ({nv},){hint}, got {tau.shape}")
-        if not np.isfinite(tau).all():
-            raise InvalidState(f"tau has non-finite entries at {np.flatnonzero(~np.isfinite(tau)).tolist()}")
+        if not math.isfinite(tau.sum()):  # a NaN or inf anywhere shows in the sum (or it overflowed)
+            bad = np.flatnonzero(~np.isfinite(tau)).tolist()
+            if bad:
+                raise InvalidState(f"tau has non-finite entries at {bad}")
         return tau
 
     # -- the step ---------------------------------------------------------------------------------

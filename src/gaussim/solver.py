@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 import proxsuite
+from numba import njit
 
 from .assembly import GaussProblem
 from .exceptions import InfeasibleConstraints, SolverError
@@ -22,15 +23,30 @@ KKT_RTOL = 100.0
 
 
 def kkt_residual(problem: GaussProblem, x: np.ndarray, lambda_eq: np.ndarray, lambda_in: np.ndarray) -> float:
-    """Largest violation of the KKT conditions of the Gauss problem at (x, lambda_eq, lambda_in >= 0)."""
-    stationarity = problem.H @ x + problem.g - problem.A.T @ lambda_eq - problem.C.T @ lambda_in
-    slack = problem.C @ x - problem.l
-    residuals = [np.abs(stationarity).max()]
-    if len(problem.b):
-        residuals.append(np.abs(problem.A @ x - problem.b).max())
-    if len(problem.l):
-        residuals += [(-slack).max(), (-lambda_in).max(), np.abs(lambda_in * slack).max()]
-    return float(np.max(residuals))  # numpy propagates a NaN, the builtin max may drop it
+    """Largest violation of the KKT conditions of the Gauss problem at (x, lambda_eq, lambda_in >= 0):
+    the stationarity residual |H x + g - A^T lambda_eq - C^T lambda_in|, the primal violations
+    |A x - b| and l - C x, the sign violation -lambda_in and the complementarity |lambda_in (C x - l)|;
+    NaN when any of them is not finite."""
+    p = problem
+    return _kkt_residual(p.H, p.g, p.A, p.b, p.C, p.l, x, lambda_eq, lambda_in)
+
+
+@njit(cache=True)
+def _kkt_residual(H, g, A, b, C, l, x, y, z):  # type: ignore[no-untyped-def]
+    worst, finite = 0.0, True
+    stationarity = H @ x + g
+    for i in range(len(b)):
+        stationarity -= y[i] * A[i]
+        violation = abs(A[i] @ x - b[i])
+        worst, finite = max(worst, violation), finite and np.isfinite(violation) and np.isfinite(y[i])
+    for i in range(len(l)):
+        stationarity -= z[i] * C[i]
+        slack = C[i] @ x - l[i]
+        worst = max(worst, -slack, -z[i], abs(z[i] * slack))
+        finite = finite and np.isfinite(slack) and np.isfinite(z[i])
+    for r in stationarity:
+        worst, finite = max(worst, abs(r)), finite and np.isfinite(r)
+    return worst if finite else np.nan
 
 
 @dataclass

@@ -43,7 +43,7 @@ class _Side:
         """(position (3,), rotation (3, 3), Jacobian (6, nv), drift (6,))."""
         if self.frame is None:
             return self.position, self.rotation, np.zeros((6, ctx.model.nv)), np.zeros(6)  # type: ignore[return-value]
-        placement = ctx.data.oMf[self.frame]
+        placement = pin.updateFramePlacement(ctx.model, ctx.data, self.frame)
         J = pin.getFrameJacobian(ctx.model, ctx.data, self.frame, LWA)
         drift = (
             pin.getFrameClassicalAcceleration(ctx.model, ctx.data, self.frame, LWA).vector

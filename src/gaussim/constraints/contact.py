@@ -126,13 +126,13 @@ _LEVELS = {"velocity": 0, "impulse": 1, "acceleration": 2}
 
 @njit(cache=True)
 def _pyramids(  # type: ignore[no-untyped-def]
-    J, U, tendency, normal, gap, mu, e, slips, stops, normal_forces, level, cos, sin, pyramid, bounds
+    J, v, x_free, drift, normal, gap, mu, e, slips, stops, normal_forces, level, cos, sin, pyramid, bounds
 ):
     """Every contact's rows, as the module docstring poses them; the per-contact work in one pass.
 
     Args:
-        J: point Jacobians (m, 3, nv); U: contact velocities J v (m, 3); tendency: where the contacts
-            would go without friction, J x_free (+ drift), (m, 3).
+        J: point Jacobians (m, 3, nv); v: the velocity (nv,); x_free: the unconstrained solution (nv,);
+        drift: Jdot v of the contacts at the acceleration level, else zeros, (m, 3).
         slips: the lagged slip of each contact (m, 3), NaN where there is none (use the current one).
         stops, normal_forces: acceleration-level sliding: contacts that stick instead, lagged lambda_n.
         level: 0 velocity, 1 impulse, 2 acceleration; pyramid: fixed basis and no De Saxce shift.
@@ -141,7 +141,8 @@ def _pyramids(  # type: ignore[no-untyped-def]
     Returns:
         rows (R, nv), bound (R,) (acceleration level: without its per-row terms, see ``rows``),
         generators (R, 3), owner contact of each row (R,), first row and number of rows of each contact
-        (m,), explicit friction force (m, 3), sliding (m,), slip used (m, 3) and its norm (m,).
+        (m,), explicit friction force (m, 3), sliding (m,), slip used (m, 3) and its norm (m,), contact
+        velocities J v (m, 3).
     """
     dt, stabilisation, threshold = bounds
     m, nv = J.shape[0], J.shape[2]
@@ -150,6 +151,12 @@ def _pyramids(  # type: ignore[no-untyped-def]
     friction, slip_used = np.zeros((m, 3)), np.empty((m, 3))
     speeds, sliding = np.empty(m), np.zeros(m, np.bool_)
     contact_bound = np.zeros(m)
+    # contact velocities, and where the contacts would go without friction
+    U, tendency = np.empty((m, 3)), np.empty((m, 3))
+    for i in range(m):
+        for j in range(3):
+            U[i, j] = J[i, j] @ v
+            tendency[i, j] = J[i, j] @ x_free + drift[i, j]
     for i in range(m):
         n = normal[i]
         u_n = U[i, 0] * n[0] + U[i, 1] * n[1] + U[i, 2] * n[2]
@@ -194,7 +201,7 @@ def _pyramids(  # type: ignore[no-untyped-def]
         g, Ji = generators[r], J[owner[r]]
         for k in range(nv):
             rows[r, k] = g[0] * Ji[0, k] + g[1] * Ji[1, k] + g[2] * Ji[2, k]
-    return rows, bound, generators, owner, starts, counts, friction, sliding, slip_used, speeds
+    return rows, bound, generators, owner, starts, counts, friction, sliding, slip_used, speeds, U
 
 
 class ContactModule:
@@ -216,23 +223,19 @@ class ContactModule:
             return None
         level, lagged, options = ctx.level, ctx.lagged, ctx.options
         J = point_jacobians(ctx.data, self.masks, contacts.joint, contacts.other_joint, contacts.point)
-        # contact velocities J v, and J x_free: where the contacts would go without friction
-        motion = J @ np.stack((ctx.v, ctx.x_free), axis=1)
         if level != "velocity":
-            keep = is_active(ctx, contacts.gap, _dot(motion[:, :, 0], contacts.normal), 0.0)
+            keep = is_active(ctx, contacts.gap, _dot(J @ ctx.v, contacts.normal), 0.0)
             if not keep.any():
                 return None
             if not keep.all():
-                contacts, J, motion = contacts.select(keep), J[keep], motion[keep]
+                contacts, J = contacts.select(keep), J[keep]
         m = len(contacts)
-        U, tendency = motion[:, :, 0], motion[:, :, 1]
-        if level == "acceleration":
-            drift = _drifts(ctx, contacts)
-            tendency = tendency + drift
-        rows, bound, G, owner, starts, counts, friction, sliding, slip, speed = _pyramids(
+        drift = _drifts(ctx, contacts) if level == "acceleration" else np.zeros((m, 3))
+        rows, bound, G, owner, starts, counts, friction, sliding, slip, speed, U = _pyramids(
             J,
-            U,
-            tendency,
+            ctx.v,
+            ctx.x_free,
+            drift,
             contacts.normal,
             contacts.gap,
             contacts.friction,
@@ -305,7 +308,7 @@ def _slips(J, x, normal, slip, speed, slipping, tolerance):  # type: ignore[no-u
     for i in range(len(slip)):
         if not slipping[i]:
             continue
-        u = J[i] @ x
+        u = np.array([J[i, 0] @ x, J[i, 1] @ x, J[i, 2] @ x])
         u -= (u[0] * normal[i, 0] + u[1] * normal[i, 1] + u[2] * normal[i, 2]) * normal[i]
         if speed[i] > SLIP_SPEED or np.sqrt(u[0] ** 2 + u[1] ** 2 + u[2] ** 2) > SLIP_SPEED:
             moved |= np.abs(u - slip[i]).max() > tolerance
