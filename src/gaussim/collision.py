@@ -246,18 +246,16 @@ class ContactDetector:
         self.restitution = np.array([pair.restitution for pair in self.pairs])
         self.joint = np.array([pair.joint for pair in self.pairs], dtype=int)
         self.other_joint = np.array([pair.other_joint for pair in self.pairs], dtype=int)
+        self._layouts: dict[bytes, tuple] = {}  # what does not move, per set of touching pairs
 
     def detect(self, data: pin.Data) -> Contacts:
         """Contacts at the placements held in ``data`` (after forward kinematics), in the order of the
         declared pairs."""
-        # pieces of (pair of each point (k,), points (k, 3), normals (k, 3), gaps (k,), names)
-        pieces: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list[str]]] = []
+        pieces: list[tuple[np.ndarray, ...]] = []  # (pair of each point (k,), points, normals, gaps)
         if len(self.hulls.pairs):
             placements, gaps, points, one, wide = self.hulls.detect(data, self.margin)
             if len(one):
-                pair_ids = self.hulls.index[one]
-                names = [self.pairs[k].names[0] for k in pair_ids.tolist()]
-                pieces.append((pair_ids, points[one], self.hulls.normal[one], gaps[one], names))
+                pieces.append((self.hulls.index[one], points[one], self.hulls.normal[one], gaps[one]))
             for h in wide.tolist():
                 outline = self._on_ground(h, placements[h]) or (points[h : h + 1], gaps[h : h + 1])
                 pieces.append(self._piece(int(self.hulls.index[h]), self.hulls.normal[h], *outline))
@@ -268,38 +266,38 @@ class ContactDetector:
         if not pieces:
             return NO_CONTACTS
         if len(pieces) == 1:
-            owner, points, normals, gaps, names = pieces[0]
+            owner, points, normals, gaps = pieces[0]
         else:
             owner, points, normals, gaps = (np.concatenate([p[i] for p in pieces]) for i in range(4))
-            names = [name for p in pieces for name in p[4]]
             order = np.argsort(owner, kind="stable")  # the declared order of the pairs
             owner, points, normals, gaps = owner[order], points[order], normals[order], gaps[order]
-            names = [names[i] for i in order.tolist()]
-        pairs = [self.pairs[k] for k in owner.tolist()]
+        key = owner.tobytes()
+        if key not in self._layouts:
+            if len(self._layouts) > 1024:  # many pairs touching in ever new combinations
+                self._layouts.clear()
+            self._layouts[key] = self._layout(owner)
+        names, geometry, obstacle, joint, other_joint, friction, restitution = self._layouts[key]
         return Contacts(
-            names,
-            [pair.geometry for pair in pairs],
-            [pair.obstacle_name for pair in pairs],
-            self.joint[owner],
-            self.other_joint[owner],
-            points,
-            normals,
-            gaps,
-            self.friction[owner],
-            self.restitution[owner],
+            names, geometry, obstacle, joint, other_joint, points, normals, gaps, friction, restitution
         )
+
+    def _layout(self, owner: np.ndarray) -> tuple:
+        """What the contacts of pairs ``owner`` (one entry per point, sorted) have that does not move."""
+        pairs, counts = np.unique(owner, return_counts=True)
+        chosen = [self.pairs[k] for k in owner.tolist()]
+        arrays = [self.joint[owner], self.other_joint[owner], self.friction[owner], self.restitution[owner]]
+        for array in arrays:
+            array.flags.writeable = False  # shared by every step with these pairs touching
+        names = [
+            name for k, n in zip(pairs.tolist(), counts.tolist()) for name in self.pairs[k].contact_names(n)
+        ]
+        return (names, [pair.geometry for pair in chosen], [pair.obstacle_name for pair in chosen], *arrays)
 
     def _piece(
         self, k: int, normal: np.ndarray, points: np.ndarray, gaps: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list[str]]:
+    ) -> tuple[np.ndarray, ...]:
         count = len(points)
-        return (
-            np.full(count, k),
-            points,
-            np.repeat(normal[None, :], count, axis=0),
-            gaps,
-            self.pairs[k].contact_names(count),
-        )
+        return np.full(count, k), points, np.repeat(normal[None, :], count, axis=0), gaps
 
     def _collide(self, pair: _Pair, data: pin.Data) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
         """coal's narrow phase and contact patch for one pair: (normal, points (k, 3), gaps (k,)), or
