@@ -18,7 +18,7 @@ _proxqp = proxsuite.proxqp
 # A row whose residual exceeds this at ProxQP's closest-feasible point is named as conflicting.
 INFEASIBLE_ROW_TOLERANCE = 1e-6
 INFEASIBLE = ("PROXQP_PRIMAL_INFEASIBLE", "PROXQP_SOLVED_CLOSEST_PRIMAL_FEASIBLE", "PROXQP_DUAL_INFEASIBLE")
-# A solution is accepted when its KKT residual is below KKT_RTOL * eps_abs * max(1, |g|_inf).
+# A solution is accepted when its relative KKT residual (see Certificate) is below KKT_RTOL * eps_abs.
 KKT_RTOL = 100.0
 
 
@@ -28,25 +28,36 @@ def kkt_residual(problem: GaussProblem, x: np.ndarray, lambda_eq: np.ndarray, la
     |A x - b| and l - C x, the sign violation -lambda_in and the complementarity |lambda_in (C x - l)|;
     NaN when any of them is not finite."""
     p = problem
-    return _kkt_residual(p.H, p.g, p.A, p.b, p.C, p.l, x, lambda_eq, lambda_in)
+    return _kkt_residuals(p.H, p.g, p.A, p.b, p.C, p.l, x, lambda_eq, lambda_in)[0]
 
 
 @njit(cache=True)
-def _kkt_residual(H, g, A, b, C, l, x, y, z):  # type: ignore[no-untyped-def]
-    worst, finite = 0.0, True
+def _kkt_residuals(H, g, A, b, C, l, x, y, z):  # type: ignore[no-untyped-def]
+    """(the residual of :func:`kkt_residual`, the same with each term relative to its size): the
+    stationarity residual relative to max(1, |g|_inf), a complementarity |z_i s_i| relative to
+    max(1, |z_i|), which makes it the slack of a row with a large multiplier (a heavy body's contact)."""
+    worst = relative = 0.0
+    finite = True
     stationarity = H @ x + g
     for i in range(len(b)):
         stationarity -= y[i] * A[i]
         violation = abs(A[i] @ x - b[i])
         worst, finite = max(worst, violation), finite and np.isfinite(violation) and np.isfinite(y[i])
+    relative = worst
     for i in range(len(l)):
         stationarity -= z[i] * C[i]
         slack = C[i] @ x - l[i]
-        worst = max(worst, -slack, -z[i], abs(z[i] * slack))
+        violation = max(-slack, -z[i])
+        complementarity = abs(z[i] * slack)
+        worst = max(worst, violation, complementarity)
+        relative = max(relative, violation, complementarity / max(1.0, abs(z[i])))
         finite = finite and np.isfinite(slack) and np.isfinite(z[i])
-    for r in stationarity:
-        worst, finite = max(worst, abs(r)), finite and np.isfinite(r)
-    return worst if finite else np.nan
+    size = 1.0
+    for i in range(len(g)):
+        worst, finite = max(worst, abs(stationarity[i])), finite and np.isfinite(stationarity[i])
+        size = max(size, abs(g[i]))
+    relative = max(relative, np.abs(stationarity).max() / size)
+    return (worst, relative) if finite else (np.nan, np.nan)
 
 
 @dataclass
@@ -63,6 +74,9 @@ class Certificate:
         kkt_residual: gaussim's own check of the returned point on the problem as posed: the largest
             of the primal violation, the stationarity residual |H x + g - A^T y - C^T z|, the sign
             violation of z and the complementarity |z_i (C x - l)_i|.
+        relative_kkt_residual: the same with the stationarity residual relative to max(1, |g|_inf)
+            and each complementarity relative to max(1, |z_i|); a solution is accepted when it is
+            below KKT_RTOL * eps_abs.
         restarted: True when the warm-started answer failed that check and ProxQP was run again
             from a cold start.
     """
@@ -75,6 +89,7 @@ class Certificate:
     setup_time: float
     solve_time: float
     kkt_residual: float = 0.0
+    relative_kkt_residual: float = 0.0
     restarted: bool = False
 
     @property
@@ -120,7 +135,7 @@ class GaussSolver:
         else:
             self._qp.update(*args)
         solution = self._run(problem)
-        if not self._acceptable(problem, solution) and solution.certificate.status not in INFEASIBLE:
+        if not self._acceptable(solution) and solution.certificate.status not in INFEASIBLE:
             # ProxQP 0.8, warm-started, may return the previous solution after 0 iterations when only
             # the bounds changed (measured: a stale contact force on a ball that left the ground), and a
             # warm start from a much different problem can stall or diverge (measured: a box stack
@@ -130,7 +145,7 @@ class GaussSolver:
             solution = self._run(problem)
             solution.certificate.restarted = True
             certificate = solution.certificate
-            if certificate.converged and not self._acceptable(problem, solution):
+            if certificate.converged and not self._acceptable(solution):
                 certificate.status = "GAUSSIM_KKT_CHECK_FAILED"
         self._check(problem, solution)
         return solution
@@ -153,13 +168,15 @@ class GaussSolver:
             float(info.duality_gap),
             float(info.setup_time),
             float(info.solve_time),
-            kkt_residual(problem, x, lambda_eq, lambda_in),
+            *_kkt_residuals(
+                problem.H, problem.g, problem.A, problem.b, problem.C, problem.l, x, lambda_eq, lambda_in
+            ),
         )
         return Solution(x, lambda_eq, lambda_in, certificate)
 
-    def _acceptable(self, problem: GaussProblem, solution: Solution) -> bool:
-        tolerance = KKT_RTOL * self.options.eps_abs * max(1.0, float(np.abs(problem.g).max()))
-        return solution.certificate.converged and solution.certificate.kkt_residual <= tolerance
+    def _acceptable(self, solution: Solution) -> bool:
+        certificate = solution.certificate
+        return certificate.converged and certificate.relative_kkt_residual <= KKT_RTOL * self.options.eps_abs
 
     def _new(self, n: int, n_eq: int, n_in: int) -> Any:
         qp = _proxqp.dense.QP(n, n_eq, n_in)

@@ -91,8 +91,8 @@ class _Batch:
         generators: force direction of each row, shape (R, 3): row r reads generators[r] @ J[i] x >= bound[r].
         starts: first row of each contact, shape (m,).
         friction: friction force applied outside the QP, shape (m, 3) (acceleration-level sliding).
-        sliding: which contacts get that force, shape (m,).
-        slipping: which contacts iterate the De Saxce shift, shape (m,).
+        sliding: which contacts get that force, shape (m,), or None when none does.
+        slipping: which contacts iterate the De Saxce shift, shape (m,), or None when none does.
         slip: the slip the De Saxce shift used, shape (m, 3) [m/s], and its norm slip_speed (m,).
     """
 
@@ -101,8 +101,8 @@ class _Batch:
     generators: np.ndarray
     starts: np.ndarray
     friction: np.ndarray
-    sliding: np.ndarray
-    slipping: np.ndarray
+    sliding: np.ndarray | None
+    slipping: np.ndarray | None
     slip: np.ndarray
     slip_speed: np.ndarray
 
@@ -126,7 +126,23 @@ _LEVELS = {"velocity": 0, "impulse": 1, "acceleration": 2}
 
 @njit(cache=True)
 def _pyramids(  # type: ignore[no-untyped-def]
-    J, v, x_free, drift, normal, gap, mu, e, slips, stops, normal_forces, level, cos, sin, pyramid, bounds
+    J,
+    v,
+    x_free,
+    drift,
+    normal,
+    gap,
+    mu,
+    e,
+    slips,
+    stops,
+    normal_forces,
+    level,
+    cos,
+    sin,
+    pyramid,
+    shifts,
+    bounds,
 ):
     """Every contact's rows, as the module docstring poses them; the per-contact work in one pass.
 
@@ -136,13 +152,15 @@ def _pyramids(  # type: ignore[no-untyped-def]
         slips: the lagged slip of each contact (m, 3), NaN where there is none (use the current one).
         stops, normal_forces: acceleration-level sliding: contacts that stick instead, lagged lambda_n.
         level: 0 velocity, 1 impulse, 2 acceleration; pyramid: fixed basis and no De Saxce shift.
+        shifts: contacts with a full pyramid refine their De Saxce shift.
         bounds: (dt, stabilisation, restitution_threshold).
 
     Returns:
         rows (R, nv), bound (R,) (acceleration level: without its per-row terms, see ``rows``),
-        generators (R, 3), owner contact of each row (R,), first row and number of rows of each contact
-        (m,), explicit friction force (m, 3), sliding (m,), slip used (m, 3) and its norm (m,), contact
-        velocities J v (m, 3).
+        generators (R, 3), owner contact of each row (R,), first row of each contact (m,), the
+        contacts that get an explicit friction force (sliding) and that refine their shift
+        (slipping), each (m,) or None when there is none, that friction force (m, 3) and its
+        generalized force (nv,), the slip used (m, 3) and its norm (m,), contact velocities J v (m, 3).
     """
     dt, stabilisation, threshold = bounds
     m, nv = J.shape[0], J.shape[2]
@@ -201,7 +219,25 @@ def _pyramids(  # type: ignore[no-untyped-def]
         g, Ji = generators[r], J[owner[r]]
         for k in range(nv):
             rows[r, k] = g[0] * Ji[0, k] + g[1] * Ji[1, k] + g[2] * Ji[2, k]
-    return rows, bound, generators, owner, starts, counts, friction, sliding, slip_used, speeds, U
+    force = np.zeros(nv)
+    for i in range(m):
+        if sliding[i]:
+            force += friction[i, 0] * J[i, 0] + friction[i, 1] * J[i, 1] + friction[i, 2] * J[i, 2]
+    slipping = (counts > 1) & shifts
+    return (
+        rows,
+        bound,
+        generators,
+        owner,
+        starts,
+        sliding if sliding.any() else None,
+        slipping if slipping.any() else None,
+        friction,
+        force,
+        slip_used,
+        speeds,
+        U,
+    )
 
 
 class ContactModule:
@@ -215,7 +251,7 @@ class ContactModule:
         angles = 2.0 * np.pi * np.arange(facets) / facets
         self.cos, self.sin = np.cos(angles), np.sin(angles)
         self.masks = support_masks(model)
-        self._nan = np.zeros((0, 3))
+        self._blanks: tuple[np.ndarray, ...] = (np.zeros((0, 3)),)
 
     def rows(self, ctx: Context) -> Rows | None:
         contacts = ctx.contacts
@@ -230,8 +266,11 @@ class ContactModule:
             if not keep.all():
                 contacts, J = contacts.select(keep), J[keep]
         m = len(contacts)
-        drift = _drifts(ctx, contacts) if level == "acceleration" else np.zeros((m, 3))
-        rows, bound, G, owner, starts, counts, friction, sliding, slip, speed, U = _pyramids(
+        no_slip, no_stops, no_force, no_drift = self._blank(m)
+        drift = _drifts(ctx, contacts) if level == "acceleration" else no_drift
+        # contacts with a full pyramid refine their De Saxce shift at the velocity and impulse levels
+        shifts = level != "acceleration" and self.mode != "pyramid"
+        rows, bound, G, owner, starts, sliding, slipping, friction, force, slip, speed, U = _pyramids(
             J,
             ctx.v,
             ctx.x_free,
@@ -240,32 +279,33 @@ class ContactModule:
             contacts.gap,
             contacts.friction,
             contacts.restitution,
-            lagged.get("slip", self._no_slip(m)),
-            lagged.get("stops", np.zeros(m, bool)),
-            lagged.get("normal", np.zeros(m)),
+            lagged.get("slip", no_slip),
+            lagged.get("stops", no_stops),
+            lagged.get("normal", no_force),
             _LEVELS[level],
             self.cos,
             self.sin,
             self.mode == "pyramid",
+            shifts,
             (options.dt, options.stabilisation, options.restitution_threshold),
         )
         if level == "acceleration":
             bound = stabilised_bound(ctx, contacts.gap[owner], _dot(G, U[owner]), _dot(G, drift[owner]), True)
-        # contacts with a full pyramid refine their De Saxce shift at the velocity and impulse levels
-        slipping = counts > 1 if level != "acceleration" and self.mode != "pyramid" else np.zeros(m, bool)
         batch = _Batch(contacts, J, G, starts, friction, sliding, slipping, slip, speed)
 
         def labels() -> list[str]:
             return [f"contact {contacts.names[i]} row {r - starts[i]}" for r, i in enumerate(owner.tolist())]
 
-        force = np.einsum("min,mi->n", J, friction) if sliding.any() else None
-        return Rows(rows, bound, False, labels, batch, force)
+        return Rows(rows, bound, False, labels, batch, force if batch.sliding is not None else None)
 
-    def _no_slip(self, m: int) -> np.ndarray:
-        """No lagged slip for m contacts (NaN: each uses its current one)."""
-        if len(self._nan) < m:
-            self._nan = np.full((m, 3), np.nan)
-        return self._nan[:m]
+    def _blank(self, m: int) -> tuple[np.ndarray, ...]:
+        """Read-only defaults for m contacts: no lagged slip (NaN: each uses its current one), no
+        stops, no lagged normal force, no drift."""
+        if len(self._blanks[0]) < m:
+            self._blanks = (np.full((m, 3), np.nan), np.zeros(m, bool), np.zeros(m), np.zeros((m, 3)))
+            for array in self._blanks:
+                array.flags.writeable = False
+        return tuple(array[:m] for array in self._blanks)
 
     def reactions(self, rows: Rows, multipliers: np.ndarray, scale: float) -> list[ContactForce]:
         b: _Batch = rows.data  # type: ignore[assignment]
@@ -282,7 +322,7 @@ class ContactModule:
         b: _Batch = rows.data  # type: ignore[assignment]
         lagged, normals, m = ctx.lagged, b.contacts.normal, len(b.contacts)
         changed = False
-        if b.sliding.any():
+        if b.sliding is not None:
             u_next = _tangential(b.J @ (ctx.v + ctx.options.dt * x), normals)
             reverse = b.sliding & (_dot(u_next, b.friction) > 0)  # such a contact sticks instead
             if reverse.any():
@@ -292,7 +332,7 @@ class ContactModule:
             lam, previous = multipliers[b.starts], lagged.get("normal", np.zeros(m))
             changed |= bool((np.abs(lam - previous) > NORMAL_FORCE_TOLERANCE)[slides].any())
             lagged["normal"] = np.where(slides, lam, previous)
-        if b.slipping.any():
+        if b.slipping is not None:
             moved, slip = _slips(b.J, x, normals, b.slip, b.slip_speed, b.slipping, SLIP_TOLERANCE[self.mode])
             changed |= moved
             lagged["slip"] = slip
