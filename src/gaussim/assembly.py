@@ -8,6 +8,7 @@ with f = M v + dt F (velocity level), M v (impulse level) or F (acceleration lev
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cache
 
 import numpy as np
 
@@ -41,24 +42,32 @@ class GaussProblem:
 
 def assemble(H: np.ndarray, f: np.ndarray, parts: list[tuple[ConstraintModule, Rows]]) -> GaussProblem:
     """Stack rows: equalities into (A, b), inequalities into (C, l), remembering where each block went."""
-    nv = len(f)
-    counts = {True: 0, False: 0}
     blocks = []
+    chosen: dict[bool, list[Rows]] = {True: [], False: []}
+    counts = {True: 0, False: 0}
     for module, rows in parts:
         start = counts[rows.equality]
         counts[rows.equality] += len(rows)
         blocks.append((module, rows, slice(start, counts[rows.equality])))
+        chosen[rows.equality].append(rows)
         if rows.force is not None:
             f = f + rows.force
-
-    def stack(equality: bool) -> tuple[np.ndarray, np.ndarray]:
-        chosen = [rows for _, rows in parts if rows.equality == equality]
-        if not chosen:
-            return np.zeros((0, nv)), np.zeros(0)
-        if len(chosen) == 1:
-            return chosen[0].J, chosen[0].bound
-        return np.vstack([r.J for r in chosen]), np.concatenate([r.bound for r in chosen])
-
-    A, b = stack(True)
-    C, l = stack(False)
+    A, b = _stack(chosen[True], len(f))
+    C, l = _stack(chosen[False], len(f))
     return GaussProblem(H, -f, A, b, C, l, blocks)
+
+
+def _stack(chosen: list[Rows], nv: int) -> tuple[np.ndarray, np.ndarray]:
+    if len(chosen) == 1:
+        return chosen[0].J, chosen[0].bound
+    if not chosen:
+        return _none(nv)
+    return np.vstack([r.J for r in chosen]), np.concatenate([r.bound for r in chosen])
+
+
+@cache
+def _none(nv: int) -> tuple[np.ndarray, np.ndarray]:
+    """No rows (read-only, shared)."""
+    J, bound = np.zeros((0, nv)), np.zeros(0)
+    J.flags.writeable = bound.flags.writeable = False
+    return J, bound

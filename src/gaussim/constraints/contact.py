@@ -251,7 +251,7 @@ class ContactModule:
         angles = 2.0 * np.pi * np.arange(facets) / facets
         self.cos, self.sin = np.cos(angles), np.sin(angles)
         self.masks = support_masks(model)
-        self._blanks: tuple[np.ndarray, ...] = (np.zeros((0, 3)),)
+        self._blanks: dict[int, tuple[np.ndarray, ...]] = {}
 
     def rows(self, ctx: Context) -> Rows | None:
         contacts = ctx.contacts
@@ -301,11 +301,11 @@ class ContactModule:
     def _blank(self, m: int) -> tuple[np.ndarray, ...]:
         """Read-only defaults for m contacts: no lagged slip (NaN: each uses its current one), no
         stops, no lagged normal force, no drift."""
-        if len(self._blanks[0]) < m:
-            self._blanks = (np.full((m, 3), np.nan), np.zeros(m, bool), np.zeros(m), np.zeros((m, 3)))
-            for array in self._blanks:
+        if m not in self._blanks:
+            self._blanks[m] = (np.full((m, 3), np.nan), np.zeros(m, bool), np.zeros(m), np.zeros((m, 3)))
+            for array in self._blanks[m]:
                 array.flags.writeable = False
-        return tuple(array[:m] for array in self._blanks)
+        return self._blanks[m]
 
     def reactions(self, rows: Rows, multipliers: np.ndarray, scale: float) -> list[ContactForce]:
         b: _Batch = rows.data  # type: ignore[assignment]
