@@ -31,17 +31,19 @@ class Dynamics:
 def compute_dynamics(
     model: pin.Model, data: pin.Data, q: np.ndarray, v: np.ndarray, tau: np.ndarray, drifts: bool
 ) -> Dynamics:
-    """Compute M, b, joint placements and joint Jacobians in one Pinocchio pass (frame placements are
-    left to the modules that use frames).
+    """M (CRBA), b (RNEA), joint placements and Jacobians, and M^-1 F from Pinocchio's sparse
+    Cholesky factor of M (frame placements are left to the modules that use frames).
 
     With ``drifts`` the spatial accelerations at a = 0 are computed too, for the acceleration-level
     constraint terms Jdot v (see :func:`point_drifts`).
     """
-    a_free = pin.aba(model, data, q, v, tau).copy()
-    pin.computeAllTerms(model, data, q, v)
+    pin.crba(model, data, q)
+    pin.computeJointJacobians(model, data, q)
+    F = tau - pin.nonLinearEffects(model, data, q, v)
     if drifts:
         pin.forwardKinematics(model, data, q, v, np.zeros(model.nv))
-    return Dynamics(data.M.copy(), tau - data.nle, a_free)
+    pin.cholesky.decompose(model, data)
+    return Dynamics(data.M.copy(), F, pin.cholesky.solve(model, data, F))
 
 
 def point_placements(

@@ -70,7 +70,6 @@ class Certificate:
         primal_residual: max constraint violation of the returned x.
         dual_residual: norm of the stationarity residual H x + g + A^T y + C^T z.
         duality_gap: ProxQP's duality gap.
-        setup_time, solve_time: ProxQP's own timings [s].
         kkt_residual: gaussim's own check of the returned point on the problem as posed: the largest
             of the primal violation, the stationarity residual |H x + g - A^T y - C^T z|, the sign
             violation of z and the complementarity |z_i (C x - l)_i|.
@@ -86,8 +85,6 @@ class Certificate:
     primal_residual: float
     dual_residual: float
     duality_gap: float
-    setup_time: float
-    solve_time: float
     kkt_residual: float = 0.0
     relative_kkt_residual: float = 0.0
     restarted: bool = False
@@ -133,7 +130,7 @@ class GaussSolver:
             args = (*args[:-1], self._upper if dims[2] else None)
             self._fresh(dims, args)
         else:
-            self._qp.update(*args)
+            self._qp.update(*args[:-1])  # the upper bounds stay +inf
         solution = self._run(problem)
         if not self._acceptable(solution) and solution.certificate.status not in INFEASIBLE:
             # ProxQP 0.8, warm-started, may return the previous solution after 0 iterations when only
@@ -166,8 +163,6 @@ class GaussSolver:
             float(info.pri_res),
             float(info.dua_res),
             float(info.duality_gap),
-            float(info.setup_time),
-            float(info.solve_time),
             *_kkt_residuals(
                 problem.H, problem.g, problem.A, problem.b, problem.C, problem.l, x, lambda_eq, lambda_in
             ),

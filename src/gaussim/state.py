@@ -33,10 +33,10 @@ class State:
     def adopt(cls, t: float, q: np.ndarray, v: np.ndarray) -> State:
         """A state that takes ownership of fresh float arrays q and v (made read-only, not copied)."""
         state = object.__new__(cls)
-        q.setflags(write=False)
-        v.setflags(write=False)
-        for name, value in (("t", float(t)), ("q", q), ("v", v)):
-            object.__setattr__(state, name, value)
+        q.flags.writeable = v.flags.writeable = False
+        _set(state, "t", float(t))
+        _set(state, "q", q)
+        _set(state, "v", v)
         return state
 
     def copy(self) -> State:
@@ -52,3 +52,6 @@ class State:
         """Load a state written by :meth:`save`."""
         with np.load(path, allow_pickle=False) as f:
             return cls(float(f["t"]), f["q"], f["v"])
+
+
+_set = object.__setattr__  # how a frozen State is filled
