@@ -29,14 +29,15 @@ class StepReport:
         impact: the reactions of an impact resolved at the start of the step, as impulses
             ([N s], [N m s]) (acceleration scheme only), or None.
         certificates: one per QP solved this step (fixed-point iterations and impacts add QPs).
-        timings: wall time per stage [s]: dynamics, collision, assembly, solve, integrate.
+        timings: wall time per stage [s]: dynamics, collision, assembly, solve, integrate (from
+            ``marks``: (stage, time.perf_counter() at its end), the stage "" untimed).
         contact_jacobian: stacked 3-row point Jacobians of the contacts, shape (3 m, nv).
     """
 
     t: float
     impact: StepReport | None = None
     certificates: list[Certificate] = field(default_factory=list)
-    timings: dict[str, float] = field(default_factory=dict)
+    marks: list[tuple[str, float]] = field(default_factory=list, repr=False)
     # (module, rows, multipliers, scale) of each block of the last QP: the reactions' source
     blocks: list[tuple[ConstraintModule, Rows, np.ndarray, float]] = field(default_factory=list, repr=False)
 
@@ -47,6 +48,14 @@ class StepReport:
             if m.name == family
             for r in m.reactions(rows, lam, scale)
         ]
+
+    @cached_property
+    def timings(self) -> dict[str, float]:
+        timings: dict[str, float] = {}
+        for (_, start), (stage, end) in zip(self.marks, self.marks[1:]):
+            if stage:
+                timings[stage] = timings.get(stage, 0.0) + end - start
+        return timings
 
     @cached_property
     def contacts(self) -> list[ContactForce]:

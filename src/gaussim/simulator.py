@@ -14,7 +14,7 @@ acceleration scheme, the paper's:
 from __future__ import annotations
 
 import math
-import time
+from time import perf_counter as _clock
 
 import numpy as np
 import pinocchio as pin
@@ -142,12 +142,13 @@ class Simulator:
         tau = self.full_torque(tau)
         o = self.options
         report = StepReport(state.t)
-        clock = time.perf_counter()
+        mark = report.marks.append
+        mark(("", _clock()))
         acceleration = o.scheme == "acceleration"
         dyn = compute_dynamics(self.model, self.data, state.q, state.v, tau, acceleration)
-        clock = _lap(report, "dynamics", clock)
+        mark(("dynamics", _clock()))
         contacts = self.detector.detect(self.data) if self.detector else NO_CONTACTS
-        clock = _lap(report, "collision", clock)
+        mark(("collision", _clock()))
         if acceleration:
             v = self._impact(state, dyn, contacts, report)
             if v is not state.v:
@@ -158,9 +159,9 @@ class Simulator:
             v_free = state.v + o.dt * dyn.a_free
             f = dyn.M @ state.v + o.dt * dyn.F
             v_next = self._gauss("velocity", state.q, state.v, dyn.M, f, v_free, contacts, report, 1.0 / o.dt)
-        clock = time.perf_counter()
+        mark(("", _clock()))
         q_next = integrate(self.model, state.q, v_next, o.dt)
-        _lap(report, "integrate", clock)
+        mark(("integrate", _clock()))
         if not math.isfinite(q_next @ q_next + v_next @ v_next) and not (
             np.isfinite(q_next).all() and np.isfinite(v_next).all()  # not just an overflow of the squares
         ):
@@ -217,16 +218,17 @@ class Simulator:
         scale: float,
     ) -> np.ndarray:
         """Solve, re-posing the rows while a module's fixed-point iteration asks for it."""
+        mark = report.marks.append
         for _ in range(self.options.friction_iterations):
-            clock = time.perf_counter()
+            mark(("", _clock()))
             parts = self._rows(ctx) if parts is None else parts
             if not parts:
-                _lap(report, "assembly", clock)
+                mark(("assembly", _clock()))
                 return ctx.x_free
             problem = assemble(M, f, parts)
-            clock = _lap(report, "assembly", clock)
+            mark(("assembly", _clock()))
             solution = self.solvers[ctx.level].solve(problem)
-            clock = _lap(report, "solve", clock)
+            mark(("solve", _clock()))
             report.certificates.append(solution.certificate)
             refine = False
             for module, rows, rows_slice in problem.blocks:
@@ -243,9 +245,3 @@ class Simulator:
         for module, rows, rows_slice in problem.blocks:
             multipliers = (solution.lambda_eq if rows.equality else solution.lambda_in)[rows_slice]
             report.blocks.append((module, rows, multipliers, scale))
-
-
-def _lap(report: StepReport, stage: str, start: float) -> float:
-    now = time.perf_counter()
-    report.timings[stage] = report.timings.get(stage, 0.0) + now - start
-    return now

@@ -111,26 +111,17 @@ class GaussSolver:
         self.options = options
         self._qp: Any = None  # proxsuite.proxqp.dense.QP
         self._dims: tuple[int, int, int] | None = None
-        self._upper = np.zeros(0)
 
     def solve(self, problem: GaussProblem) -> Solution:
         """Solve the Gauss problem; raise :class:`SolverError` as ``Options.on_failure`` says."""
-        dims = (len(problem.g), len(problem.b), len(problem.l))
-        args = (
-            problem.H,
-            problem.g,
-            problem.A if dims[1] else None,
-            problem.b if dims[1] else None,
-            problem.C if dims[2] else None,
-            problem.l if dims[2] else None,
-            self._upper if dims[2] else None,
-        )
-        if dims != self._dims or self._qp is None:
-            self._upper = np.full(dims[2], np.inf)  # every inequality row is one-sided
-            args = (*args[:-1], self._upper if dims[2] else None)
-            self._fresh(dims, args)
+        p = problem
+        dims = (len(p.g), len(p.b), len(p.l))
+        equalities = (p.A, p.b) if dims[1] else (None, None)
+        inequalities = (p.C, p.l) if dims[2] else (None, None)
+        if dims != self._dims:
+            self._fresh(p, dims, equalities, inequalities)
         else:
-            self._qp.update(*args[:-1])  # the upper bounds stay +inf
+            self._qp.update(p.H, p.g, *equalities, *inequalities)  # the upper bounds stay +inf
         solution = self._run(problem)
         if not self._acceptable(solution) and solution.certificate.status not in INFEASIBLE:
             # ProxQP 0.8, warm-started, may return the previous solution after 0 iterations when only
@@ -138,7 +129,7 @@ class GaussSolver:
             # warm start from a much different problem can stall or diverge (measured: a box stack
             # whose contact patches changed size, and the QP object kept NaNs after it): solve again from
             # a cold start, in a new QP object.
-            self._fresh(dims, args)
+            self._fresh(p, dims, equalities, inequalities)
             solution = self._run(problem)
             solution.certificate.restarted = True
             certificate = solution.certificate
@@ -147,9 +138,13 @@ class GaussSolver:
         self._check(problem, solution)
         return solution
 
-    def _fresh(self, dims: tuple[int, int, int], args: tuple) -> None:
+    def _fresh(
+        self, p: GaussProblem, dims: tuple[int, int, int], equalities: tuple, inequalities: tuple
+    ) -> None:
+        """A new QP object for the problem's sizes, initialised with it."""
         self._qp = self._new(*dims)
-        self._qp.init(*args)
+        upper = np.full(dims[2], np.inf) if dims[2] else None  # every inequality row is one-sided
+        self._qp.init(p.H, p.g, *equalities, *inequalities, upper)
         self._dims = dims
 
     def _run(self, problem: GaussProblem) -> Solution:
