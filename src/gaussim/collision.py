@@ -166,16 +166,17 @@ class _GroundHulls:
         self.narrow_at = np.full((len(chosen), 3), np.nan)  # ground normal, joint frame, of each verdict
 
     def detect(self, data: pin.Data, margin: float) -> tuple[np.ndarray, ...]:
-        """(joint placements (P, 4, 4), gaps (P,), deepest vertex in the world (P, 3), the hulls that
-        touch at that vertex alone, the hulls that touch more widely) of the hulls within ``margin``."""
+        """The hulls within ``margin`` of the ground: (joint placements (P, 4, 4), then of those that
+        touch at their deepest vertex alone their pairs (k,), deepest vertices in the world (k, 3),
+        normals (k, 3) and gaps (k,), then the hulls that touch more widely (w,))."""
         placements = np.array([data.oMi[j].homogeneous for j in self.joints])
         return placements, *_ground_hulls(
-            placements, self.plane, self.columns, self.narrow_at, self.turn2, margin
+            placements, self.plane, self.columns, self.narrow_at, self.turn2, margin, self.index
         )
 
 
 @njit(cache=True)
-def _ground_hulls(placements, plane, columns, narrow_at, turn2, margin):  # type: ignore[no-untyped-def]
+def _ground_hulls(placements, plane, columns, narrow_at, turn2, margin, pair):  # type: ignore[no-untyped-def]
     """The compiled pass of :class:`_GroundHulls` (updates ``narrow_at``)."""
     count, size = columns.shape[0], columns.shape[2]
     gaps, points = np.empty(count), np.empty((count, 3))
@@ -216,7 +217,8 @@ def _ground_hulls(placements, plane, columns, narrow_at, turn2, margin):  # type
         narrow[k] = (high - low).max() <= PATCH_MIN_EXTENT
         for j in range(3):
             narrow_at[k, j] = c[j] if narrow[k] else np.nan
-    return gaps, points, np.flatnonzero(touching & narrow), np.flatnonzero(touching & ~narrow)
+    one = np.flatnonzero(touching & narrow)
+    return pair[one], points[one], plane[one, :3], gaps[one], np.flatnonzero(touching & ~narrow)
 
 
 class ContactDetector:
@@ -253,11 +255,11 @@ class ContactDetector:
         declared pairs."""
         pieces: list[tuple[np.ndarray, ...]] = []  # (pair of each point (k,), points, normals, gaps)
         if len(self.hulls.pairs):
-            placements, gaps, points, one, wide = self.hulls.detect(data, self.margin)
-            if len(one):
-                pieces.append((self.hulls.index[one], points[one], self.hulls.normal[one], gaps[one]))
+            placements, *one, wide = self.hulls.detect(data, self.margin)
+            if len(one[0]):
+                pieces.append(tuple(one))
             for h in wide.tolist():
-                outline = self._on_ground(h, placements[h]) or (points[h : h + 1], gaps[h : h + 1])
+                outline = self._on_ground(h, placements[h])
                 pieces.append(self._piece(int(self.hulls.index[h]), self.hulls.normal[h], *outline))
         for k in self.others:
             hit = self._collide(self.pairs[k], data)
@@ -351,16 +353,18 @@ class ContactDetector:
         local = np.round((middle - placement.translation) @ placement.rotation, 4)
         return middle[np.lexsort(local.T[::-1])]
 
-    def _on_ground(self, hull: int, placement: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    def _on_ground(self, hull: int, placement: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Hull ``hull`` (its joint's placement (4, 4)) on the ground: its vertices within PATCH_TOLERANCE
         of the deepest one (or penetrating), reduced to the vertices of their support outline: (points
-        (k, 3), gaps (k,)), each with its own gap; None when they span less than PATCH_MIN_EXTENT."""
+        (k, 3), gaps (k,)), each with its own gap; the deepest vertex alone when they span less than
+        PATCH_MIN_EXTENT."""
         pair, columns = self.hulls.pairs[hull], self.hulls.columns[hull]
         heights = self.hulls.plane[hull] @ placement @ columns
         near = np.flatnonzero(heights <= max(0.0, min(self.margin, float(heights.min()) + PATCH_TOLERANCE)))
         world, heights = (placement[:3] @ columns[:, near]).T, heights[near]
         if np.ptp(world, axis=0).max() <= PATCH_MIN_EXTENT:
-            return None
+            deepest = int(np.argmin(heights))
+            return world[deepest : deepest + 1], heights[deepest : deepest + 1]
         chosen = sorted(set(np.argmax(world @ pair.directions.T, axis=0).tolist()))
         return world[chosen], heights[chosen]
 
