@@ -75,11 +75,12 @@ def point_jacobians(
     the point moves at v_O + w x p over the columns of the joint's ancestors, and the ancestors the
     two bodies share cancel.
     """
-    return _point_jacobians(data.J, masks, joints, other_joints, points)
+    return point_jacobians_from(data.J, masks, joints, other_joints, points)
 
 
 @njit(cache=True)
-def _point_jacobians(J, masks, joints, other_joints, points):  # type: ignore[no-untyped-def]
+def point_jacobians_from(J, masks, joints, other_joints, points):  # type: ignore[no-untyped-def]
+    """:func:`point_jacobians` from the joint Jacobians J (6, nv) (compiled, for other kernels)."""
     m, nv = len(joints), J.shape[1]
     result = np.zeros((m, 3, nv))
     for i in range(m):

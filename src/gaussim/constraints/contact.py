@@ -35,7 +35,7 @@ import pinocchio as pin
 from numba import njit
 
 from ..collision import Contacts
-from ..dynamics import point_drifts, point_jacobians, point_placements, support_masks
+from ..dynamics import point_drifts, point_jacobians, point_jacobians_from, point_placements, support_masks
 from .base import Context, Rows, is_active, stabilised_bound
 
 # Below this tangential speed a contact sticks at the acceleration level [m/s].
@@ -126,7 +126,11 @@ _LEVELS = {"velocity": 0, "impulse": 1, "acceleration": 2}
 
 @njit(cache=True)
 def _pyramids(  # type: ignore[no-untyped-def]
-    J,
+    joint_jacobians,
+    masks,
+    joints,
+    other_joints,
+    points,
     v,
     x_free,
     drift,
@@ -147,7 +151,8 @@ def _pyramids(  # type: ignore[no-untyped-def]
     """Every contact's rows, as the module docstring poses them; the per-contact work in one pass.
 
     Args:
-        J: point Jacobians (m, 3, nv); v: the velocity (nv,); x_free: the unconstrained solution (nv,);
+        joint_jacobians, masks, joints, other_joints, points: what :func:`point_jacobians` reads.
+        v: the velocity (nv,); x_free: the unconstrained solution (nv,);
         drift: Jdot v of the contacts at the acceleration level, else zeros, (m, 3).
         slips: the lagged slip of each contact (m, 3), NaN where there is none (use the current one).
         stops, normal_forces: acceleration-level sliding: contacts that stick instead, lagged lambda_n.
@@ -156,13 +161,15 @@ def _pyramids(  # type: ignore[no-untyped-def]
         bounds: (dt, stabilisation, restitution_threshold).
 
     Returns:
-        rows (R, nv), bound (R,) (acceleration level: without its per-row terms, see ``rows``),
-        generators (R, 3), owner contact of each row (R,), first row of each contact (m,), the
-        contacts that get an explicit friction force (sliding) and that refine their shift
-        (slipping), each (m,) or None when there is none, that friction force (m, 3) and its
-        generalized force (nv,), the slip used (m, 3) and its norm (m,), contact velocities J v (m, 3).
+        the point Jacobians (m, 3, nv), rows (R, nv), bound (R,) (acceleration level: without its
+        per-row terms, see ``rows``), generators (R, 3), owner contact of each row (R,), first row of
+        each contact (m,), the contacts that get an explicit friction force (sliding) and that refine
+        their shift (slipping), each (m,) or None when there is none, that friction force (m, 3) and
+        its generalized force (nv,), the slip used (m, 3) and its norm (m,), contact velocities J v
+        (m, 3).
     """
     dt, stabilisation, threshold = bounds
+    J = point_jacobians_from(joint_jacobians, masks, joints, other_joints, points)
     m, nv = J.shape[0], J.shape[2]
     acceleration = level == 2
     counts = np.empty(m, np.int64)
@@ -225,6 +232,7 @@ def _pyramids(  # type: ignore[no-untyped-def]
             force += friction[i, 0] * J[i, 0] + friction[i, 1] * J[i, 1] + friction[i, 2] * J[i, 2]
     slipping = (counts > 1) & shifts
     return (
+        J,
         rows,
         bound,
         generators,
@@ -258,20 +266,24 @@ class ContactModule:
         if not len(contacts):
             return None
         level, lagged, options = ctx.level, ctx.lagged, ctx.options
-        J = point_jacobians(ctx.data, self.masks, contacts.joint, contacts.other_joint, contacts.point)
         if level != "velocity":
+            J = point_jacobians(ctx.data, self.masks, contacts.joint, contacts.other_joint, contacts.point)
             keep = is_active(ctx, contacts.gap, _dot(J @ ctx.v, contacts.normal), 0.0)
             if not keep.any():
                 return None
             if not keep.all():
-                contacts, J = contacts.select(keep), J[keep]
+                contacts = contacts.select(keep)
         m = len(contacts)
         no_slip, no_stops, no_force, no_drift = self._blank(m)
         drift = _drifts(ctx, contacts) if level == "acceleration" else no_drift
         # contacts with a full pyramid refine their De Saxce shift at the velocity and impulse levels
         shifts = level != "acceleration" and self.mode != "pyramid"
-        rows, bound, G, owner, starts, sliding, slipping, friction, force, slip, speed, U = _pyramids(
-            J,
+        J, rows, bound, G, owner, starts, sliding, slipping, friction, force, slip, speed, U = _pyramids(
+            ctx.data.J,
+            self.masks,
+            contacts.joint,
+            contacts.other_joint,
+            contacts.point,
             ctx.v,
             ctx.x_free,
             drift,
