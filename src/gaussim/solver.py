@@ -15,6 +15,9 @@ from .exceptions import InfeasibleConstraints, SolverError
 from .options import Options
 
 _proxqp = proxsuite.proxqp
+_STATUS = {status: status.name for status in _proxqp.QPSolverOutput.__members__.values()}
+_NONE = np.zeros(0)  # no multipliers of a kind
+_NONE.flags.writeable = False
 # A row whose residual exceeds this at ProxQP's closest-feasible point is named as conflicting.
 INFEASIBLE_ROW_TOLERANCE = 1e-6
 INFEASIBLE = ("PROXQP_PRIMAL_INFEASIBLE", "PROXQP_SOLVED_CLOSEST_PRIMAL_FEASIBLE", "PROXQP_DUAL_INFEASIBLE")
@@ -151,9 +154,11 @@ class GaussSolver:
         self._qp.solve()
         result = self._qp.results
         info = result.info
-        x, lambda_eq, lambda_in = result.x.copy(), -result.y, -result.z
+        x = result.x.copy()
+        lambda_eq = -result.y if self._dims[1] else _NONE  # type: ignore[index]
+        lambda_in = -result.z if self._dims[2] else _NONE  # type: ignore[index]
         certificate = Certificate(
-            info.status.name,
+            _STATUS[info.status],
             int(info.iter),
             float(info.pri_res),
             float(info.dua_res),
