@@ -169,7 +169,8 @@ class _GroundHulls:
         """The hulls within ``margin`` of the ground: (joint placements (P, 4, 4), then of those that
         touch at their deepest vertex alone their pairs (k,), deepest vertices in the world (k, 3),
         normals (k, 3) and gaps (k,), then the hulls that touch more widely (w,))."""
-        placements = np.array([data.oMi[j].homogeneous for j in self.joints])
+        oMi = data.oMi
+        placements = np.array([oMi[j].homogeneous for j in self.joints])
         return placements, *_ground_hulls(
             placements, self.plane, self.columns, self.narrow_at, self.turn2, margin, self.index
         )

@@ -19,7 +19,7 @@ from time import perf_counter as _clock
 import numpy as np
 import pinocchio as pin
 
-from .assembly import GaussProblem, assemble
+from .assembly import assemble
 from .collision import NO_CONTACTS, ContactDetector, Contacts
 from .constraints import BilateralModule, ContactModule, LimitModule
 from .constraints.base import ConstraintModule, Context, Level, Rows
@@ -29,7 +29,7 @@ from .integrator import integrate
 from .options import Options
 from .report import StepReport
 from .scene import Scene
-from .solver import GaussSolver, Solution
+from .solver import GaussSolver
 from .state import State
 
 # A velocity violating an impulse-level row by more than this is an impact [m/s or rad/s].
@@ -226,21 +226,18 @@ class Simulator:
             solution = self.solvers[ctx.level].solve(problem)
             mark(("solve", _clock()))
             report.certificates.append(solution.certificate)
+            blocks = [
+                (module, rows, (solution.lambda_eq if rows.equality else solution.lambda_in)[rows_slice])
+                for module, rows, rows_slice in problem.blocks
+            ]
             refine = False
-            for module, rows, rows_slice in problem.blocks:
-                multipliers = (solution.lambda_eq if rows.equality else solution.lambda_in)[rows_slice]
+            for module, rows, multipliers in blocks:
                 refine |= module.refine(ctx, rows, solution.x, multipliers)
             if not refine:
                 break
             parts = None
-        self._record(problem, solution, report, scale)
+        report.blocks += [(module, rows, multipliers, scale) for module, rows, multipliers in blocks]
         return solution.x
-
-    @staticmethod
-    def _record(problem: GaussProblem, solution: Solution, report: StepReport, scale: float) -> None:
-        for module, rows, rows_slice in problem.blocks:
-            multipliers = (solution.lambda_eq if rows.equality else solution.lambda_in)[rows_slice]
-            report.blocks.append((module, rows, multipliers, scale))
 
 
 def _finite(x: np.ndarray) -> bool:
