@@ -18,7 +18,8 @@ class Dynamics:
     """The free system M a = F at the current (q, v).
 
     Attributes:
-        M: joint-space inertia, shape (nv, nv), symmetric positive definite.
+        M: joint-space inertia, shape (nv, nv), symmetric positive definite: Pinocchio's data.M itself,
+            valid until the next ``compute_dynamics`` on the same data (the step uses it before then).
         F: generalized force tau - b(q, v), shape (nv,) [N or N m].
         a_free: unconstrained acceleration M^-1 F, shape (nv,) (Pinocchio's ABA).
     """
@@ -43,7 +44,7 @@ def compute_dynamics(
     if drifts:
         pin.forwardKinematics(model, data, q, v, np.zeros(model.nv))
     pin.cholesky.decompose(model, data)
-    return Dynamics(data.M.copy(), F, pin.cholesky.solve(model, data, F))
+    return Dynamics(data.M, F, pin.cholesky.solve(model, data, F))
 
 
 def point_placements(
