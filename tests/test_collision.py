@@ -37,7 +37,7 @@ def test_polyhedra_on_ground_match_coal(solo12, normal):
     model, data = solo12.model, solo12.model.createData()
     compared = 0
     pin.seed(0)
-    for _ in range(20):
+    for _ in range(100):
         q = pin.randomConfiguration(model, -np.ones(model.nq), np.ones(model.nq))
         q[3:7] /= np.linalg.norm(q[3:7])
         pin.forwardKinematics(model, data, q)
@@ -53,7 +53,7 @@ def test_polyhedra_on_ground_match_coal(solo12, normal):
                 np.testing.assert_allclose(contacts.point[mine[0]], point, atol=AGREEMENT)
                 np.testing.assert_allclose(contacts.normal[mine[0]], ground.normal, atol=1e-15)
                 compared += 1
-    assert compared >= 40, compared  # most random poses touch at one vertex
+    assert compared >= 200, compared  # most random poses touch at one vertex
 
 
 def test_box_flat_on_ground_touches_at_its_corners(box):

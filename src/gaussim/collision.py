@@ -114,7 +114,9 @@ class _Pair:
         self.radius = self.shape.aabb_radius
         self.center = np.asarray(self.shape.aabb_center)
         # Polyhedra against the ground: the vertices of a wide patch, each with its own gap
-        self.vertices = _vertices(self.shape) if isinstance(self.obstacle, Ground) else None
+        polyhedron = _vertices(self.shape) if isinstance(self.obstacle, Ground) else None
+        self.vertices: np.ndarray | None = polyhedron[0] if polyhedron else None
+        self.edges: list[list[int]] = polyhedron[1] if polyhedron else []
         if self.vertices is not None and isinstance(self.obstacle, Ground):
             self.ground_normal = n = np.asarray(self.obstacle.normal)
             t1 = np.cross(n, np.eye(3)[int(np.argmin(np.abs(n)))])
@@ -164,6 +166,18 @@ class _GroundHulls:
         reach = [np.linalg.norm(p.vertices - p.vertices.mean(axis=0), axis=1).max() for p in chosen]  # type: ignore[operator]
         self.turn2 = np.array([(NARROW_SLACK / (2.0 * r)) ** 2 if r > 0 else np.inf for r in reach])
         self.narrow_at = np.full((len(chosen), 3), np.nan)  # ground normal, joint frame, of each verdict
+        # the edges of each hull as adjacency lists: the neighbours of vertex i of hull k are
+        # neighbours[k, first[k, i] : first[k, i + 1]]
+        self.first = np.zeros((len(chosen), size + 1), dtype=np.int64)
+        self.neighbours = np.zeros(
+            (len(chosen), max((sum(map(len, p.edges)) for p in chosen), default=0)), np.int64
+        )
+        for k, pair in enumerate(chosen):
+            counts = [len(e) for e in pair.edges]
+            self.first[k, 1 : len(counts) + 1] = np.cumsum(counts)
+            self.first[k, len(counts) + 1 :] = self.first[k, len(counts)]  # padding has no neighbours
+            self.neighbours[k, : sum(counts)] = [j for e in pair.edges for j in e]
+        self.deepest = np.zeros(len(chosen), dtype=np.int64)  # where each search for the deepest starts
 
     def detect(self, data: pin.Data, margin: float) -> tuple[np.ndarray, ...]:
         """The hulls within ``margin`` of the ground: (joint placements (P, 4, 4), then of those that
@@ -172,13 +186,26 @@ class _GroundHulls:
         oMi = data.oMi
         placements = np.array([oMi[j].homogeneous for j in self.joints])
         return placements, *_ground_hulls(
-            placements, self.plane, self.columns, self.narrow_at, self.turn2, margin, self.index
+            placements,
+            self.plane,
+            self.columns,
+            self.first,
+            self.neighbours,
+            self.deepest,
+            self.narrow_at,
+            self.turn2,
+            margin,
+            self.index,
         )
 
 
 @njit(cache=True)
-def _ground_hulls(placements, plane, columns, narrow_at, turn2, margin, pair):  # type: ignore[no-untyped-def]
-    """The compiled pass of :class:`_GroundHulls` (updates ``narrow_at``)."""
+def _ground_hulls(placements, plane, columns, first, neighbours, deepest, narrow_at, turn2, margin, pair):  # type: ignore[no-untyped-def]
+    """The compiled pass of :class:`_GroundHulls` (updates ``deepest`` and ``narrow_at``).
+
+    The deepest vertex is found by descent along the hull's edges from the last one: a vertex no
+    neighbour of which is deeper is the deepest of a convex polyhedron (a linear function has no
+    other local minimum on its vertex graph)."""
     count, size = columns.shape[0], columns.shape[2]
     gaps, points = np.empty(count), np.empty((count, 3))
     narrow = np.zeros(count, np.bool_)
@@ -190,16 +217,20 @@ def _ground_hulls(placements, plane, columns, narrow_at, turn2, margin, pair):  
             c[j] = (
                 plane[k, 0] * H[0, j] + plane[k, 1] * H[1, j] + plane[k, 2] * H[2, j] + plane[k, 3] * H[3, j]
             )
-        lowest, deepest = np.inf, 0
-        for i in range(size):
-            height = c[0] * X[0, i] + c[1] * X[1, i] + c[2] * X[2, i] + c[3]
-            if height < lowest:
-                lowest, deepest = height, i
-        gaps[k] = lowest
+        i = deepest[k]
+        lowest = c[0] * X[0, i] + c[1] * X[1, i] + c[2] * X[2, i] + c[3]
+        descending = True
+        while descending:
+            descending = False
+            for e in range(first[k, i], first[k, i + 1]):
+                j = neighbours[k, e]
+                height = c[0] * X[0, j] + c[1] * X[1, j] + c[2] * X[2, j] + c[3]
+                if height < lowest:
+                    i, lowest, descending = j, height, True
+                    break
+        deepest[k], gaps[k] = i, lowest
         for j in range(3):
-            points[k, j] = (
-                H[j, 0] * X[0, deepest] + H[j, 1] * X[1, deepest] + H[j, 2] * X[2, deepest] + H[j, 3]
-            )
+            points[k, j] = H[j, 0] * X[0, i] + H[j, 1] * X[1, i] + H[j, 2] * X[2, i] + H[j, 3]
         touching[k] = lowest <= margin
         if not touching[k]:
             continue
@@ -382,12 +413,14 @@ def _convex(shape: coal.CollisionGeometry) -> coal.CollisionGeometry:
     return shape
 
 
-def _vertices(shape: coal.CollisionGeometry) -> np.ndarray | None:
-    """Vertices of a box or convex polyhedron in its own frame, shape (V, 3); None for curved shapes."""
+def _vertices(shape: coal.CollisionGeometry) -> tuple[np.ndarray, list[list[int]]] | None:
+    """Vertices of a box or convex polyhedron in its own frame, shape (V, 3), and the vertices each
+    shares an edge with; None for curved shapes."""
     if isinstance(shape, coal.Box):
         half = np.asarray(shape.halfSide)
         corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=float)
-        return corners * half
+        return corners * half, [[i ^ 1, i ^ 2, i ^ 4] for i in range(8)]  # corner i = 4 x + 2 y + z
     if isinstance(shape, coal.ConvexBase):
-        return np.asarray(shape.points())
+        points = np.asarray(shape.points())
+        return points, [list(shape.neighbors(i)) for i in range(len(points))]
     return None
