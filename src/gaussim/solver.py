@@ -126,7 +126,9 @@ class GaussSolver:
         else:
             self._qp.update(p.H, p.g, *equalities, *inequalities)  # the upper bounds stay +inf
         solution = self._run(problem)
-        if not self._acceptable(solution) and solution.certificate.status not in INFEASIBLE:
+        if self._acceptable(solution):  # converged, finite and certified: nothing more to check
+            return solution
+        if solution.certificate.status not in INFEASIBLE:
             # ProxQP 0.8, warm-started, may return the previous solution after 0 iterations when only
             # the bounds changed (measured: a stale contact force on a ball that left the ground), and a
             # warm start from a much different problem can stall or diverge (measured: a box stack

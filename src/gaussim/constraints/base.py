@@ -17,6 +17,7 @@ from typing import Literal, Protocol
 
 import numpy as np
 import pinocchio as pin
+from numba import vectorize
 
 from ..collision import Contacts
 from ..options import Options
@@ -107,14 +108,23 @@ def stabilised_bound(
     ``stabilisation / dt``; at the acceleration level a critically damped Baumgarte term with time
     constant dt / stabilisation does the same; at the impulse level the rows only stop the approach.
     """
-    options = ctx.options
-    rate_gain = options.stabilisation / options.dt
-    if ctx.level == "velocity":
-        gain = np.where((phi >= 0) & unilateral, 1.0 / options.dt, rate_gain)
-        return -gain * phi
-    if ctx.level == "impulse":
-        return np.zeros_like(phi)
-    return -drift - 2.0 * rate_gain * rate - rate_gain**2 * phi
+    o = ctx.options
+    return bound_of(LEVELS[ctx.level], o.dt, o.stabilisation, phi, rate, drift, unilateral)
+
+
+# Levels as compiled code sees them.
+LEVELS = {"velocity": 0, "impulse": 1, "acceleration": 2}
+
+
+@vectorize(["float64(int64, float64, float64, float64, float64, float64, boolean)"], cache=True)
+def bound_of(level, dt, stabilisation, phi, rate, drift, unilateral):  # type: ignore[no-untyped-def]
+    """:func:`stabilised_bound` for a level code (LEVELS), elementwise; callable from compiled code."""
+    if level == 0:
+        return -(1.0 / dt if phi >= 0 and unilateral else stabilisation / dt) * phi
+    if level == 1:
+        return 0.0
+    gain = stabilisation / dt
+    return -drift - 2.0 * gain * rate - gain * gain * phi
 
 
 def is_active(ctx: Context, phi: np.ndarray, rate: np.ndarray, margin: float) -> np.ndarray:

@@ -36,7 +36,7 @@ from numba import njit
 
 from ..collision import Contacts
 from ..dynamics import point_drifts, point_jacobians, point_jacobians_from, point_placements, support_masks
-from .base import Context, Rows, is_active, stabilised_bound
+from .base import LEVELS, Context, Rows, bound_of, is_active
 
 # Below this tangential speed a contact sticks at the acceleration level [m/s].
 SLIP_SPEED = 1e-4
@@ -120,10 +120,6 @@ def _tangential(u: np.ndarray, n: np.ndarray) -> np.ndarray:
     return u - _dot(u, n)[:, None] * n
 
 
-# Levels as the compiled kernels see them.
-_LEVELS = {"velocity": 0, "impulse": 1, "acceleration": 2}
-
-
 @njit(cache=True)
 def _pyramids(  # type: ignore[no-untyped-def]
     joint_jacobians,
@@ -161,12 +157,11 @@ def _pyramids(  # type: ignore[no-untyped-def]
         bounds: (dt, stabilisation, restitution_threshold).
 
     Returns:
-        the point Jacobians (m, 3, nv), rows (R, nv), bound (R,) (acceleration level: without its
-        per-row terms, see ``rows``), generators (R, 3), owner contact of each row (R,), first row of
-        each contact (m,), the contacts that get an explicit friction force (sliding) and that refine
-        their shift (slipping), each (m,) or None when there is none, that friction force (m, 3) and
-        its generalized force (nv,), the slip used (m, 3) and its norm (m,), contact velocities J v
-        (m, 3).
+        the point Jacobians (m, 3, nv), rows (R, nv), bound (R,), generators (R, 3), owner contact of
+        each row (R,), first row of each contact (m,), the contacts that get an explicit friction
+        force (sliding) and that refine their shift (slipping), each (m,) or None when there is none,
+        that friction force (m, 3) and its generalized force (nv,), the slip used (m, 3) and its norm
+        (m,).
     """
     dt, stabilisation, threshold = bounds
     J = point_jacobians_from(joint_jacobians, masks, joints, other_joints, points)
@@ -192,8 +187,7 @@ def _pyramids(  # type: ignore[no-untyped-def]
             friction[i] = -mu[i] * normal_forces[i] / speed * slip
         counts[i] = 1 if mu[i] == 0 or slides else len(cos)
         sliding[i], slip_used[i], speeds[i] = slides, slip, speed
-        if level == 0:  # a gap closes within the step, a penetration at the rate stabilisation / dt
-            contact_bound[i] = -gap[i] / dt if gap[i] >= 0 else -stabilisation / dt * gap[i]
+        contact_bound[i] = bound_of(level, dt, stabilisation, gap[i], 0.0, 0.0, True)
         if not acceleration:
             # restitution: an approaching contact leaves at -e u_n at least; De Saxce shift mu |slip|
             if e[i] > 0 and -u_n > threshold:
@@ -223,9 +217,13 @@ def _pyramids(  # type: ignore[no-untyped-def]
         owner[r : r + counts[i]] = i
     rows, bound = np.zeros((total, nv)), contact_bound[owner]
     for r in range(total):
-        g, Ji = generators[r], J[owner[r]]
+        i = owner[r]
+        g, Ji = generators[r], J[i]
         for k in range(nv):
             rows[r, k] = g[0] * Ji[0, k] + g[1] * Ji[1, k] + g[2] * Ji[2, k]
+        if acceleration:  # the row's own rate and drift
+            rate, row_drift = g @ U[i], g @ drift[i]
+            bound[r] = bound_of(level, dt, stabilisation, gap[i], rate, row_drift, True)
     force = np.zeros(nv)
     for i in range(m):
         if sliding[i]:
@@ -244,7 +242,6 @@ def _pyramids(  # type: ignore[no-untyped-def]
         force,
         slip_used,
         speeds,
-        U,
     )
 
 
@@ -278,7 +275,7 @@ class ContactModule:
         drift = _drifts(ctx, contacts) if level == "acceleration" else no_drift
         # contacts with a full pyramid refine their De Saxce shift at the velocity and impulse levels
         shifts = level != "acceleration" and self.mode != "pyramid"
-        J, rows, bound, G, owner, starts, sliding, slipping, friction, force, slip, speed, U = _pyramids(
+        J, rows, bound, G, owner, starts, sliding, slipping, friction, force, slip, speed = _pyramids(
             ctx.data.J,
             self.masks,
             contacts.joint,
@@ -294,15 +291,13 @@ class ContactModule:
             lagged.get("slip", no_slip),
             lagged.get("stops", no_stops),
             lagged.get("normal", no_force),
-            _LEVELS[level],
+            LEVELS[level],
             self.cos,
             self.sin,
             self.mode == "pyramid",
             shifts,
             (options.dt, options.stabilisation, options.restitution_threshold),
         )
-        if level == "acceleration":
-            bound = stabilised_bound(ctx, contacts.gap[owner], _dot(G, U[owner]), _dot(G, drift[owner]), True)
         batch = _Batch(contacts, J, G, starts, friction, sliding, slipping, slip, speed)
 
         def labels() -> list[str]:
