@@ -162,7 +162,6 @@ class _GroundHulls:
         # the ground plane (n, -height) of each pair: its product with a joint placement gives the
         # signed distance of the joint frame's points to the ground, shape (P, 4)
         self.plane = np.array([[*p.ground_normal, -p.obstacle.height] for p in chosen]).reshape(-1, 4)  # type: ignore[union-attr]
-        self.normal = self.plane[:, :3].copy()
         reach = [np.linalg.norm(p.vertices - p.vertices.mean(axis=0), axis=1).max() for p in chosen]  # type: ignore[operator]
         self.turn2 = np.array([(NARROW_SLACK / (2.0 * r)) ** 2 if r > 0 else np.inf for r in reach])
         self.narrow_at = np.full((len(chosen), 3), np.nan)  # ground normal, joint frame, of each verdict
@@ -292,7 +291,7 @@ class ContactDetector:
                 pieces.append(tuple(one))
             for h in wide.tolist():
                 outline = self._on_ground(h, placements[h])
-                pieces.append(self._piece(int(self.hulls.index[h]), self.hulls.normal[h], *outline))
+                pieces.append(self._piece(int(self.hulls.index[h]), self.hulls.plane[h, :3], *outline))
         for k in self.others:
             hit = self._collide(self.pairs[k], data)
             if hit is not None:

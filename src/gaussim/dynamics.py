@@ -21,7 +21,7 @@ class Dynamics:
         M: joint-space inertia, shape (nv, nv), symmetric positive definite: Pinocchio's data.M itself,
             valid until the next ``compute_dynamics`` on the same data (the step uses it before then).
         F: generalized force tau - b(q, v), shape (nv,) [N or N m].
-        a_free: unconstrained acceleration M^-1 F, shape (nv,) (Pinocchio's ABA).
+        a_free: unconstrained acceleration M^-1 F, shape (nv,) (Pinocchio's sparse Cholesky solve).
     """
 
     M: np.ndarray

@@ -55,11 +55,11 @@ def _kkt_residuals(H, g, A, b, C, l, x, y, z):  # type: ignore[no-untyped-def]
         worst = max(worst, violation, complementarity)
         relative = max(relative, violation, complementarity / max(1.0, abs(z[i])))
         finite = finite and np.isfinite(slack) and np.isfinite(z[i])
-    size = 1.0
+    largest, size = 0.0, 1.0
     for i in range(len(g)):
-        worst, finite = max(worst, abs(stationarity[i])), finite and np.isfinite(stationarity[i])
+        largest, finite = max(largest, abs(stationarity[i])), finite and np.isfinite(stationarity[i])
         size = max(size, abs(g[i]))
-    relative = max(relative, np.abs(stationarity).max() / size)
+    worst, relative = max(worst, largest), max(relative, largest / size)
     return (worst, relative) if finite else (np.nan, np.nan)
 
 
