@@ -10,6 +10,7 @@ import pinocchio as pin
 from numba import njit
 
 LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+_WORLD = pin.Convention.WORLD
 _IDENTITY = np.eye(3)
 
 
@@ -32,14 +33,13 @@ class Dynamics:
 def compute_dynamics(
     model: pin.Model, data: pin.Data, q: np.ndarray, v: np.ndarray, tau: np.ndarray, drifts: bool
 ) -> Dynamics:
-    """M (CRBA), b (RNEA), joint placements and Jacobians, and M^-1 F from Pinocchio's sparse
+    """M, joint placements and Jacobians (one CRBA pass), b (RNEA), and M^-1 F from Pinocchio's sparse
     Cholesky factor of M (frame placements are left to the modules that use frames).
 
     With ``drifts`` the spatial accelerations at a = 0 are computed too, for the acceleration-level
     constraint terms Jdot v (see :func:`point_drifts`).
     """
-    pin.crba(model, data, q)
-    pin.computeJointJacobians(model, data, q)
+    pin.crba(model, data, q, _WORLD)  # the WORLD convention also fills data.oMi and data.J
     F = tau - pin.nonLinearEffects(model, data, q, v)
     if drifts:
         pin.forwardKinematics(model, data, q, v, np.zeros(model.nv))

@@ -13,11 +13,11 @@ acceleration scheme, the paper's:
 
 from __future__ import annotations
 
-import math
 from time import perf_counter as _clock
 
 import numpy as np
 import pinocchio as pin
+from numba import njit
 
 from .assembly import assemble
 from .collision import NO_CONTACTS, ContactDetector, Contacts
@@ -26,6 +26,7 @@ from .constraints.base import ConstraintModule, Context, Level, Rows
 from .dynamics import Dynamics, compute_dynamics
 from .exceptions import InvalidState, SolverError
 from .integrator import integrate
+from .linalg import finite, matvec
 from .options import Options
 from .report import StepReport
 from .scene import Scene
@@ -53,7 +54,7 @@ class Simulator:
             level: GaussSolver(self.options) for level in ("velocity", "impulse", "acceleration")
         }
         self.last_step: StepReport | None = None
-        self._floating, self._zeros6 = scene.robot.floating, np.zeros(6)
+        self._floating = scene.robot.floating
         self._last_state: State | None = None  # the state the last step returned: already valid
         # (slice, what) of each joint whose configuration ends with a unit quaternion or (cos, sin)
         self._unit_parts = []
@@ -117,11 +118,11 @@ class Simulator:
             return np.zeros(nv)
         tau = np.asarray(tau, dtype=float)
         if tau.shape == (nv - 6,) and self._floating:
-            tau = np.concatenate([self._zeros6, tau])
+            tau = _padded(tau, 6)
         if tau.shape != (nv,):
             hint = f" or ({nv - 6},) for the actuated joints" if self._floating else ""
             raise InvalidState(f"tau must have shape ({nv},){hint}, got {tau.shape}")
-        if not _finite(tau):
+        if not finite(tau):
             raise InvalidState(f"tau has non-finite entries at {np.flatnonzero(~np.isfinite(tau)).tolist()}")
         return tau
 
@@ -154,13 +155,12 @@ class Simulator:
             a = self._gauss("acceleration", state.q, v, dyn.M, dyn.F, dyn.a_free, contacts, report, 1.0)
             v_next = v + o.dt * a
         else:
-            v_free = state.v + o.dt * dyn.a_free
-            f = dyn.M @ state.v + o.dt * dyn.F
+            v_free, f = _free_velocity(dyn.M, state.v, dyn.F, dyn.a_free, o.dt)  # v + dt a_free, M v + dt F
             v_next = self._gauss("velocity", state.q, state.v, dyn.M, f, v_free, contacts, report, 1.0 / o.dt)
         mark(("", _clock()))
         q_next = integrate(self.model, state.q, v_next, o.dt)
         mark(("integrate", _clock()))
-        if not (_finite(q_next) and _finite(v_next)):
+        if not (finite(q_next) and finite(v_next)):
             raise SolverError(f"step at t={state.t:.6g} s produced a non-finite state", report)
         self.last_step = report
         self._last_state = State.adopt(state.t + o.dt, q_next, v_next)  # both arrays are this step's own
@@ -240,7 +240,16 @@ class Simulator:
         return solution.x
 
 
-def _finite(x: np.ndarray) -> bool:
-    """True when every entry of x is finite (a NaN or inf shows in x . x, as does an overflow of the
-    squares, which the slower exact test then tells apart)."""
-    return math.isfinite(x @ x) or bool(np.isfinite(x).all())
+@njit(cache=True)
+def _padded(tau: np.ndarray, head: int) -> np.ndarray:
+    """tau after ``head`` zeros (a floating base's unactuated coordinates)."""
+    full = np.zeros(head + len(tau))
+    full[head:] = tau
+    return full
+
+
+@njit(cache=True)
+def _free_velocity(M, v, F, a_free, dt):  # type: ignore[no-untyped-def]
+    """(v_free = v + dt a_free, f = M v + dt F): the velocity-level Gauss problem's free solution and
+    linear term."""
+    return v + dt * a_free, matvec(M, v) + dt * F

@@ -11,6 +11,7 @@ import proxsuite
 from numba import njit
 
 from .assembly import GaussProblem
+from .linalg import dot, matvec
 from .exceptions import InfeasibleConstraints, SolverError
 from .options import Options
 
@@ -41,15 +42,15 @@ def _kkt_residuals(H, g, A, b, C, l, x, y, z):  # type: ignore[no-untyped-def]
     max(1, |z_i|), which makes it the slack of a row with a large multiplier (a heavy body's contact)."""
     worst = relative = 0.0
     finite = True
-    stationarity = H @ x + g
+    stationarity = matvec(H, x) + g
     for i in range(len(b)):
         stationarity -= y[i] * A[i]
-        violation = abs(A[i] @ x - b[i])
+        violation = abs(dot(A[i], x) - b[i])
         worst, finite = max(worst, violation), finite and np.isfinite(violation) and np.isfinite(y[i])
     relative = worst
     for i in range(len(l)):
         stationarity -= z[i] * C[i]
-        slack = C[i] @ x - l[i]
+        slack = dot(C[i], x) - l[i]
         violation = max(-slack, -z[i])
         complementarity = abs(z[i] * slack)
         worst = max(worst, violation, complementarity)

@@ -35,6 +35,7 @@ import pinocchio as pin
 from numba import njit
 
 from ..collision import Contacts
+from ..linalg import dot
 from ..dynamics import point_drifts, point_jacobians, point_jacobians_from, point_placements, support_masks
 from .base import LEVELS, Context, Rows, bound_of, is_active
 
@@ -175,8 +176,8 @@ def _pyramids(  # type: ignore[no-untyped-def]
     U, tendency = np.empty((m, 3)), np.empty((m, 3))
     for i in range(m):
         for j in range(3):
-            U[i, j] = J[i, j] @ v
-            tendency[i, j] = J[i, j] @ x_free + drift[i, j]
+            U[i, j] = dot(J[i, j], v)
+            tendency[i, j] = dot(J[i, j], x_free) + drift[i, j]
     for i in range(m):
         n = normal[i]
         u_n = U[i, 0] * n[0] + U[i, 1] * n[1] + U[i, 2] * n[2]
