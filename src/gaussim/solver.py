@@ -11,8 +11,8 @@ import proxsuite
 from numba import njit
 
 from .assembly import GaussProblem
-from .linalg import dot, matvec
 from .exceptions import InfeasibleConstraints, SolverError
+from .linalg import dot, matvec
 from .options import Options
 
 _proxqp = proxsuite.proxqp

@@ -35,8 +35,8 @@ import pinocchio as pin
 from numba import njit
 
 from ..collision import Contacts
-from ..linalg import dot
 from ..dynamics import point_drifts, point_jacobians, point_jacobians_from, point_placements, support_masks
+from ..linalg import dot
 from .base import LEVELS, Context, Rows, bound_of, is_active
 
 # Below this tangential speed a contact sticks at the acceleration level [m/s].
