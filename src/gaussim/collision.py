@@ -177,15 +177,15 @@ class _GroundHulls:
             self.first[k, len(counts) + 1 :] = self.first[k, len(counts)]  # padding has no neighbours
             self.neighbours[k, : sum(counts)] = [j for e in pair.edges for j in e]
         self.deepest = np.zeros(len(chosen), dtype=np.int64)  # where each search for the deepest starts
+        self._data: pin.Data | None = None
+        self._views: tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...]] = ((), ())
 
     def detect(self, data: pin.Data, margin: float) -> tuple[np.ndarray, ...]:
-        """The hulls within ``margin`` of the ground: (joint placements (P, 4, 4), then of those that
-        touch at their deepest vertex alone their pairs (k,), deepest vertices in the world (k, 3),
-        normals (k, 3) and gaps (k,), then the hulls that touch more widely (w,))."""
-        oMi = data.oMi
-        placements = np.array([oMi[j].homogeneous for j in self.joints])
-        return placements, *_ground_hulls(
-            placements,
+        """The hulls within ``margin`` of the ground: of those that touch at their deepest vertex alone
+        their pairs (k,), deepest vertices in the world (k, 3), normals (k, 3) and gaps (k,), then the
+        hulls that touch more widely (w,)."""
+        return _ground_hulls(
+            *self._placements(data),
             self.plane,
             self.columns,
             self.first,
@@ -197,9 +197,23 @@ class _GroundHulls:
             self.index,
         )
 
+    def _placements(self, data: pin.Data) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...]]:
+        """(rotations, translations) of the hulls' joints: views of Pinocchio's arrays inside
+        ``data.oMi`` itself, which follow every kinematics pass on that data (made once per data)."""
+        if self._data is not data:
+            oMi = data.oMi
+            self._views = (
+                tuple(oMi[j].rotation for j in self.joints),
+                tuple(oMi[j].translation for j in self.joints),
+            )
+            self._data = data  # keeps the memory the views read alive
+        return self._views
+
 
 @njit(cache=True)
-def _ground_hulls(placements, plane, columns, first, neighbours, deepest, narrow_at, turn2, margin, pair):  # type: ignore[no-untyped-def]
+def _ground_hulls(
+    rotations, translations, plane, columns, first, neighbours, deepest, narrow_at, turn2, margin, pair
+):  # type: ignore[no-untyped-def]
     """The compiled pass of :class:`_GroundHulls` (updates ``deepest`` and ``narrow_at``).
 
     The deepest vertex is found by descent along the hull's edges from the last one: a vertex no
@@ -211,11 +225,10 @@ def _ground_hulls(placements, plane, columns, first, neighbours, deepest, narrow
     touching = np.zeros(count, np.bool_)
     c = np.empty(4)  # the ground seen from the joint: (n^T R, n^T p - height)
     for k in range(count):
-        H, X = placements[k], columns[k]
-        for j in range(4):
-            c[j] = (
-                plane[k, 0] * H[0, j] + plane[k, 1] * H[1, j] + plane[k, 2] * H[2, j] + plane[k, 3] * H[3, j]
-            )
+        R, p, X = rotations[k], translations[k], columns[k]
+        for j in range(3):
+            c[j] = plane[k, 0] * R[0, j] + plane[k, 1] * R[1, j] + plane[k, 2] * R[2, j]
+        c[3] = plane[k, 0] * p[0] + plane[k, 1] * p[1] + plane[k, 2] * p[2] + plane[k, 3]
         i = deepest[k]
         lowest = c[0] * X[0, i] + c[1] * X[1, i] + c[2] * X[2, i] + c[3]
         descending = True
@@ -229,7 +242,7 @@ def _ground_hulls(placements, plane, columns, first, neighbours, deepest, narrow
                     break
         deepest[k], gaps[k] = i, lowest
         for j in range(3):
-            points[k, j] = H[j, 0] * X[0, i] + H[j, 1] * X[1, i] + H[j, 2] * X[2, i] + H[j, 3]
+            points[k, j] = R[j, 0] * X[0, i] + R[j, 1] * X[1, i] + R[j, 2] * X[2, i] + p[j]
         touching[k] = lowest <= margin
         if not touching[k]:
             continue
@@ -286,11 +299,11 @@ class ContactDetector:
         declared pairs."""
         pieces: list[tuple[np.ndarray, ...]] = []  # (pair of each point (k,), points, normals, gaps)
         if len(self.hulls.pairs):
-            placements, *one, wide = self.hulls.detect(data, self.margin)
+            *one, wide = self.hulls.detect(data, self.margin)
             if len(one[0]):
                 pieces.append(tuple(one))
             for h in wide.tolist():
-                outline = self._on_ground(h, placements[h])
+                outline = self._on_ground(h, data.oMi[self.hulls.joints[h]].homogeneous)
                 pieces.append(self._piece(int(self.hulls.index[h]), self.hulls.plane[h, :3], *outline))
         for k in self.others:
             hit = self._collide(self.pairs[k], data)
