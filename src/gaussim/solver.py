@@ -17,8 +17,6 @@ from .options import Options
 
 _proxqp = proxsuite.proxqp
 _STATUS = {status: status.name for status in _proxqp.QPSolverOutput.__members__.values()}
-_NONE = np.zeros(0)  # no multipliers of a kind
-_NONE.flags.writeable = False
 # A row whose residual exceeds this at ProxQP's closest-feasible point is named as conflicting.
 INFEASIBLE_ROW_TOLERANCE = 1e-6
 INFEASIBLE = ("PROXQP_PRIMAL_INFEASIBLE", "PROXQP_SOLVED_CLOSEST_PRIMAL_FEASIBLE", "PROXQP_DUAL_INFEASIBLE")
@@ -62,6 +60,14 @@ def _kkt_residuals(H, g, A, b, C, l, x, y, z):  # type: ignore[no-untyped-def]
         size = max(size, abs(g[i]))
     worst, relative = max(worst, largest), max(relative, largest / size)
     return (worst, relative) if finite else (np.nan, np.nan)
+
+
+@njit(cache=True)
+def _read(H, g, A, b, C, l, x, y, z):  # type: ignore[no-untyped-def]
+    """(x, the multipliers -y and -z, the residuals of :func:`_kkt_residuals` there), all copied out of
+    ProxQP's results."""
+    x, y, z = x.copy(), -y[: len(b)], -z[: len(l)]
+    return (x, y, z, *_kkt_residuals(H, g, A, b, C, l, x, y, z))
 
 
 @dataclass
@@ -157,18 +163,19 @@ class GaussSolver:
         self._qp.solve()
         result = self._qp.results
         info = result.info
-        x = result.x.copy()
-        lambda_eq = -result.y if self._dims[1] else _NONE  # type: ignore[index]
-        lambda_in = -result.z if self._dims[2] else _NONE  # type: ignore[index]
+        p = problem
+        # copies (ProxQP's arrays are overwritten by the next solve); the multipliers are -y, -z
+        x, lambda_eq, lambda_in, residual, relative = _read(
+            p.H, p.g, p.A, p.b, p.C, p.l, result.x, result.y, result.z
+        )
         certificate = Certificate(
             _STATUS[info.status],
             int(info.iter),
             float(info.pri_res),
             float(info.dua_res),
             float(info.duality_gap),
-            *_kkt_residuals(
-                problem.H, problem.g, problem.A, problem.b, problem.C, problem.l, x, lambda_eq, lambda_in
-            ),
+            residual,
+            relative,
         )
         return Solution(x, lambda_eq, lambda_in, certificate)
 
