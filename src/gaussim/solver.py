@@ -121,6 +121,7 @@ class GaussSolver:
         self.options = options
         self._qp: Any = None  # proxsuite.proxqp.dense.QP
         self._dims: tuple[int, int, int] | None = None
+        self._results: tuple[Any, ...] = ()  # the QP object's x, y, z and info
 
     def solve(self, problem: GaussProblem) -> Solution:
         """Solve the Gauss problem; raise :class:`SolverError` as ``Options.on_failure`` says."""
@@ -158,16 +159,15 @@ class GaussSolver:
         upper = np.full(dims[2], np.inf) if dims[2] else None  # every inequality row is one-sided
         self._qp.init(p.H, p.g, *equalities, *inequalities, upper)
         self._dims = dims
+        results = self._qp.results  # views that every solve of this QP object writes into
+        self._results = results.x, results.y, results.z, results.info
 
     def _run(self, problem: GaussProblem) -> Solution:
         self._qp.solve()
-        result = self._qp.results
-        info = result.info
+        x, y, z, info = self._results
         p = problem
         # copies (ProxQP's arrays are overwritten by the next solve); the multipliers are -y, -z
-        x, lambda_eq, lambda_in, residual, relative = _read(
-            p.H, p.g, p.A, p.b, p.C, p.l, result.x, result.y, result.z
-        )
+        x, lambda_eq, lambda_in, residual, relative = _read(p.H, p.g, p.A, p.b, p.C, p.l, x, y, z)
         certificate = Certificate(
             _STATUS[info.status],
             int(info.iter),
