@@ -10,6 +10,8 @@ import pytest
 import gaussim
 from gaussim.collision import PATCH_MIN_EXTENT, PATCH_TOLERANCE, ContactDetector
 
+from .conftest import two_boxes
+
 FEET = ("FL", "FR", "HL", "HR")
 # Both compute the same support point in floating point; they may round differently.
 AGREEMENT = 1e-9
@@ -79,3 +81,26 @@ def test_box_flat_on_ground_touches_at_its_corners(box):
     q[2] = 1.0
     pin.forwardKinematics(model, data, q)
     assert len(detector.detect(data)) == 0
+
+
+# A 0.2 m box resting on another (top centre, then bottom, as free-flyer configurations) where coal
+# 3.0's default GJK/EPA gives a NaN normal and a depth of -DBL_MAX (found by a mass-ratio stack run).
+_FACE_TO_FACE = [
+    "-0x1.c999b3713edf3p-42", "-0x1.8074963e13735p-41", "0x1.999999999a35bp-4", "0x1.7939019f74e3ep-45",
+    "0x1.279c7c2271ecfp-44", "-0x1.28009baccf4d5p-54", "0x1.0000000000000p+0", "-0x1.6755948f5ac47p-40",
+    "-0x1.990d15169bd92p-40", "0x1.333333335fa19p-2", "0x1.1b4372fc8f449p-38", "-0x1.82544727ead60p-41",
+    "0x1.ac376a0b98393p-49", "0x1.0000000000000p+0",
+]  # fmt: skip
+
+
+def test_box_on_box_face_to_face_gives_a_finite_contact(tmp_path):
+    """The pose coal's default GJK fails on gives a finite contact (the retry's answer)."""
+    robot = two_boxes(tmp_path / "pair.urdf", 1.0, 100.0)
+    scene = gaussim.Scene(robot, ground=gaussim.Ground(), contacts=[("top_0", "bottom_0")])
+    q = np.array([float.fromhex(x) for x in _FACE_TO_FACE])
+    data = robot.model.createData()
+    pin.forwardKinematics(robot.model, data, q)
+    contacts = ContactDetector(scene, 1e-3).detect(data)
+    assert np.isfinite(contacts.normal).all() and np.isfinite(contacts.gap).all()
+    assert np.allclose(contacts.normal, [0.0, 0.0, 1.0], atol=1e-9)  # the bottom box's top face
+    assert np.all(np.abs(contacts.gap) < 1e-9)

@@ -45,3 +45,40 @@ def test_kkt_residual_is_nan_when_anything_is_not_finite():
     anchored = GaussProblem(np.eye(3), problem.g, np.eye(3)[:1], np.zeros(1), problem.C, problem.l, [])
     assert kkt_residual(anchored, solution, np.zeros(1), np.zeros(1)) == 0.0
     assert np.isnan(kkt_residual(anchored, solution, np.array([np.inf]), np.zeros(1)))
+
+
+def test_sign_violation_is_judged_relative_to_the_problem_scale():
+    """A -1.6e-7 multiplier on a light row beside a 1e4 load (a 1e6 kg box on a 1 kg one, as ProxQP
+    returned it at eps_abs 1e-9) is a round-off, not a pull: accepted relative to max(1, |g|), still
+    counted in the absolute residual; the same multiplier in a problem of unit scale is not."""
+    from gaussim.solver import KKT_RTOL, _kkt_residuals
+
+    def residuals(load: float, z: float) -> tuple[float, float]:
+        H, g = np.eye(2), np.array([load, 0.0])
+        C, l = np.eye(2), np.array([0.0, 0.0])  # x >= 0: the load presses row 0, row 1 is idle
+        x, multipliers = np.zeros(2), np.array([load, z])
+        return _kkt_residuals(H, g, np.zeros((0, 2)), np.zeros(0), C, l, x, np.zeros(0), multipliers)
+
+    absolute, relative = residuals(1e4, -1.6e-7)
+    assert absolute == pytest.approx(1.6e-7)
+    assert relative == pytest.approx(1.6e-11) and relative <= KKT_RTOL * 1e-9
+    unit = residuals(1.0, -1.6e-7)[1]
+    assert unit == pytest.approx(1.6e-7) and unit > KKT_RTOL * 1e-9
+
+
+@pytest.mark.parametrize(
+    ("conflict", "status"), [(1e-8, "GAUSSIM_CERTIFIED_AT_MAX_ITER"), (1e-6, "PROXQP_MAX_ITER_REACHED")]
+)
+def test_iteration_cap_is_accepted_only_when_the_kkt_check_certifies_the_point(conflict, status):
+    """Two rows that conflict by ``conflict`` (x_3 >= 0 and x_3 <= -conflict, as redundant contact rows
+    do in round-off): ProxQP cannot bring its primal residual below eps_abs and stops at its cap. A
+    round-off conflict is certified by the KKT check (relative residual conflict / 2 <= KKT_RTOL
+    eps_abs) and accepted; a real one is reported as ProxQP's failure."""
+    C = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]])
+    problem = GaussProblem(
+        np.eye(3), np.array([0, 0, 9.81e-3]), np.zeros((0, 3)), np.zeros(0), C, np.array([0.0, conflict]), []
+    )
+    solution = GaussSolver(gaussim.Options(on_failure="report")).solve(problem)
+    assert solution.certificate.status == status
+    assert solution.certificate.converged == (status != "PROXQP_MAX_ITER_REACHED")
+    assert solution.x[2] == pytest.approx(-conflict / 2, rel=1e-6)

@@ -13,6 +13,7 @@ See FORMULATION.md in the project's documentation for the derivation.
 
 from .constraints import BilateralReaction, ContactForce, LimitReaction
 from .exceptions import (
+    ContactError,
     FrameNotFound,
     GaussimError,
     GeometryNotFound,
@@ -44,6 +45,7 @@ __all__ = [
     "GaussimError",
     "GeometryNotFound",
     "Ground",
+    "ContactError",
     "InfeasibleConstraints",
     "InvalidOptions",
     "InvalidRobot",

@@ -9,6 +9,8 @@ import numpy as np
 import pinocchio as pin
 from numba import njit
 
+from .exceptions import ContactError
+from .linalg import finite
 from .scene import Box, ContactPair, Ground, Scene, Sphere
 
 # Surface points within this distance of the support plane belong to a contact patch [m].
@@ -281,9 +283,11 @@ class ContactDetector:
         self.pairs = [_Pair(scene, p) for p in scene.pairs]
         self.hulls = _GroundHulls(self.pairs)
         self.others = [k for k, pair in enumerate(self.pairs) if pair.vertices is None]
-        self.request = coal.CollisionRequest()
-        self.request.security_margin = margin
-        self.request.num_max_contacts = 1
+        self.request = self._request(margin, coal.GJKVariant.DefaultGJK)
+        # coal 3.0's default GJK/EPA returns a NaN normal and a depth of -DBL_MAX for two boxes face
+        # to face within ~1e-11 rad (measured: a box resting on a box); the Nesterov-accelerated
+        # GJK answers those, and is the retry of any non-finite answer
+        self.retry_request = self._request(margin, coal.GJKVariant.NesterovAcceleration)
         self.patch_request = coal.ContactPatchRequest()
         self.patch_request.setPatchTolerance(PATCH_TOLERANCE)
         self.result = coal.CollisionResult()
@@ -339,6 +343,14 @@ class ContactDetector:
         ]
         return (names, [pair.geometry for pair in chosen], [pair.obstacle_name for pair in chosen], *arrays)
 
+    @staticmethod
+    def _request(margin: float, variant: coal.GJKVariant) -> coal.CollisionRequest:
+        request = coal.CollisionRequest()
+        request.security_margin = margin
+        request.num_max_contacts = 1
+        request.gjk_variant = variant
+        return request
+
     def _piece(
         self, k: int, normal: np.ndarray, points: np.ndarray, gaps: np.ndarray
     ) -> tuple[np.ndarray, ...]:
@@ -355,15 +367,24 @@ class ContactDetector:
             pair.obstacle_center = other.act(pair.obstacle_local_center)
         if pair.obstacle_radius < np.inf and not self._near(pair, placement):
             return None  # coal's half-space test is as cheap as this bounding-sphere test
-        self.result.clear()
-        if not coal.collide(
-            pair.shape, placement, pair.obstacle_shape, pair.obstacle_tf, self.request, self.result
-        ):
-            return None
-        # copies: coal's arrays are views into its result, which the next pair overwrites
-        contact = self.result.getContact(0)
-        normal = -contact.normal.copy()  # coal's normal points from the robot to the obstacle
-        gap = contact.penetration_depth
+        for request in (self.request, self.retry_request):
+            self.result.clear()
+            if not coal.collide(
+                pair.shape, placement, pair.obstacle_shape, pair.obstacle_tf, request, self.result
+            ):
+                return None
+            # copies: coal's arrays are views into its result, which the next pair overwrites
+            contact = self.result.getContact(0)
+            normal = -contact.normal.copy()  # coal's normal points from the robot to the obstacle
+            gap = contact.penetration_depth
+            if finite(normal) and np.isfinite(gap):
+                break
+        else:
+            raise ContactError(
+                f"coal returned a non-finite contact for pair '{pair.name}' (normal {normal}, gap {gap}) "
+                "with both GJK variants tried",
+                pair.name,
+            )
         patch = self._patch(pair, placement, normal, gap)
         if patch is None:
             return normal, contact.getNearestPoint1().copy()[None, :], np.array([gap])

@@ -69,3 +69,11 @@ class InfeasibleConstraints(SolverError):
     def __init__(self, message: str, rows: list[str], report: object | None = None) -> None:
         self.rows = rows
         super().__init__(message, report)
+
+
+class ContactError(GaussimError):
+    """Contact detection gave no usable answer for a pair; ``pair`` names it."""
+
+    def __init__(self, message: str, pair: str) -> None:
+        self.pair = pair
+        super().__init__(message)

@@ -20,6 +20,7 @@ import numpy as np
 from .exceptions import GaussimError
 from .options import Options
 from .report import StepReport
+from .solver import CONVERGED
 from .state import State
 
 FORMAT_VERSION = 1
@@ -69,7 +70,7 @@ class RunLog:
         self._append_state(state)
         self._tau.append(np.asarray(tau, dtype=float))
         statuses = [c.status for c in report.certificates]
-        worst = next((s for s in statuses if s != "PROXQP_SOLVED"), "PROXQP_SOLVED" if statuses else "NO_QP")
+        worst = next((s for s in statuses if s not in CONVERGED), statuses[0] if statuses else "NO_QP")
         self._solver.append((len(statuses), report.iterations, report.max_residual, worst))
         for c in report.contacts:
             if c.name not in self._ids:
@@ -249,7 +250,7 @@ class RunLog:
         """A plain-text summary: run, solver and per-contact force statistics."""
         c, s = self.contact_arrays(), self.solver_arrays()
         wall_time = self.wall_time
-        failed = int(np.sum((s["status"] != "PROXQP_SOLVED") & (s["status"] != "NO_QP")))
+        failed = int(np.sum(~np.isin(s["status"], [*CONVERGED, "NO_QP"])))
         t = self.t
         lines = [
             f"robot {self.robot}: {self.steps} steps, {t[-1] - t[0]:.4g} s simulated"
