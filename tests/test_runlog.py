@@ -163,6 +163,31 @@ def test_cli_simulation_failure_exits_1_and_keeps_the_log(tmp_path):
     assert not gaussim.RunLog.load(tmp_path / "r.npz").complete
 
 
+def test_cli_contact_failure_exits_1_and_keeps_the_log(tmp_path, monkeypatch, capsys):
+    """Detection that gives no usable contact midway is a simulation failure, not bad input."""
+    from gaussim.cli import main
+    from gaussim.collision import ContactDetector
+
+    collide = ContactDetector._collide
+    calls = []
+
+    def failing(self, pair, data):  # the 30th narrow phase fails, as coal's NaN normal did
+        calls.append(pair.name)
+        if len(calls) == 30:
+            raise gaussim.ContactError(
+                f"coal returned a non-finite contact for pair '{pair.name}'", pair.name
+            )
+        return collide(self, pair, data)
+
+    monkeypatch.setattr(ContactDetector, "_collide", failing)
+    out = tmp_path / "r.npz"
+    assert main(["run", str(SCENES / "box_stack.toml"), "--out", str(out), "--quiet"]) == 1
+    stderr = capsys.readouterr().err
+    assert "simulation failed" in stderr and "non-finite contact" in stderr and str(out) in stderr
+    log = gaussim.RunLog.load(out)
+    assert not log.complete and log.steps == 14  # two narrow phases a step: the 15th step failed
+
+
 def test_cli_ctrl_c_keeps_the_log(tmp_path):
     out = tmp_path / "r.npz"
     process = subprocess.Popen(

@@ -11,10 +11,12 @@ import csv
 import sys
 from pathlib import Path
 
-from .exceptions import GaussimError, InvalidOptions, InvalidRobot, InvalidState, SolverError
+from .exceptions import ContactError, GaussimError, InvalidOptions, InvalidRobot, InvalidState, SolverError
 from .options import FRICTION_MODES, SCHEMES
 
 EXIT_OK, EXIT_FAILURE, EXIT_BAD_INPUT = 0, 1, 2
+# what stops a simulation midway (the other GaussimErrors are bad input)
+SIMULATION_FAILURES = (SolverError, ContactError)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -65,7 +67,7 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("gaussim: interrupted; the log of the steps made was written", file=sys.stderr)
         return EXIT_FAILURE
-    except SolverError as err:
+    except SIMULATION_FAILURES as err:
         print(f"gaussim: simulation failed: {err}", file=sys.stderr)
         return EXIT_FAILURE
     except (InvalidOptions, InvalidRobot, InvalidState, GaussimError) as err:
@@ -97,7 +99,7 @@ def _run(args: argparse.Namespace) -> int:
             progress=None if args.quiet else sys.stderr,
             observer=follow(viewer, args.speed) if viewer else None,
         )
-    except SolverError as err:
+    except SIMULATION_FAILURES as err:
         print(f"gaussim: simulation failed: {err}\ngaussim: the steps made are in {out}", file=sys.stderr)
         return EXIT_FAILURE
     finally:

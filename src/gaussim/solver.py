@@ -143,7 +143,7 @@ class GaussSolver:
         else:
             self._qp.update(p.H, p.g, *equalities, *inequalities)  # the upper bounds stay +inf
         solution = self._run(problem)
-        if self._acceptable(solution):  # converged, finite and certified: nothing more to check
+        if self._certified(solution):  # converged, finite and certified: nothing more to check
             return solution
         if solution.certificate.status not in INFEASIBLE:
             # ProxQP 0.8, warm-started, may return the previous solution after 0 iterations when only
@@ -154,7 +154,7 @@ class GaussSolver:
             self._fresh(p, dims, equalities, inequalities)
             solution = self._run(problem)
             solution.certificate.restarted = True
-            if not self._acceptable(solution) and solution.certificate.converged:
+            if not self._certified(solution) and solution.certificate.converged:
                 solution.certificate.status = "GAUSSIM_KKT_CHECK_FAILED"
         self._check(problem, solution)
         return solution
@@ -187,8 +187,9 @@ class GaussSolver:
         )
         return Solution(x, lambda_eq, lambda_in, certificate)
 
-    def _acceptable(self, solution: Solution) -> bool:
-        """Converged (or stopped at the cap: then so marked) and certified by the KKT check."""
+    def _certified(self, solution: Solution) -> bool:
+        """True when the KKT check certifies the solution and ProxQP converged or stopped at its
+        iteration cap; a certified stop at the cap gets the status GAUSSIM_CERTIFIED_AT_MAX_ITER."""
         c = solution.certificate
         if not c.relative_kkt_residual <= KKT_RTOL * self.options.eps_abs:  # NaN fails too
             return False
