@@ -29,6 +29,7 @@ values ("slip", "normal", "stops") aligned with the contacts that produced rows.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import pinocchio as pin
@@ -80,36 +81,52 @@ class ContactForce:
         return self.force - self.normal_force * self.normal
 
 
-@dataclass
 class _Batch:
     """The contacts that produced rows, and what turns multipliers back into forces.
 
-    Rows are grouped by contact: contact i owns rows starts[i] to starts[i + 1].
+    Rows are grouped by contact: contact i owns rows starts[i] to starts[i + 1]. The per-step arrays
+    come from :func:`_pyramids` packed in one buffer (returning each would cost more than computing
+    it); :func:`_unpacked` gives views of them, read here only when asked for.
 
     Attributes:
         contacts: m contacts.
-        J: point Jacobians, shape (m, 3, nv).
-        generators: force direction of each row, shape (R, 3): row r reads generators[r] @ J[i] x >= bound[r].
-        starts: first row of each contact, shape (m,).
-        friction: friction force applied outside the QP, shape (m, 3) (acceleration-level sliding).
-        sliding: which contacts get that force, shape (m,), or None when none does.
-        slipping: which contacts iterate the De Saxce shift, shape (m,), or None when none does.
-        slip: the slip the De Saxce shift used, shape (m, 3) [m/s], and its norm slip_speed (m,).
+        packed: the point Jacobians J (m, 3, nv), the force direction of each row (R, 3) (row r reads
+            generators[r] @ J[i] x >= bound[r]), the slip the De Saxce shift used (m, 3) [m/s] and the
+            friction force applied outside the QP (m, 3) (acceleration-level sliding), in one buffer.
+        starts: first row of each contact, then the number of rows, shape (m + 1,).
+        sliding: which contacts get that friction force, shape (m,), or None when none does.
+        shifts: True when the contacts with a full pyramid refine their De Saxce shift.
     """
 
-    contacts: Contacts
-    J: np.ndarray
-    generators: np.ndarray
-    starts: np.ndarray
-    friction: np.ndarray
-    sliding: np.ndarray | None
-    slipping: np.ndarray | None
-    slip: np.ndarray
-    slip_speed: np.ndarray
+    def __init__(
+        self, contacts: Contacts, packed: np.ndarray, starts: np.ndarray, sliding: np.ndarray | None, shifts: bool
+    ) -> None:
+        self.contacts, self.packed, self.starts, self.sliding, self.shifts = contacts, packed, starts, sliding, shifts
+
+    @cached_property
+    def _views(self) -> tuple[np.ndarray, ...]:
+        m = len(self.contacts)
+        nv = (len(self.packed) - 3 * int(self.starts[-1]) - 6 * m) // (3 * m)
+        return _unpacked(self.packed, m, nv)
+
+    @property
+    def J(self) -> np.ndarray:
+        """Point Jacobians, shape (m, 3, nv)."""
+        return self._views[0]
+
+    @property
+    def generators(self) -> np.ndarray:
+        """Force direction of each row, shape (R, 3)."""
+        return self._views[1]
+
+    @property
+    def friction(self) -> np.ndarray:
+        """Friction force applied outside the QP, shape (m, 3) [N]."""
+        return self._views[3]
 
     def forces(self, lam: np.ndarray) -> np.ndarray:
         """Sum each contact's rows' multipliers times their generators, shape (m, 3)."""
-        return np.add.reduceat(lam[:, None] * self.generators, self.starts, axis=0)
+        return np.add.reduceat(lam[:, None] * self.generators, self.starts[:-1], axis=0)
 
 
 def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -119,6 +136,20 @@ def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def _tangential(u: np.ndarray, n: np.ndarray) -> np.ndarray:
     return u - _dot(u, n)[:, None] * n
+
+
+@njit(cache=True)
+def _unpacked(packed, m, nv):  # type: ignore[no-untyped-def]
+    """Views of the buffer :func:`_pyramids` fills: J (m, 3, nv), generators (R, 3), slip (m, 3),
+    friction (m, 3)."""
+    rows = (len(packed) - 3 * m * nv - 6 * m) // 3
+    ends = np.cumsum(np.array([3 * m * nv, 3 * rows, 3 * m, 3 * m]))
+    return (
+        packed[: ends[0]].reshape((m, 3, nv)),
+        packed[ends[0] : ends[1]].reshape((rows, 3)),
+        packed[ends[1] : ends[2]].reshape((m, 3)),
+        packed[ends[2] : ends[3]].reshape((m, 3)),
+    )
 
 
 @njit(cache=True)
@@ -142,7 +173,6 @@ def _pyramids(  # type: ignore[no-untyped-def]
     cos,
     sin,
     pyramid,
-    shifts,
     bounds,
 ):
     """Every contact's rows, as the module docstring poses them; the per-contact work in one pass.
@@ -154,40 +184,29 @@ def _pyramids(  # type: ignore[no-untyped-def]
         slips: the lagged slip of each contact (m, 3), NaN where there is none (use the current one).
         stops, normal_forces: acceleration-level sliding: contacts that stick instead, lagged lambda_n.
         level: 0 velocity, 1 impulse, 2 acceleration; pyramid: fixed basis and no De Saxce shift.
-        shifts: contacts with a full pyramid refine their De Saxce shift.
         bounds: (dt, stabilisation, restitution_threshold).
 
     Returns:
-        the point Jacobians (m, 3, nv), rows (R, nv), bound (R,), generators (R, 3), owner contact of
-        each row (R,), first row of each contact (m,), the contacts that get an explicit friction
-        force (sliding) and that refine their shift (slipping), each (m,) or None when there is none,
-        that friction force (m, 3) and its generalized force (nv,), the slip used (m, 3) and its norm
-        (m,).
+        rows (R, nv), bound (R,), the buffer :func:`_unpacked` reads (point Jacobians, generators, slip
+        used, friction force), the first row of each contact then R (m + 1,), and, when a contact gets
+        an explicit friction force (acceleration-level sliding), which ones (m,) and that force's
+        generalized force (nv,), else None and None.
     """
     dt, stabilisation, threshold = bounds
-    J = point_jacobians_from(joint_jacobians, masks, joints, other_joints, points)
-    m, nv = J.shape[0], J.shape[2]
+    m, nv, facets = len(joints), len(v), len(cos)
     acceleration = level == 2
-    counts = np.empty(m, np.int64)
-    friction, slip_used = np.zeros((m, 3)), np.empty((m, 3))
-    speeds, sliding = np.empty(m), np.zeros(m, np.bool_)
-    contact_bound = np.zeros(m)
-    # contact velocities, and where the contacts would go without friction
-    U, tendency = np.empty((m, 3)), np.empty((m, 3))
-    for i in range(m):
-        for j in range(3):
-            U[i, j] = dot(J[i, j], v)
-            tendency[i, j] = dot(J[i, j], x_free) + drift[i, j]
+    J3 = point_jacobians_from(joint_jacobians, masks, joints, other_joints, points)
+    starts, sliding = np.zeros(m + 1, np.int64), np.zeros(m, np.bool_)
+    contact_bound, slip_used = np.empty(m), slips.copy()
     for i in range(m):
         n = normal[i]
-        u_n = U[i, 0] * n[0] + U[i, 1] * n[1] + U[i, 2] * n[2]
-        slip = U[i] - u_n * n if acceleration or np.isnan(slips[i, 0]) else slips[i]
-        speed = np.sqrt(slip[0] ** 2 + slip[1] ** 2 + slip[2] ** 2)
-        slides = acceleration and mu[i] > 0 and speed > SLIP_SPEED and not stops[i]
-        if slides:  # explicit Coulomb force opposite the slip, lambda_n iterated (module docstring)
-            friction[i] = -mu[i] * normal_forces[i] / speed * slip
-        counts[i] = 1 if mu[i] == 0 or slides else len(cos)
-        sliding[i], slip_used[i], speeds[i] = slides, slip, speed
+        u0, u1, u2 = dot(J3[i, 0], v), dot(J3[i, 1], v), dot(J3[i, 2], v)
+        u_n = u0 * n[0] + u1 * n[1] + u2 * n[2]
+        if acceleration or np.isnan(slips[i, 0]):  # the current slip
+            slip_used[i, 0], slip_used[i, 1], slip_used[i, 2] = u0 - u_n * n[0], u1 - u_n * n[1], u2 - u_n * n[2]
+        speed = np.sqrt(slip_used[i, 0] ** 2 + slip_used[i, 1] ** 2 + slip_used[i, 2] ** 2)
+        sliding[i] = acceleration and mu[i] > 0 and speed > SLIP_SPEED and not stops[i]
+        starts[i + 1] = starts[i] + (1 if mu[i] == 0 or sliding[i] else facets)
         contact_bound[i] = bound_of(level, dt, stabilisation, gap[i], 0.0, 0.0, True)
         if not acceleration:
             # restitution: an approaching contact leaves at -e u_n at least; De Saxce shift mu |slip|
@@ -195,16 +214,27 @@ def _pyramids(  # type: ignore[no-untyped-def]
                 contact_bound[i] = max(contact_bound[i], -e[i] * u_n)
             if not pyramid:
                 contact_bound[i] -= mu[i] * speed
-    starts = np.zeros(m, np.int64)
-    starts[1:] = np.cumsum(counts)[:-1]
-    total = counts.sum()
-    generators, owner = np.empty((total, 3)), np.empty(total, np.int64)
+    total = starts[m]
+    packed = np.empty(3 * m * nv + 3 * total + 6 * m)
+    J, generators, slip, friction = _unpacked(packed, m, nv)
+    J[:] = J3
+    slip[:] = slip_used
+    friction[:] = 0.0
+    rows, bound = np.empty((total, nv)), np.empty(total)
+    force = np.zeros(nv)
     for i in range(m):
-        n, r = normal[i], starts[i]
-        if counts[i] == 1:  # the normal row alone
+        n, r, count = normal[i], starts[i], starts[i + 1] - starts[i]
+        if sliding[i]:  # explicit Coulomb force opposite the slip, lambda_n iterated (module docstring)
+            speed = np.sqrt(slip[i, 0] ** 2 + slip[i, 1] ** 2 + slip[i, 2] ** 2)
+            for j in range(3):
+                friction[i, j] = -mu[i] * normal_forces[i] / speed * slip[i, j]
+                for k in range(nv):
+                    force[k] += friction[i, j] * J[i, j, k]
+        if count == 1:  # the normal row alone
             generators[r] = n
         else:  # friction opposes the tangential velocity the contact would have without it
-            t = -tendency[i] + (tendency[i, 0] * n[0] + tendency[i, 1] * n[1] + tendency[i, 2] * n[2]) * n
+            tendency = np.array([dot(J[i, j], x_free) + drift[i, j] for j in range(3)])
+            t = -tendency + (tendency[0] * n[0] + tendency[1] * n[1] + tendency[2] * n[2]) * n
             norm = np.sqrt(t[0] ** 2 + t[1] ** 2 + t[2] ** 2)
             if pyramid or norm <= 1e-12:  # a fixed basis: n x (the axis of n's smallest component)
                 axis = np.zeros(3)
@@ -213,37 +243,22 @@ def _pyramids(  # type: ignore[no-untyped-def]
                 norm = np.sqrt(t[0] ** 2 + t[1] ** 2 + t[2] ** 2)
             t1 = t / norm
             t2 = np.cross(n, t1)
-            for k in range(counts[i]):
-                generators[r + k] = n + mu[i] * (cos[k] * t1 + sin[k] * t2)
-        owner[r : r + counts[i]] = i
-    rows, bound = np.zeros((total, nv)), contact_bound[owner]
-    for r in range(total):
-        i = owner[r]
-        g, Ji = generators[r], J[i]
-        for k in range(nv):
-            rows[r, k] = g[0] * Ji[0, k] + g[1] * Ji[1, k] + g[2] * Ji[2, k]
-        if acceleration:  # the row's own rate and drift
-            rate, row_drift = g @ U[i], g @ drift[i]
-            bound[r] = bound_of(level, dt, stabilisation, gap[i], rate, row_drift, True)
-    force = np.zeros(nv)
-    for i in range(m):
-        if sliding[i]:
-            force += friction[i, 0] * J[i, 0] + friction[i, 1] * J[i, 1] + friction[i, 2] * J[i, 2]
-    slipping = (counts > 1) & shifts
-    return (
-        J,
-        rows,
-        bound,
-        generators,
-        owner,
-        starts,
-        sliding if sliding.any() else None,
-        slipping if slipping.any() else None,
-        friction,
-        force,
-        slip_used,
-        speeds,
-    )
+            for k in range(count):
+                for j in range(3):
+                    generators[r + k, j] = n[j] + mu[i] * (cos[k] * t1[j] + sin[k] * t2[j])
+        for k in range(count):
+            g = generators[r + k]
+            for c in range(nv):
+                rows[r + k, c] = g[0] * J[i, 0, c] + g[1] * J[i, 1, c] + g[2] * J[i, 2, c]
+            if acceleration:  # the row's own rate and drift
+                rate = g[0] * dot(J[i, 0], v) + g[1] * dot(J[i, 1], v) + g[2] * dot(J[i, 2], v)
+                row_drift = g[0] * drift[i, 0] + g[1] * drift[i, 1] + g[2] * drift[i, 2]
+                bound[r + k] = bound_of(level, dt, stabilisation, gap[i], rate, row_drift, True)
+            else:
+                bound[r + k] = contact_bound[i]
+    if sliding.any():
+        return rows, bound, packed, starts, sliding, force
+    return rows, bound, packed, starts, None, None
 
 
 class ContactModule:
@@ -274,9 +289,7 @@ class ContactModule:
         m = len(contacts)
         no_slip, no_stops, no_force, no_drift = self._blank(m)
         drift = _drifts(ctx, contacts) if level == "acceleration" else no_drift
-        # contacts with a full pyramid refine their De Saxce shift at the velocity and impulse levels
-        shifts = level != "acceleration" and self.mode != "pyramid"
-        J, rows, bound, G, owner, starts, sliding, slipping, friction, force, slip, speed = _pyramids(
+        rows, bound, packed, starts, sliding, force = _pyramids(
             ctx.data.J,
             self.masks,
             contacts.joint,
@@ -296,15 +309,19 @@ class ContactModule:
             self.cos,
             self.sin,
             self.mode == "pyramid",
-            shifts,
             (options.dt, options.stabilisation, options.restitution_threshold),
         )
-        batch = _Batch(contacts, J, G, starts, friction, sliding, slipping, slip, speed)
+        # contacts with a full pyramid refine their De Saxce shift at the velocity and impulse levels
+        shifts = level != "acceleration" and self.mode != "pyramid"
 
         def labels() -> list[str]:
-            return [f"contact {contacts.names[i]} row {r - starts[i]}" for r, i in enumerate(owner.tolist())]
+            return [
+                f"contact {name} row {r}"
+                for name, count in zip(contacts.names, np.diff(starts).tolist())
+                for r in range(count)
+            ]
 
-        return Rows(rows, bound, False, labels, batch, force if batch.sliding is not None else None)
+        return Rows(rows, bound, False, labels, _Batch(contacts, packed, starts, sliding, shifts), force)
 
     def _blank(self, m: int) -> tuple[np.ndarray, ...]:
         """Read-only defaults for m contacts: no lagged slip (NaN: each uses its current one), no
@@ -337,28 +354,30 @@ class ContactModule:
                 lagged["stops"] = lagged.get("stops", np.zeros(m, bool)) | reverse
                 changed = True
             slides = b.sliding & ~reverse
-            lam, previous = multipliers[b.starts], lagged.get("normal", np.zeros(m))
+            lam, previous = multipliers[b.starts[:-1]], lagged.get("normal", np.zeros(m))
             changed |= bool((np.abs(lam - previous) > NORMAL_FORCE_TOLERANCE)[slides].any())
             lagged["normal"] = np.where(slides, lam, previous)
-        if b.slipping is not None:
-            moved, slip = _slips(b.J, x, normals, b.slip, b.slip_speed, b.slipping, SLIP_TOLERANCE[self.mode])
+        if b.shifts:
+            moved, slip = _slips(b.packed, b.starts, x, normals, SLIP_TOLERANCE[self.mode])
             changed |= moved
             lagged["slip"] = slip
         return changed
 
 
 @njit(cache=True)
-def _slips(J, x, normal, slip, speed, slipping, tolerance):  # type: ignore[no-untyped-def]
-    """The slips of solution x for the contacts that refine their shift and are moving (a sticking
-    contact has no shift to refine), the others' unchanged: (True when one moved more than
-    ``tolerance``, slips (m, 3))."""
+def _slips(packed, starts, x, normal, tolerance):  # type: ignore[no-untyped-def]
+    """The slips of solution x for the contacts that refine their shift (those with a full pyramid)
+    and are moving (a sticking contact has no shift to refine), the others' unchanged: (True when one
+    moved more than ``tolerance``, slips (m, 3)); ``packed`` and ``starts`` are :func:`_pyramids`'."""
+    J, _, slip, _ = _unpacked(packed, len(normal), len(x))
     result, moved = slip.copy(), False
     for i in range(len(slip)):
-        if not slipping[i]:
+        if starts[i + 1] - starts[i] == 1:
             continue
-        u = np.array([J[i, 0] @ x, J[i, 1] @ x, J[i, 2] @ x])
+        u = np.array([dot(J[i, 0], x), dot(J[i, 1], x), dot(J[i, 2], x)])
         u -= (u[0] * normal[i, 0] + u[1] * normal[i, 1] + u[2] * normal[i, 2]) * normal[i]
-        if speed[i] > SLIP_SPEED or np.sqrt(u[0] ** 2 + u[1] ** 2 + u[2] ** 2) > SLIP_SPEED:
+        speed = np.sqrt(slip[i, 0] ** 2 + slip[i, 1] ** 2 + slip[i, 2] ** 2)
+        if speed > SLIP_SPEED or np.sqrt(u[0] ** 2 + u[1] ** 2 + u[2] ** 2) > SLIP_SPEED:
             moved |= np.abs(u - slip[i]).max() > tolerance
             result[i] = u
     return moved, result
