@@ -1,8 +1,8 @@
 """Stage 4, assembly: stack the modules' rows into one Gauss problem
 
-    min_x 1/2 x^T M x - x^T f   s.t.   A x = b,   l <= C x
+    min_x 1/2 x^T M x + g^T x   s.t.   A x = b,   l <= C x
 
-with f = M v + dt F (velocity level), M v (impulse level) or F (acceleration level).
+with g = -(M v + dt F) (velocity level), -M v (impulse level) or -F (acceleration level).
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ class GaussProblem:
 
     Attributes:
         H: Hessian M, shape (nv, nv).
-        g: linear term -f, shape (nv,).
+        g: linear term, shape (nv,).
         A, b: equality rows (n_eq, nv), (n_eq,).
         C, l: inequality rows (n_in, nv), lower bounds (n_in,) (upper bounds are +inf).
         blocks: (module, rows, equality?, slice into the multipliers of that kind).
@@ -40,21 +40,20 @@ class GaussProblem:
         return [label for _, rows, _ in self.blocks if rows.equality == equality for label in rows.labels()]
 
 
-def assemble(H: np.ndarray, f: np.ndarray, parts: list[tuple[ConstraintModule, Rows]]) -> GaussProblem:
-    """Stack rows: equalities into (A, b), inequalities into (C, l), remembering where each block went."""
+def assemble(H: np.ndarray, g: np.ndarray, parts: list[tuple[ConstraintModule, Rows]]) -> GaussProblem:
+    """Stack rows: equalities into (A, b), inequalities into (C, l), remembering where each block went;
+    a force a module applies outside the QP enters the linear term g."""
     blocks = []
-    chosen: dict[bool, list[Rows]] = {True: [], False: []}
-    counts = {True: 0, False: 0}
+    counts = [0, 0]  # rows of each kind so far: inequalities, equalities
     for module, rows in parts:
         start = counts[rows.equality]
-        counts[rows.equality] += len(rows)
-        blocks.append((module, rows, slice(start, counts[rows.equality])))
-        chosen[rows.equality].append(rows)
+        counts[rows.equality] = end = start + len(rows.bound)
+        blocks.append((module, rows, slice(start, end)))
         if rows.force is not None:
-            f = f + rows.force
-    A, b = _stack(chosen[True], len(f))
-    C, l = _stack(chosen[False], len(f))
-    return GaussProblem(H, -f, A, b, C, l, blocks)
+            g = g - rows.force
+    A, b = _stack([rows for _, rows in parts if rows.equality], len(g))
+    C, l = _stack([rows for _, rows in parts if not rows.equality], len(g))
+    return GaussProblem(H, g, A, b, C, l, blocks)
 
 
 def _stack(chosen: list[Rows], nv: int) -> tuple[np.ndarray, np.ndarray]:

@@ -36,15 +36,26 @@ def compute_dynamics(
     """M, joint placements and Jacobians (one CRBA pass), b (RNEA), and M^-1 F from Pinocchio's sparse
     Cholesky factor of M (frame placements are left to the modules that use frames).
 
+    ``tau`` has shape (nv,), or fewer entries: the torques of the last joints (a floating base's
+    actuated joints), the first ones unactuated.
+
     With ``drifts`` the spatial accelerations at a = 0 are computed too, for the acceleration-level
     constraint terms Jdot v (see :func:`point_drifts`).
     """
     pin.crba(model, data, q, _WORLD)  # the WORLD convention also fills data.oMi and data.J
-    F = tau - pin.nonLinearEffects(model, data, q, v)
+    F = _generalized_force(tau, pin.nonLinearEffects(model, data, q, v))
     if drifts:
         pin.forwardKinematics(model, data, q, v, np.zeros(model.nv))
     pin.cholesky.decompose(model, data)
     return Dynamics(data.M, F, pin.cholesky.solve(model, data, F))
+
+
+@njit(cache=True)
+def _generalized_force(tau, nle):  # type: ignore[no-untyped-def]
+    """F = tau - b, with tau's missing first entries zero."""
+    F = -nle
+    F[len(nle) - len(tau) :] += tau
+    return F
 
 
 def point_placements(

@@ -56,6 +56,8 @@ class Simulator:
         self.last_step: StepReport | None = None
         self._floating = scene.robot.floating
         self._last_state: State | None = None  # the state the last step returned: already valid
+        self._no_torque = np.zeros(self.model.nv)
+        self._no_torque.flags.writeable = False
         # (slice, what) of each joint whose configuration ends with a unit quaternion or (cos, sin)
         self._unit_parts = []
         for j in range(1, self.model.njoints):
@@ -113,13 +115,16 @@ class Simulator:
     def full_torque(self, tau: np.ndarray | None) -> np.ndarray:
         """Validate ``tau`` and return it with shape (nv,) (zeros for None; a floating robot's
         actuated-joint torques (nv - 6,) are padded with zeros on the base)."""
-        nv = self.model.nv
+        tau = self._torque(tau)
+        return tau if len(tau) == self.model.nv else _padded(tau, 6)
+
+    def _torque(self, tau: np.ndarray | None) -> np.ndarray:
+        """``tau`` validated: finite, shape (nv,) or, for a floating robot, (nv - 6,) (zeros for None)."""
         if tau is None:
-            return np.zeros(nv)
+            return self._no_torque
         tau = np.asarray(tau, dtype=float)
-        if tau.shape == (nv - 6,) and self._floating:
-            tau = _padded(tau, 6)
-        if tau.shape != (nv,):
+        nv = self.model.nv
+        if tau.shape != (nv,) and not (self._floating and tau.shape == (nv - 6,)):
             hint = f" or ({nv - 6},) for the actuated joints" if self._floating else ""
             raise InvalidState(f"tau must have shape ({nv},){hint}, got {tau.shape}")
         if not finite(tau):
@@ -129,7 +134,8 @@ class Simulator:
     # -- the step ---------------------------------------------------------------------------------
 
     def step(self, state: State, tau: np.ndarray | None = None) -> State:
-        """Advance ``state`` by one time step under joint torques ``tau`` (nv,) [N m]; return the new state.
+        """Advance ``state`` by one time step under joint torques ``tau`` [N m], shape (nv,) (or, for a
+        floating robot, (nv - 6,): the actuated joints'); return the new state.
 
         Raises:
             InvalidState: bad state or torque.
@@ -138,7 +144,7 @@ class Simulator:
         """
         if state is not self._last_state:
             self._check_state(state)
-        tau = self.full_torque(tau)
+        tau = self._torque(tau)
         o = self.options
         report = StepReport(state.t)
         mark = report.marks.append
@@ -152,11 +158,12 @@ class Simulator:
             v = self._impact(state, dyn, contacts, report)
             if v is not state.v:
                 dyn = compute_dynamics(self.model, self.data, state.q, v, tau, True)
-            a = self._gauss("acceleration", state.q, v, dyn.M, dyn.F, dyn.a_free, contacts, report, 1.0)
+            a = self._gauss("acceleration", state.q, v, dyn.M, -dyn.F, dyn.a_free, contacts, report, 1.0)
             v_next = v + o.dt * a
         else:
-            v_free, f = _free_velocity(dyn.M, state.v, dyn.F, dyn.a_free, o.dt)  # v + dt a_free, M v + dt F
-            v_next = self._gauss("velocity", state.q, state.v, dyn.M, f, v_free, contacts, report, 1.0 / o.dt)
+            # v_free = v + dt a_free, g = -(M v + dt F)
+            v_free, g = _free_velocity(dyn.M, state.v, dyn.F, dyn.a_free, o.dt)
+            v_next = self._gauss("velocity", state.q, state.v, dyn.M, g, v_free, contacts, report, 1.0 / o.dt)
         mark(("", _clock()))
         q_next = integrate(self.model, state.q, v_next, o.dt)
         mark(("integrate", _clock()))
@@ -175,7 +182,7 @@ class Simulator:
         ):
             return state.v
         report.impact = StepReport(state.t)
-        v = self._solve(ctx, dyn.M, dyn.M @ state.v, parts, report.impact, 1.0)
+        v = self._solve(ctx, dyn.M, -(dyn.M @ state.v), parts, report.impact, 1.0)
         report.certificates += report.impact.certificates
         return v
 
@@ -185,15 +192,16 @@ class Simulator:
         q: np.ndarray,
         v: np.ndarray,
         M: np.ndarray,
-        f: np.ndarray,
+        g: np.ndarray,
         x_free: np.ndarray,
         contacts: Contacts,
         report: StepReport,
         scale: float,
     ) -> np.ndarray:
-        """Minimise the Gauss functional of ``level``; record the reactions in ``report``."""
+        """Minimise the Gauss functional 1/2 x^T M x + g^T x of ``level``; record the reactions in
+        ``report``."""
         ctx = self._context(level, q, v, x_free, contacts)
-        return self._solve(ctx, M, f, None, report, scale)
+        return self._solve(ctx, M, g, None, report, scale)
 
     def _context(
         self, level: Level, q: np.ndarray, v: np.ndarray, x_free: np.ndarray, contacts: Contacts
@@ -208,7 +216,7 @@ class Simulator:
         self,
         ctx: Context,
         M: np.ndarray,
-        f: np.ndarray,
+        g: np.ndarray,
         parts: list[tuple[ConstraintModule, Rows]] | None,
         report: StepReport,
         scale: float,
@@ -221,7 +229,7 @@ class Simulator:
             if not parts:
                 mark(("assembly", _clock()))
                 return ctx.x_free
-            problem = assemble(M, f, parts)
+            problem = assemble(M, g, parts)
             mark(("assembly", _clock()))
             solution = self.solvers[ctx.level].solve(problem)
             mark(("solve", _clock()))
@@ -250,6 +258,6 @@ def _padded(tau: np.ndarray, head: int) -> np.ndarray:
 
 @njit(cache=True)
 def _free_velocity(M, v, F, a_free, dt):  # type: ignore[no-untyped-def]
-    """(v_free = v + dt a_free, f = M v + dt F): the velocity-level Gauss problem's free solution and
+    """(v_free = v + dt a_free, g = -(M v + dt F)): the velocity-level Gauss problem's free solution and
     linear term."""
-    return v + dt * a_free, matvec(M, v) + dt * F
+    return v + dt * a_free, -(matvec(M, v) + dt * F)

@@ -176,14 +176,8 @@ class GaussSolver:
         p = problem
         # copies (ProxQP's arrays are overwritten by the next solve); the multipliers are -y, -z
         x, lambda_eq, lambda_in, residual, relative = _read(p.H, p.g, p.A, p.b, p.C, p.l, x, y, z)
-        certificate = Certificate(
-            _STATUS[info.status],
-            int(info.iter),
-            float(info.pri_res),
-            float(info.dua_res),
-            float(info.duality_gap),
-            residual,
-            relative,
+        certificate = Certificate(  # ProxQP's info gives Python ints and floats
+            _STATUS[info.status], info.iter, info.pri_res, info.dua_res, info.duality_gap, residual, relative
         )
         return Solution(x, lambda_eq, lambda_in, certificate)
 

@@ -99,9 +99,15 @@ class _Batch:
     """
 
     def __init__(
-        self, contacts: Contacts, packed: np.ndarray, starts: np.ndarray, sliding: np.ndarray | None, shifts: bool
+        self,
+        contacts: Contacts,
+        packed: np.ndarray,
+        starts: np.ndarray,
+        sliding: np.ndarray | None,
+        shifts: bool,
     ) -> None:
-        self.contacts, self.packed, self.starts, self.sliding, self.shifts = contacts, packed, starts, sliding, shifts
+        self.contacts, self.packed, self.starts = contacts, packed, starts
+        self.sliding, self.shifts = sliding, shifts
 
     @cached_property
     def _views(self) -> tuple[np.ndarray, ...]:
@@ -203,7 +209,7 @@ def _pyramids(  # type: ignore[no-untyped-def]
         u0, u1, u2 = dot(J3[i, 0], v), dot(J3[i, 1], v), dot(J3[i, 2], v)
         u_n = u0 * n[0] + u1 * n[1] + u2 * n[2]
         if acceleration or np.isnan(slips[i, 0]):  # the current slip
-            slip_used[i, 0], slip_used[i, 1], slip_used[i, 2] = u0 - u_n * n[0], u1 - u_n * n[1], u2 - u_n * n[2]
+            slip_used[i] = (u0 - u_n * n[0], u1 - u_n * n[1], u2 - u_n * n[2])
         speed = np.sqrt(slip_used[i, 0] ** 2 + slip_used[i, 1] ** 2 + slip_used[i, 2] ** 2)
         sliding[i] = acceleration and mu[i] > 0 and speed > SLIP_SPEED and not stops[i]
         starts[i + 1] = starts[i] + (1 if mu[i] == 0 or sliding[i] else facets)
