@@ -9,6 +9,8 @@ import numpy as np
 import pinocchio as pin
 from numba import njit
 
+from .linalg import matvec
+
 LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 _WORLD = pin.Convention.WORLD
 _IDENTITY = np.eye(3)
@@ -16,46 +18,53 @@ _IDENTITY = np.eye(3)
 
 @dataclass
 class Dynamics:
-    """The free system M a = F at the current (q, v).
+    """The unconstrained Gauss problem of one level at the current (q, v):
+
+        min_x 1/2 x^T M x + g^T x,   solved by   x_free = -M^-1 g.
 
     Attributes:
         M: joint-space inertia, shape (nv, nv), symmetric positive definite: Pinocchio's data.M itself,
             valid until the next ``compute_dynamics`` on the same data (the step uses it before then).
-        F: generalized force tau - b(q, v), shape (nv,) [N or N m].
-        a_free: unconstrained acceleration M^-1 F, shape (nv,) (Pinocchio's sparse Cholesky solve).
+        g: linear term, shape (nv,): -(M v + dt F) at the velocity level (x = v+), -F at the
+            acceleration level (x = a), with F = tau - b(q, v) [N or N m].
+        x_free: the unconstrained solution, shape (nv,): v + dt M^-1 F or M^-1 F (Pinocchio's sparse
+            Cholesky solve).
     """
 
     M: np.ndarray
-    F: np.ndarray
-    a_free: np.ndarray
+    g: np.ndarray
+    x_free: np.ndarray
 
 
 def compute_dynamics(
-    model: pin.Model, data: pin.Data, q: np.ndarray, v: np.ndarray, tau: np.ndarray, drifts: bool
+    model: pin.Model, data: pin.Data, q: np.ndarray, v: np.ndarray, tau: np.ndarray, dt: float | None
 ) -> Dynamics:
-    """M, joint placements and Jacobians (one CRBA pass), b (RNEA), and M^-1 F from Pinocchio's sparse
-    Cholesky factor of M (frame placements are left to the modules that use frames).
+    """M, joint placements and Jacobians (one CRBA pass), b (RNEA), and the free Gauss problem of the
+    velocity level (time step ``dt``) or, for ``dt=None``, of the acceleration level, with the spatial
+    accelerations at a = 0 that its constraint terms Jdot v read (see :func:`point_drifts`). Frame
+    placements are left to the modules that use frames.
 
     ``tau`` has shape (nv,), or fewer entries: the torques of the last joints (a floating base's
     actuated joints), the first ones unactuated.
-
-    With ``drifts`` the spatial accelerations at a = 0 are computed too, for the acceleration-level
-    constraint terms Jdot v (see :func:`point_drifts`).
     """
     pin.crba(model, data, q, _WORLD)  # the WORLD convention also fills data.oMi and data.J
-    F = _generalized_force(tau, pin.nonLinearEffects(model, data, q, v))
-    if drifts:
+    nle = pin.nonLinearEffects(model, data, q, v)
+    if dt is None:
         pin.forwardKinematics(model, data, q, v, np.zeros(model.nv))
+    M = data.M
+    f, g = _linear_term(M, v, tau, nle, 0.0 if dt is None else dt)
     pin.cholesky.decompose(model, data)
-    return Dynamics(data.M, F, pin.cholesky.solve(model, data, F))
+    return Dynamics(M, g, pin.cholesky.solve(model, data, f))
 
 
 @njit(cache=True)
-def _generalized_force(tau, nle):  # type: ignore[no-untyped-def]
-    """F = tau - b, with tau's missing first entries zero."""
+def _linear_term(M, v, tau, nle, dt):  # type: ignore[no-untyped-def]
+    """(f, -f): f = M v + dt F at the velocity level (dt > 0), F at the acceleration level (dt = 0),
+    with F = tau - b and tau's missing first entries zero."""
     F = -nle
     F[len(nle) - len(tau) :] += tau
-    return F
+    f = matvec(M, v) + dt * F if dt > 0 else F
+    return f, -f
 
 
 def point_placements(

@@ -26,7 +26,7 @@ from .constraints.base import ConstraintModule, Context, Level, Rows
 from .dynamics import Dynamics, compute_dynamics
 from .exceptions import InvalidState, SolverError
 from .integrator import integrate
-from .linalg import finite, matvec
+from .linalg import finite
 from .options import Options
 from .report import StepReport
 from .scene import Scene
@@ -150,20 +150,17 @@ class Simulator:
         mark = report.marks.append
         mark(("", _clock()))
         acceleration = o.scheme == "acceleration"
-        dyn = compute_dynamics(self.model, self.data, state.q, state.v, tau, acceleration)
+        dyn = compute_dynamics(self.model, self.data, state.q, state.v, tau, None if acceleration else o.dt)
         mark(("dynamics", _clock()))
         contacts = self.detector.detect(self.data) if self.detector else NO_CONTACTS
         mark(("collision", _clock()))
         if acceleration:
-            v = self._impact(state, dyn, contacts, report)
+            v = self._impact(state, dyn.M, contacts, report)
             if v is not state.v:
-                dyn = compute_dynamics(self.model, self.data, state.q, v, tau, True)
-            a = self._gauss("acceleration", state.q, v, dyn.M, -dyn.F, dyn.a_free, contacts, report, 1.0)
-            v_next = v + o.dt * a
+                dyn = compute_dynamics(self.model, self.data, state.q, v, tau, None)
+            v_next = v + o.dt * self._gauss("acceleration", state.q, v, dyn, contacts, report, 1.0)
         else:
-            # v_free = v + dt a_free, g = -(M v + dt F)
-            v_free, g = _free_velocity(dyn.M, state.v, dyn.F, dyn.a_free, o.dt)
-            v_next = self._gauss("velocity", state.q, state.v, dyn.M, g, v_free, contacts, report, 1.0 / o.dt)
+            v_next = self._gauss("velocity", state.q, state.v, dyn, contacts, report, 1.0 / o.dt)
         mark(("", _clock()))
         q_next = integrate(self.model, state.q, v_next, o.dt)
         mark(("integrate", _clock()))
@@ -173,7 +170,7 @@ class Simulator:
         self._last_state = State.adopt(state.t + o.dt, q_next, v_next)  # both arrays are this step's own
         return self._last_state
 
-    def _impact(self, state: State, dyn: Dynamics, contacts: Contacts, report: StepReport) -> np.ndarray:
+    def _impact(self, state: State, M: np.ndarray, contacts: Contacts, report: StepReport) -> np.ndarray:
         """The impulsive Gauss projection of v when v violates an impulse-level row, else v itself."""
         ctx = self._context("impulse", state.q, state.v, state.v, contacts)
         parts = self._rows(ctx)
@@ -182,7 +179,7 @@ class Simulator:
         ):
             return state.v
         report.impact = StepReport(state.t)
-        v = self._solve(ctx, dyn.M, -(dyn.M @ state.v), parts, report.impact, 1.0)
+        v = self._solve(ctx, M, -(M @ state.v), parts, report.impact, 1.0)
         report.certificates += report.impact.certificates
         return v
 
@@ -191,17 +188,15 @@ class Simulator:
         level: Level,
         q: np.ndarray,
         v: np.ndarray,
-        M: np.ndarray,
-        g: np.ndarray,
-        x_free: np.ndarray,
+        dyn: Dynamics,
         contacts: Contacts,
         report: StepReport,
         scale: float,
     ) -> np.ndarray:
-        """Minimise the Gauss functional 1/2 x^T M x + g^T x of ``level``; record the reactions in
-        ``report``."""
-        ctx = self._context(level, q, v, x_free, contacts)
-        return self._solve(ctx, M, g, None, report, scale)
+        """Minimise the Gauss functional of ``level`` (``dyn``'s free problem over the constraints' rows);
+        record the reactions in ``report``."""
+        ctx = self._context(level, q, v, dyn.x_free, contacts)
+        return self._solve(ctx, dyn.M, dyn.g, None, report, scale)
 
     def _context(
         self, level: Level, q: np.ndarray, v: np.ndarray, x_free: np.ndarray, contacts: Contacts
@@ -254,10 +249,3 @@ def _padded(tau: np.ndarray, head: int) -> np.ndarray:
     full = np.zeros(head + len(tau))
     full[head:] = tau
     return full
-
-
-@njit(cache=True)
-def _free_velocity(M, v, F, a_free, dt):  # type: ignore[no-untyped-def]
-    """(v_free = v + dt a_free, g = -(M v + dt F)): the velocity-level Gauss problem's free solution and
-    linear term."""
-    return v + dt * a_free, -(matvec(M, v) + dt * F)
