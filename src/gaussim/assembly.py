@@ -24,7 +24,7 @@ class GaussProblem:
         g: linear term, shape (nv,).
         A, b: equality rows (n_eq, nv), (n_eq,).
         C, l: inequality rows (n_in, nv), lower bounds (n_in,) (upper bounds are +inf).
-        blocks: (module, rows, equality?, slice into the multipliers of that kind).
+        blocks: (module, rows, the slice of its multipliers in [lambda_eq; lambda_in]).
     """
 
     H: np.ndarray
@@ -41,14 +41,15 @@ class GaussProblem:
 
 
 def assemble(H: np.ndarray, g: np.ndarray, parts: list[tuple[ConstraintModule, Rows]]) -> GaussProblem:
-    """Stack rows: equalities into (A, b), inequalities into (C, l), remembering where each block went;
-    a force a module applies outside the QP enters the linear term g."""
+    """Stack rows: equalities into (A, b), inequalities into (C, l), remembering where each block's
+    multipliers go; a force a module applies outside the QP enters the linear term g."""
     blocks = []
-    counts = [0, 0]  # rows of each kind so far: inequalities, equalities
+    n_eq = sum(len(rows.bound) for _, rows in parts if rows.equality)
+    start = {True: 0, False: n_eq}  # where each kind's next multipliers go in [lambda_eq; lambda_in]
     for module, rows in parts:
-        start = counts[rows.equality]
-        counts[rows.equality] = end = start + len(rows.bound)
-        blocks.append((module, rows, slice(start, end)))
+        first = start[rows.equality]
+        start[rows.equality] = end = first + len(rows.bound)
+        blocks.append((module, rows, slice(first, end)))
         if rows.force is not None:
             g = g - rows.force
     A, b = _stack([rows for _, rows in parts if rows.equality], len(g))

@@ -164,7 +164,7 @@ class Simulator:
         mark(("", _clock()))
         q_next = integrate(self.model, state.q, v_next, o.dt)
         mark(("integrate", _clock()))
-        if not (finite(q_next) and finite(v_next)):
+        if not finite(q_next, v_next):
             raise SolverError(f"step at t={state.t:.6g} s produced a non-finite state", report)
         self.last_step = report
         self._last_state = State.adopt(state.t + o.dt, q_next, v_next)  # both arrays are this step's own
@@ -229,10 +229,7 @@ class Simulator:
             solution = self.solvers[ctx.level].solve(problem)
             mark(("solve", _clock()))
             report.certificates.append(solution.certificate)
-            blocks = [
-                (module, rows, (solution.lambda_eq if rows.equality else solution.lambda_in)[rows_slice])
-                for module, rows, rows_slice in problem.blocks
-            ]
+            blocks = [(module, rows, solution.multipliers[part]) for module, rows, part in problem.blocks]
             refine = False
             for module, rows, multipliers in blocks:
                 refine |= module.refine(ctx, rows, solution.x, multipliers)

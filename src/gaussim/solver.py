@@ -76,10 +76,12 @@ def _kkt_residuals(H, g, A, b, C, l, x, y, z):  # type: ignore[no-untyped-def]
 
 @njit(cache=True)
 def _read(H, g, A, b, C, l, x, y, z):  # type: ignore[no-untyped-def]
-    """(x, the multipliers -y and -z, the residuals of :func:`_kkt_residuals` there), all copied out of
+    """(x, the multipliers [-y; -z], the residuals of :func:`_kkt_residuals` there), copied out of
     ProxQP's results."""
-    x, y, z = x.copy(), -y[: len(b)], -z[: len(l)]
-    return (x, y, z, *_kkt_residuals(H, g, A, b, C, l, x, y, z))
+    n_eq, n_in = len(b), len(l)
+    x, multipliers = x.copy(), np.empty(n_eq + n_in)
+    multipliers[:n_eq], multipliers[n_eq:] = -y[:n_eq], -z[:n_in]
+    return (x, multipliers, *_kkt_residuals(H, g, A, b, C, l, x, multipliers[:n_eq], multipliers[n_eq:]))
 
 
 @dataclass
@@ -121,12 +123,21 @@ class Certificate:
 
 @dataclass
 class Solution:
-    """x, the multipliers (reactions, >= 0 on inequality rows) and the certificate."""
+    """x, the multipliers [lambda_eq; lambda_in] of the equality and inequality rows (the reactions,
+    >= 0 on inequality rows) and the certificate."""
 
     x: np.ndarray
-    lambda_eq: np.ndarray
-    lambda_in: np.ndarray
+    multipliers: np.ndarray
+    n_eq: int
     certificate: Certificate
+
+    @property
+    def lambda_eq(self) -> np.ndarray:
+        return self.multipliers[: self.n_eq]
+
+    @property
+    def lambda_in(self) -> np.ndarray:
+        return self.multipliers[self.n_eq :]
 
 
 class GaussSolver:
@@ -187,11 +198,11 @@ class GaussSolver:
         x, y, z, info = self._results
         p = problem
         # copies (ProxQP's arrays are overwritten by the next solve); the multipliers are -y, -z
-        x, lambda_eq, lambda_in, residual, relative = _read(p.H, p.g, p.A, p.b, p.C, p.l, x, y, z)
+        x, multipliers, residual, relative = _read(p.H, p.g, p.A, p.b, p.C, p.l, x, y, z)
         certificate = Certificate(  # ProxQP's info gives Python ints and floats
             _STATUS[info.status], info.iter, info.pri_res, info.dua_res, info.duality_gap, residual, relative
         )
-        return Solution(x, lambda_eq, lambda_in, certificate)
+        return Solution(x, multipliers, len(p.b), certificate)
 
     def _certified(self, solution: Solution) -> bool:
         """True when the KKT check certifies the solution and ProxQP converged or stopped at its

@@ -364,17 +364,19 @@ class ContactModule:
             changed |= bool((np.abs(lam - previous) > NORMAL_FORCE_TOLERANCE)[slides].any())
             lagged["normal"] = np.where(slides, lam, previous)
         if b.shifts:
-            moved, slip = _slips(b.packed, b.starts, x, normals, SLIP_TOLERANCE[self.mode])
-            changed |= moved
-            lagged["slip"] = slip
+            slip = _slips(b.packed, b.starts, x, normals, SLIP_TOLERANCE[self.mode])
+            if slip is not None:
+                lagged["slip"] = slip
+                changed = True
         return changed
 
 
 @njit(cache=True)
 def _slips(packed, starts, x, normal, tolerance):  # type: ignore[no-untyped-def]
-    """The slips of solution x for the contacts that refine their shift (those with a full pyramid)
-    and are moving (a sticking contact has no shift to refine), the others' unchanged: (True when one
-    moved more than ``tolerance``, slips (m, 3)); ``packed`` and ``starts`` are :func:`_pyramids`'."""
+    """When the slip of a contact that refines its shift (one with a full pyramid) and is moving (a
+    sticking contact has no shift to refine) moved more than ``tolerance``: the slips (m, 3) of
+    solution x for those contacts, the others' unchanged; else None. ``packed`` and ``starts`` are
+    :func:`_pyramids`'."""
     J, _, slip, _ = _unpacked(packed, len(normal), len(x))
     result, moved = slip.copy(), False
     for i in range(len(slip)):
@@ -386,7 +388,7 @@ def _slips(packed, starts, x, normal, tolerance):  # type: ignore[no-untyped-def
         if speed > SLIP_SPEED or np.sqrt(u[0] ** 2 + u[1] ** 2 + u[2] ** 2) > SLIP_SPEED:
             moved |= np.abs(u - slip[i]).max() > tolerance
             result[i] = u
-    return moved, result
+    return result if moved else None
 
 
 def _drifts(ctx: Context, contacts: Contacts) -> np.ndarray:
