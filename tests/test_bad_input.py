@@ -37,6 +37,38 @@ def test_non_finite_state_and_torque(sim, ball, bad):
     tau[2] = bad
     with pytest.raises(gaussim.InvalidState, match=r"tau has non-finite entries at \[2\]"):
         sim.step(sim.reset(at_height(ball, 1.0)), tau)
+    with pytest.raises(gaussim.InvalidState, match=r"tau has non-finite entries at \[2\]"):
+        sim.full_torque(tau)
+
+
+def test_non_finite_actuated_torque_names_its_entry(solo12):
+    """The torques of a floating robot's actuated joints (nv - 6,) are checked where the dynamics
+    read them; the error names the entry of the array the user gave."""
+    sim = gaussim.Simulator(gaussim.Scene(solo12))
+    state = sim.reset(solo12.configuration("standing"))
+    tau = np.zeros(12)
+    tau[7] = np.nan
+    with pytest.raises(gaussim.InvalidState, match=r"tau has non-finite entries at \[7\]"):
+        sim.step(state, tau)
+    assert sim.last_step is None
+
+
+def test_non_finite_velocity_never_reaches_the_state(sim, ball, monkeypatch):
+    """A non-finite free velocity (forced here: a broken dynamics stage) stops the step with a
+    SolverError; the state given stays valid and no new state is made."""
+    import gaussim.simulator
+
+    real = gaussim.simulator.compute_dynamics
+
+    def broken(*args):
+        dyn = real(*args)
+        return gaussim.dynamics.Dynamics(dyn.M, dyn.g, np.full_like(dyn.x_free, np.nan))
+
+    state = sim.reset(at_height(ball, 1.0))  # free flight: x_free is the next velocity
+    monkeypatch.setattr(gaussim.simulator, "compute_dynamics", broken)
+    with pytest.raises(gaussim.SolverError, match="non-finite velocity"):
+        sim.step(state)
+    assert np.isfinite(state.q).all() and sim.last_step is None
 
 
 def test_non_unit_quaternion(sim, ball):

@@ -9,6 +9,7 @@ import numpy as np
 import pinocchio as pin
 from numba import njit
 
+from .exceptions import InvalidState
 from .linalg import matvec
 
 LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
@@ -45,26 +46,33 @@ def compute_dynamics(
     placements are left to the modules that use frames.
 
     ``tau`` has shape (nv,), or fewer entries: the torques of the last joints (a floating base's
-    actuated joints), the first ones unactuated.
+    actuated joints), the first ones unactuated. Raises :class:`InvalidState` when it is not finite
+    (checked here, in the kernel that reads it).
     """
     pin.crba(model, data, q, _WORLD)  # the WORLD convention also fills data.oMi and data.J
     nle = pin.nonLinearEffects(model, data, q, v)
     if dt is None:
         pin.forwardKinematics(model, data, q, v, np.zeros(model.nv))
     M = data.M
-    f, g = _linear_term(M, v, tau, nle, 0.0 if dt is None else dt)
+    finite, f, g = _linear_term(M, v, tau, nle, 0.0 if dt is None else dt)
+    if not finite:
+        raise InvalidState.non_finite("tau", tau)
     pin.cholesky.decompose(model, data)
     return Dynamics(M, g, pin.cholesky.solve(model, data, f))
 
 
 @njit(cache=True)
 def _linear_term(M, v, tau, nle, dt):  # type: ignore[no-untyped-def]
-    """(f, -f): f = M v + dt F at the velocity level (dt > 0), F at the acceleration level (dt = 0),
-    with F = tau - b and tau's missing first entries zero."""
-    F = -nle
-    F[len(nle) - len(tau) :] += tau
+    """(True, f, -f): f = M v + dt F at the velocity level (dt > 0), F at the acceleration level
+    (dt = 0), with F = tau - b and tau's missing first entries zero; (False, ...) when tau is not
+    finite."""
+    F, head = -nle, len(nle) - len(tau)
+    for i in range(len(tau)):
+        if not np.isfinite(tau[i]):
+            return False, F, F
+        F[head + i] += tau[i]
     f = matvec(M, v) + dt * F if dt > 0 else F
-    return f, -f
+    return True, f, -f
 
 
 def point_placements(

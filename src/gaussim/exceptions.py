@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
+import numpy as np
+
 
 class GaussimError(Exception):
     """Base class of every error gaussim raises on purpose."""
@@ -53,6 +55,11 @@ class InvalidOptions(GaussimError, ValueError):
 
 class InvalidState(GaussimError, ValueError):
     """A configuration, velocity or torque has the wrong shape, is not finite, or is off the manifold."""
+
+    @classmethod
+    def non_finite(cls, name: str, values: np.ndarray) -> InvalidState:
+        """The error for an array ``name`` with non-finite entries: it lists where they are."""
+        return cls(f"{name} has non-finite entries at {np.flatnonzero(~np.isfinite(values)).tolist()}")
 
 
 class SolverError(GaussimError):

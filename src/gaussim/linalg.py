@@ -26,13 +26,9 @@ def matvec(A, x):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def finite(x, y=None):  # type: ignore[no-untyped-def]
-    """True when every entry of the vector x, and of the vector y when given, is finite."""
+def finite(x):  # type: ignore[no-untyped-def]
+    """True when every entry of the vector x is finite."""
     for value in x:
         if not np.isfinite(value):
             return False
-    if y is not None:
-        for value in y:
-            if not np.isfinite(value):
-                return False
     return True

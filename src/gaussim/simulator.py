@@ -102,9 +102,7 @@ class Simulator:
             if arr.shape != (size,):
                 raise InvalidState(f"{name} must have shape ({size},), got {arr.shape}")
             if not np.all(np.isfinite(arr)):
-                raise InvalidState(
-                    f"{name} has non-finite entries at {np.flatnonzero(~np.isfinite(arr)).tolist()}"
-                )
+                raise InvalidState.non_finite(name, arr)
         if not np.isfinite(state.t):
             raise InvalidState(f"t must be finite, got {state.t}")
         for part, message in self._unit_parts:
@@ -115,11 +113,14 @@ class Simulator:
     def full_torque(self, tau: np.ndarray | None) -> np.ndarray:
         """Validate ``tau`` and return it with shape (nv,) (zeros for None; a floating robot's
         actuated-joint torques (nv - 6,) are padded with zeros on the base)."""
-        tau = self._torque(tau)
+        tau = self._shaped_torque(tau)
+        if not finite(tau):
+            raise InvalidState.non_finite("tau", tau)
         return tau if len(tau) == self.model.nv else _padded(tau, 6)
 
-    def _torque(self, tau: np.ndarray | None) -> np.ndarray:
-        """``tau`` validated: finite, shape (nv,) or, for a floating robot, (nv - 6,) (zeros for None)."""
+    def _shaped_torque(self, tau: np.ndarray | None) -> np.ndarray:
+        """``tau`` as a float array of shape (nv,) or, for a floating robot, (nv - 6,) (zeros for None);
+        its entries are checked by the dynamics stage, which reads them."""
         if tau is None:
             return self._no_torque
         tau = np.asarray(tau, dtype=float)
@@ -127,8 +128,6 @@ class Simulator:
         if tau.shape != (nv,) and not (self._floating and tau.shape == (nv - 6,)):
             hint = f" or ({nv - 6},) for the actuated joints" if self._floating else ""
             raise InvalidState(f"tau must have shape ({nv},){hint}, got {tau.shape}")
-        if not finite(tau):
-            raise InvalidState(f"tau has non-finite entries at {np.flatnonzero(~np.isfinite(tau)).tolist()}")
         return tau
 
     # -- the step ---------------------------------------------------------------------------------
@@ -144,7 +143,7 @@ class Simulator:
         """
         if state is not self._last_state:
             self._check_state(state)
-        tau = self._torque(tau)
+        tau = self._shaped_torque(tau)
         o = self.options
         report = StepReport(state.t)
         mark = report.marks.append
@@ -164,8 +163,8 @@ class Simulator:
         mark(("", _clock()))
         q_next = integrate(self.model, state.q, v_next, o.dt)
         mark(("integrate", _clock()))
-        if not finite(q_next, v_next):
-            raise SolverError(f"step at t={state.t:.6g} s produced a non-finite state", report)
+        if q_next is None:
+            raise SolverError(f"step at t={state.t:.6g} s produced a non-finite velocity", report)
         self.last_step = report
         self._last_state = State.adopt(state.t + o.dt, q_next, v_next)  # both arrays are this step's own
         return self._last_state
