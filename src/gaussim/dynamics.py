@@ -24,8 +24,7 @@ class Dynamics:
         min_x 1/2 x^T M x + g^T x,   solved by   x_free = -M^-1 g.
 
     Attributes:
-        M: joint-space inertia, shape (nv, nv), symmetric positive definite: Pinocchio's data.M itself,
-            valid until the next ``compute_dynamics`` on the same data (the step uses it before then).
+        M: joint-space inertia, shape (nv, nv), symmetric positive definite (a copy of data.M).
         g: linear term, shape (nv,): -(M v + dt F) at the velocity level (x = v+), -F at the
             acceleration level (x = a), with F = tau - b(q, v) [N or N m].
         x_free: the unconstrained solution, shape (nv,): v + dt M^-1 F or M^-1 F (Pinocchio's sparse
@@ -49,11 +48,10 @@ def compute_dynamics(
     actuated joints), the first ones unactuated. Raises :class:`InvalidState` when it is not finite
     (checked here, in the kernel that reads it).
     """
-    pin.crba(model, data, q, _WORLD)  # the WORLD convention also fills data.oMi and data.J
+    M = pin.crba(model, data, q, _WORLD)  # a copy of data.M; the WORLD convention also fills data.oMi, data.J
     nle = pin.nonLinearEffects(model, data, q, v)
     if dt is None:
         pin.forwardKinematics(model, data, q, v, np.zeros(model.nv))
-    M = data.M
     finite, f, g = _linear_term(M, v, tau, nle, 0.0 if dt is None else dt)
     if not finite:
         raise InvalidState.non_finite("tau", tau)

@@ -279,6 +279,8 @@ class ContactModule:
         self.cos, self.sin = np.cos(angles), np.sin(angles)
         self.masks = support_masks(model)
         self._blanks: dict[int, tuple[np.ndarray, ...]] = {}
+        self._data: pin.Data | None = None
+        self._joint_jacobians = np.zeros((6, 0))
 
     def rows(self, ctx: Context) -> Rows | None:
         contacts = ctx.contacts
@@ -296,7 +298,7 @@ class ContactModule:
         no_slip, no_stops, no_force, no_drift = self._blank(m)
         drift = _drifts(ctx, contacts) if level == "acceleration" else no_drift
         rows, bound, packed, starts, sliding, force = _pyramids(
-            ctx.data.J,
+            self._jacobians(ctx.data),
             self.masks,
             contacts.joint,
             contacts.other_joint,
@@ -328,6 +330,13 @@ class ContactModule:
             ]
 
         return Rows(rows, bound, False, labels, _Batch(contacts, packed, starts, sliding, shifts), force)
+
+    def _jacobians(self, data: pin.Data) -> np.ndarray:
+        """The joint Jacobians data.J (6, nv): a view of Pinocchio's array that follows every pass on
+        that data (made once per data object)."""
+        if data is not self._data:
+            self._data, self._joint_jacobians = data, data.J  # the reference keeps the memory alive
+        return self._joint_jacobians
 
     def _blank(self, m: int) -> tuple[np.ndarray, ...]:
         """Read-only defaults for m contacts: no lagged slip (NaN: each uses its current one), no
