@@ -56,7 +56,8 @@ class Simulator:
         self.last_step: StepReport | None = None
         self._floating = scene.robot.floating
         self._last_state: State | None = None  # the state the last step returned: already valid
-        self._no_torque = np.zeros(self.model.nv)
+        self._nv = self.model.nv  # read each step: a plain int, not a property of the Pinocchio model
+        self._no_torque = np.zeros(self._nv)
         self._no_torque.flags.writeable = False
         # (slice, what) of each joint whose configuration ends with a unit quaternion or (cos, sin)
         self._unit_parts = []
@@ -116,7 +117,7 @@ class Simulator:
         tau = self._shaped_torque(tau)
         if not finite(tau):
             raise InvalidState.non_finite("tau", tau)
-        return tau if len(tau) == self.model.nv else _padded(tau, 6)
+        return tau if len(tau) == self._nv else _padded(tau, 6)
 
     def _shaped_torque(self, tau: np.ndarray | None) -> np.ndarray:
         """``tau`` as a float array of shape (nv,) or, for a floating robot, (nv - 6,) (zeros for None);
@@ -124,7 +125,7 @@ class Simulator:
         if tau is None:
             return self._no_torque
         tau = np.asarray(tau, dtype=float)
-        nv = self.model.nv
+        nv = self._nv
         if tau.shape != (nv,) and not (self._floating and tau.shape == (nv - 6,)):
             hint = f" or ({nv - 6},) for the actuated joints" if self._floating else ""
             raise InvalidState(f"tau must have shape ({nv},){hint}, got {tau.shape}")

@@ -17,6 +17,7 @@ from .options import Options
 
 _proxqp = proxsuite.proxqp
 _STATUS = {status: status.name for status in _proxqp.QPSolverOutput.__members__.values()}
+_SOLVED = _proxqp.QPSolverOutput.PROXQP_SOLVED  # compared by identity: hashing the enum costs more
 # A row whose residual exceeds this at ProxQP's closest-feasible point is named as conflicting.
 INFEASIBLE_ROW_TOLERANCE = 1e-6
 INFEASIBLE = ("PROXQP_PRIMAL_INFEASIBLE", "PROXQP_SOLVED_CLOSEST_PRIMAL_FEASIBLE", "PROXQP_DUAL_INFEASIBLE")
@@ -199,8 +200,15 @@ class GaussSolver:
         p = problem
         # copies (ProxQP's arrays are overwritten by the next solve); the multipliers are -y, -z
         x, multipliers, residual, relative = _read(p.H, p.g, p.A, p.b, p.C, p.l, x, y, z)
+        status = info.status
         certificate = Certificate(  # ProxQP's info gives Python ints and floats
-            _STATUS[info.status], info.iter, info.pri_res, info.dua_res, info.duality_gap, residual, relative
+            "PROXQP_SOLVED" if status is _SOLVED else _STATUS[status],
+            info.iter,
+            info.pri_res,
+            info.dua_res,
+            info.duality_gap,
+            residual,
+            relative,
         )
         return Solution(x, multipliers, len(p.b), certificate)
 

@@ -33,7 +33,8 @@ class State:
     def adopt(cls, t: float, q: np.ndarray, v: np.ndarray) -> State:
         """A state that takes ownership of fresh float arrays q and v (made read-only, not copied)."""
         state = object.__new__(cls)
-        q.flags.writeable = v.flags.writeable = False
+        q.setflags(write=False)
+        v.setflags(write=False)
         _set(state, "t", float(t))
         _set(state, "q", q)
         _set(state, "v", v)
