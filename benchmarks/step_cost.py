@@ -7,15 +7,12 @@ Run:  python benchmarks/step_cost.py [--steps 3000] [--repeats 3]
 from __future__ import annotations
 
 import argparse
-import re
 import statistics
 import sys
 import time
-from pathlib import Path
-
-import numpy as np
 
 import gaussim
+from gaussim.bench.peers import mujoco_model
 
 KP, KD = 5.0, 0.2
 STAGES = ("dynamics", "collision", "assembly", "solve", "integrate")
@@ -50,47 +47,11 @@ def gaussim_cost(steps: int, **options) -> tuple[float, dict[str, float], float]
     return total, {k: v / steps * 1e6 for k, v in split.items()}, penetration
 
 
-def _mujoco_model(robot: gaussim.Robot):
-    """Solo-12 in MuJoCo: URDF without meshes, sphere feet of gaussim's foot size, a free joint, a floor."""
-    import mujoco
-
-    text = Path(robot.urdf).read_text()
-    text = re.sub(r"<visual>.*?</visual>", "", text, flags=re.S)
-    text = re.sub(r"<collision>.*?</collision>", "", text, flags=re.S)
-    text = text.replace(
-        "</robot>", '<mujoco><compiler fusestatic="false" discardvisual="true"/></mujoco></robot>'
-    )
-    spec_model = mujoco.MjModel.from_xml_string(text)
-    path = Path("/tmp/gaussim_solo12_mujoco.xml")
-    mujoco.mj_saveLastXML(str(path), spec_model)
-    xml = path.read_text()
-    # foot spheres: radius and centre from the collision hull of the foot in gaussim's model
-    geometry = robot.collision_model.geometryObjects[robot.geometry_id("FL_FOOT_0")]
-    points = (
-        np.asarray(geometry.geometry.convex.points())
-        if hasattr(geometry.geometry, "convex")
-        else np.zeros((1, 3))
-    )
-    radius = float(np.max(np.linalg.norm(points - points.mean(axis=0), axis=1))) if len(points) > 1 else 0.016
-    center = geometry.placement.act(points.mean(axis=0))
-    pos = " ".join(f"{x:.5f}" for x in center)
-    for leg in FEET:
-        xml = re.sub(
-            rf'(<body name="{leg}_LOWER_LEG"[^>]*>)',
-            rf'\1<geom type="sphere" size="{radius:.5f}" pos="{pos}" friction="0.8"/>',
-            xml,
-        )
-    xml = re.sub(r'(<body name="base_link"[^>]*>)', r"\1<freejoint/>", xml, count=1)
-    xml = xml.replace("<worldbody>", '<worldbody><geom type="plane" size="5 5 0.1" friction="0.8"/>', 1)
-    xml = xml.replace("<compiler", '<option timestep="0.001" integrator="implicitfast"/><compiler', 1)
-    return mujoco.MjModel.from_xml_string(xml)
-
-
 def mujoco_cost(robot: gaussim.Robot, steps: int, solver: str) -> tuple[float, float]:
     """(us per step, max penetration [m]) of MuJoCo on Solo-12 standing under the same PD hold."""
     import mujoco
 
-    model = _mujoco_model(robot)
+    model = mujoco_model(robot)
     model.opt.solver = {"Newton": mujoco.mjtSolver.mjSOL_NEWTON, "PGS": mujoco.mjtSolver.mjSOL_PGS}[solver]
     data = mujoco.MjData(model)
     q_ref = robot.configuration("standing")

@@ -58,25 +58,3 @@ def solo12_run(tmp_path_factory) -> tuple[gaussim.RunLog, gaussim.SceneSpec]:
     spec.duration = 0.15
     out = tmp_path_factory.mktemp("solo12") / "run.npz"
     return gaussim.run(spec, out), spec
-
-
-BOX_SIDE = 0.2  # [m], the cubes of two_boxes
-_FREE_CUBE = """
-  <joint name="{name}_joint" type="floating"><parent link="world"/><child link="{name}"/></joint>
-  <link name="{name}">
-    <inertial>
-      <mass value="{mass}"/><inertia ixx="{i}" ixy="0" ixz="0" iyy="{i}" iyz="0" izz="{i}"/>
-    </inertial>
-    <collision><geometry><box size="{side} {side} {side}"/></geometry></collision>
-  </link>"""
-
-
-def two_boxes(path: Path, bottom: float, top: float) -> gaussim.Robot:
-    """Two free cubes named bottom and top, of masses ``bottom`` and ``top`` [kg], written as a URDF
-    at ``path`` (their collision geometries are bottom_0 and top_0)."""
-    cubes = "".join(
-        _FREE_CUBE.format(name=name, mass=mass, i=mass * BOX_SIDE**2 / 6, side=BOX_SIDE)
-        for name, mass in (("bottom", bottom), ("top", top))
-    )
-    path.write_text(f'<?xml version="1.0"?>\n<robot name="pair"><link name="world"/>{cubes}\n</robot>\n')
-    return gaussim.load_robot(path)

@@ -8,9 +8,8 @@ import pinocchio as pin
 import pytest
 
 import gaussim
+from gaussim.bench.cases import two_boxes
 from gaussim.collision import PATCH_MIN_EXTENT, PATCH_TOLERANCE, ContactDetector
-
-from .conftest import two_boxes
 
 FEET = ("FL", "FR", "HL", "HR")
 # Both compute the same support point in floating point; they may round differently.

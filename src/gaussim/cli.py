@@ -60,9 +60,27 @@ def main(argv: list[str] | None = None) -> int:
     target.add_argument("--csv", type=Path)
     target.add_argument("--parquet", type=Path, help="needs pandas and pyarrow")
 
+    bench = commands.add_parser(
+        "bench", help="sweep the speed-accuracy knobs over the reference cases, against peers if installed"
+    )
+    bench.add_argument("cases", nargs="*", help="cases to run (default: all; see --list)")
+    bench.add_argument("--quick", action="store_true", help="a few cases and knobs, short runs (< 2 min)")
+    bench.add_argument("--out", type=Path, default=Path("out/bench"), help="results, tables, plots")
+    bench.add_argument("--workers", type=int, help="local processes (default: all cores)")
+    bench.add_argument("--scheduler", help="run on a Dask cluster: its scheduler address")
+    bench.add_argument("--no-peers", action="store_true", help="gaussim only")
+    bench.add_argument("--list", action="store_true", help="list the cases and what their error measures")
+
     args = parser.parse_args(argv)
     try:
-        commands_ = {"run": _run, "inspect": _inspect, "forces": _forces, "replay": _replay, "plot": _plot}
+        commands_ = {
+            "run": _run,
+            "inspect": _inspect,
+            "forces": _forces,
+            "replay": _replay,
+            "plot": _plot,
+            "bench": _bench,
+        }
         return commands_[args.command](args)
     except KeyboardInterrupt:
         print("gaussim: interrupted; the log of the steps made was written", file=sys.stderr)
@@ -73,6 +91,36 @@ def main(argv: list[str] | None = None) -> int:
     except (InvalidOptions, InvalidRobot, InvalidState, GaussimError) as err:
         print(f"gaussim: {err}", file=sys.stderr)
         return EXIT_BAD_INPUT
+
+
+def _bench(args: argparse.Namespace) -> int:
+    from .bench import CASES, run_bench
+
+    if args.list:
+        for name, case in CASES.items():
+            print(f"{name:18s} {case.error}")
+        return 0
+    if args.workers is not None and args.workers < 1:
+        raise InvalidOptions("--workers", f"must be >= 1, got {args.workers}")
+    unknown = sorted(set(args.cases) - set(CASES))
+    if unknown:
+        raise InvalidOptions("cases", f"unknown {unknown}; known: {', '.join(CASES)}")
+
+    def progress(done: int, total: int, record: dict) -> None:
+        print(f"[{done}/{total}] {record['key']}: {record['status']}", file=sys.stderr, flush=True)
+
+    records = run_bench(
+        args.cases or None,
+        args.out,
+        quick=args.quick,
+        peers=[] if args.no_peers else None,
+        workers=args.workers,
+        scheduler=args.scheduler,
+        progress=progress,
+    )
+    failed = [r for r in records if r["status"] != "ok"]
+    print(f"{len(records)} runs, {len(failed)} failed; tables and plots: {args.out / 'benchmarks.md'}")
+    return EXIT_FAILURE if failed else 0
 
 
 def _run(args: argparse.Namespace) -> int:

@@ -100,3 +100,29 @@ def save_plot(log: RunLog, scene: Scene, path: str | Path, what: str = "forces")
     figure.savefig(path, dpi=110)
     _pyplot().close(figure)
     return path
+
+
+def pareto_figure(records: list[dict], title: str) -> Any:
+    """Error against wall time per simulated second, one curve per engine and knob (each knob's
+    values joined through the default point), for the records of one benchmark case."""
+    plt = _pyplot()
+    figure, axis = plt.subplots(figsize=(7, 5), constrained_layout=True)
+    ok = [r for r in records if r["status"] == "ok" and "error" in r["metrics"]]
+    default = [r for r in ok if r["engine"] == "gaussim" and r["knob"] == "default"]
+    series: dict[str, list[dict]] = {}
+    for r in ok:
+        name = r["engine"] if r["engine"] != "gaussim" else f"gaussim {r['knob']}"
+        series.setdefault(name, []).append(r)
+    for name, rows in sorted(series.items()):
+        if name.startswith("gaussim ") and name != "gaussim default":
+            rows = rows + default
+        rows.sort(key=lambda r: r["metrics"]["wall_per_sim_s"])
+        x = [r["metrics"]["wall_per_sim_s"] for r in rows]
+        y = [max(r["metrics"]["error"], 1e-16) for r in rows]
+        axis.plot(x, y, "o-" if len(rows) > 1 else "s", label=name)
+    axis.set(
+        xscale="log", yscale="log", xlabel="wall time per simulated second [s]", ylabel="error", title=title
+    )
+    axis.grid(True, which="both", alpha=0.3)
+    axis.legend(fontsize=7)
+    return figure

@@ -16,9 +16,8 @@ import numpy as np
 import pytest
 
 import gaussim
-
-from ..conftest import BOX_SIDE as SIDE
-from ..conftest import two_boxes
+from gaussim.bench.cases import BOX_SIDE as SIDE
+from gaussim.bench.cases import two_boxes
 
 PENETRATION = 1e-4  # [m]
 SINK_TOLERANCE = 1e-5  # [m]

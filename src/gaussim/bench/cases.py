@@ -1,0 +1,243 @@
+"""The reference scenes of the benchmark, each with an analytic reference and the error against it.
+
+Every case runs for a fixed simulated time (shorter with ``quick``), whatever the time step, and
+returns the :class:`~gaussim.bench.metrics.Recorder` summary plus ``error`` (its own, defined in
+``ERRORS``) and the case's other measurements.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import tempfile
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+from ..options import Options
+from ..robot import Robot, load_robot
+from ..scene import Ground, Scene
+from ..scenefile import load_scene
+from ..simulator import Simulator
+from .metrics import Recorder
+
+G = 9.81
+SCENES_DIR = Path(__file__).resolve().parents[3] / "robots" / "scenes"
+BOX_HALF_HEIGHT = 0.05  # robots/box.urdf is 0.1 m high
+BOX_SIDE = 0.2  # [m], the cubes of two_boxes
+_FREE_CUBE = """
+  <joint name="{name}_joint" type="floating"><parent link="world"/><child link="{name}"/></joint>
+  <link name="{name}">
+    <inertial>
+      <mass value="{mass}"/><inertia ixx="{i}" ixy="0" ixz="0" iyy="{i}" iyz="0" izz="{i}"/>
+    </inertial>
+    <collision><geometry><box size="{side} {side} {side}"/></geometry></collision>
+  </link>"""
+
+
+def two_boxes(path: Path, bottom: float, top: float) -> Robot:
+    """Two free cubes named bottom and top, of masses ``bottom`` and ``top`` [kg], written as a URDF
+    at ``path`` (their collision geometries are bottom_0 and top_0)."""
+    cubes = "".join(
+        _FREE_CUBE.format(name=name, mass=mass, i=mass * BOX_SIDE**2 / 6, side=BOX_SIDE)
+        for name, mass in (("bottom", bottom), ("top", top))
+    )
+    path.write_text(f'<?xml version="1.0"?>\n<robot name="pair"><link name="world"/>{cubes}\n</robot>\n')
+    return load_robot(path)
+
+
+@dataclass(frozen=True)
+class Case:
+    """A reference scene: ``run(options, quick)`` returns its metrics; ``error`` says what the
+    ``error`` metric measures."""
+
+    name: str
+    error: str
+    run: Callable[[Options, bool], dict[str, float]]
+
+
+def _recorder(scene: Scene, options: Options) -> tuple[Simulator, Recorder]:
+    sim = Simulator(scene, options)
+    return sim, Recorder(sim)
+
+
+def _ball(restitution: float) -> Callable[[Options, bool], dict[str, float]]:
+    def run(options: Options, quick: bool) -> dict[str, float]:
+        ball = load_robot("ball", floating_base=True)
+        sim, rec = _recorder(Scene(ball, ground=Ground(friction=0.8, restitution=restitution)), options)
+        height = 1.0
+        q = ball.neutral()
+        radius = q[2] = _ball_radius(ball)
+        q[2] += height
+        state = sim.reset(q)
+        if restitution == 0:  # drop, then rest: the error is the resting penetration
+            state = rec.run(state, 1.0 if quick else 2.0)
+            metrics = rec.summary()
+            return {**metrics, "error": max(0.0, radius - state.q[2])}
+        apex, rising = -np.inf, False  # bounce: the first rebound's apex against e^2 h
+        while state.t < 2.0:
+            state = rec.step(state)
+            rising = rising or state.v[2] > 0
+            if rising:
+                apex = max(apex, state.q[2] - radius)
+                if state.v[2] < 0:
+                    break
+        return {**rec.summary(), "error": abs(apex - restitution**2 * height), "apex": apex}
+
+    return run
+
+
+def _ball_radius(ball: Robot) -> float:
+    geometry = ball.collision_model.geometryObjects[0].geometry
+    return float(geometry.radius)
+
+
+def _sliding(heading_deg: float, mu: float = 0.5) -> Callable[[Options, bool], dict[str, float]]:
+    def run(options: Options, quick: bool) -> dict[str, float]:
+        box = load_robot("box", floating_base=True)
+        sim, rec = _recorder(Scene(box, ground=Ground(friction=mu)), options)
+        heading = np.radians(heading_deg)
+        q = box.neutral()
+        q[2] = BOX_HALF_HEIGHT
+        state = sim.reset(q, np.array([np.cos(heading), np.sin(heading), 0, 0, 0, 0]))
+        lift = 0.0
+        for _ in range(round(0.4 / options.dt)):  # it stops after 1 / (mu g) = 0.2 s
+            state = rec.step(state)
+            lift = max(lift, abs(state.q[2] - BOX_HALF_HEIGHT))
+        reference = 1.0 / (2 * mu * G)
+        distance = float(np.linalg.norm(state.q[:2]))
+        drift = abs(float(np.arctan2(state.q[1], state.q[0])) - heading)
+        return {**rec.summary(), "error": abs(distance / reference - 1), "heading_drift": drift, "lift": lift}
+
+    return run
+
+
+def _incline(offset: float, mu: float = 0.5) -> Callable[[Options, bool], dict[str, float]]:
+    """A block on an incline of slope mu + offset: it must stick (offset < 0) or slide at
+    g (sin - mu cos)."""
+
+    def run(options: Options, quick: bool) -> dict[str, float]:
+        box = load_robot("box", floating_base=True)
+        theta = np.arctan(mu + offset)
+        normal = np.array([-np.sin(theta), 0.0, np.cos(theta)])
+        sim, rec = _recorder(Scene(box, ground=Ground(friction=mu, normal=tuple(normal))), options)
+        q = box.neutral()
+        q[:3] = BOX_HALF_HEIGHT * normal
+        q[3:7] = pin.Quaternion(pin.rpy.rpyToMatrix(0, -theta, 0)).coeffs()
+        state = rec.run(sim.reset(q), 0.5 if quick else 1.0)
+        travel = float(np.linalg.norm(state.q[:3] - q[:3]))
+        if offset < 0:  # sticks: any travel is creep
+            return {**rec.summary(), "error": travel, "decided_right": float(travel < 1e-4)}
+        expected = 0.5 * G * (np.sin(theta) - mu * np.cos(theta)) * state.t**2
+        error = abs(travel / expected - 1)
+        return {**rec.summary(), "error": error, "decided_right": float(error < 0.5)}
+
+    return run
+
+
+def _scene_file(
+    name: str, measure: Callable[..., dict[str, float]]
+) -> Callable[[Options, bool], dict[str, float]]:
+    """A shipped scene file run with the benchmark's options (its own options are the defaults)."""
+
+    def run(options: Options, quick: bool) -> dict[str, float]:
+        spec = load_scene(SCENES_DIR / f"{name}.toml")
+        sim, rec = _recorder(spec.scene, options)
+        return measure(spec, sim, rec, quick)
+
+    return run
+
+
+def _pendulum_limits(spec, sim, rec, quick) -> dict[str, float]:  # type: ignore[no-untyped-def]
+    model = spec.robot.model
+    lower, upper = model.lowerPositionLimit[0], model.upperPositionLimit[0]
+    state = sim.reset(spec.initial.q, spec.initial.v)
+    violation = 0.0
+    for _ in range(round((1.0 if quick else 2.0) / sim.options.dt)):
+        state = rec.step(state)
+        violation = max(violation, state.q[0] - upper, lower - state.q[0])
+    return {**rec.summary(), "error": violation}
+
+
+def _fourbar(spec, sim, rec, quick) -> dict[str, float]:  # type: ignore[no-untyped-def]
+    model = spec.robot.model
+    data = model.createData()
+    tip, anchor = model.getFrameId("tip"), model.getFrameId("anchor")
+    state = sim.reset(spec.initial.q, spec.initial.v)
+    drift = 0.0
+    for _ in range(round((1.0 if quick else 5.0) / sim.options.dt)):
+        state = rec.step(state)
+        pin.framesForwardKinematics(model, data, state.q)
+        drift = max(drift, float(np.linalg.norm(data.oMf[tip].translation - data.oMf[anchor].translation)))
+    return {**rec.summary(), "error": drift}
+
+
+def _standing(spec, sim, rec, quick) -> dict[str, float]:  # type: ignore[no-untyped-def]
+    """A legged robot standing under its PD hold: the contact forces' vertical sum against m g at the
+    end, foot slip per second after landing."""
+    state = sim.reset(spec.initial.q, spec.initial.v)
+    state = rec.run(state, 0.3, spec.controller)  # land
+    feet = [c.point for c in sim.last_step.contacts]
+    seconds = 0.2 if quick else 1.0
+    state = rec.run(state, seconds, spec.controller)
+    weight = spec.robot.mass * G
+    total = sim.last_step.total_contact_force()
+    now = [c.point for c in sim.last_step.contacts]
+    slip = max((float(np.linalg.norm(a[:2] - b[:2])) for a, b in zip(feet, now)), default=0.0) / seconds
+    return {**rec.summary(), "error": abs(total[2] - weight) / weight, "slip_per_s": slip}
+
+
+def _stack(ratio: float) -> Callable[[Options, bool], dict[str, float]]:
+    """A light box (1 kg) under a heavy one (``ratio`` kg), 0.2 m cubes resting: penetration and
+    sinking of the top box after 0.5 s."""
+
+    def run(options: Options, quick: bool) -> dict[str, float]:
+        with tempfile.TemporaryDirectory() as folder:
+            robot = two_boxes(Path(folder) / "pair.urdf", 1.0, ratio)
+        contacts = [("bottom_0", "ground"), ("top_0", "bottom_0")]
+        sim, rec = _recorder(Scene(robot, ground=Ground(friction=0.8), contacts=contacts), options)
+        side = BOX_SIDE
+        q = robot.neutral()
+        q[2], q[9] = side / 2, 1.5 * side
+        state = rec.run(sim.reset(q), 0.5)
+        settled = state.q[9]
+        state = rec.run(state, 0.5 if quick else 2.0)
+        penetration = max(rec.penetration, side - (state.q[9] - state.q[2]))
+        return {**rec.summary(), "error": penetration, "sinking": abs(state.q[9] - settled)}
+
+    return run
+
+
+CASES: dict[str, Case] = {
+    case.name: case
+    for case in [
+        Case("ball_rest", "resting penetration [m]", _ball(0.0)),
+        Case("ball_bounce", "|apex - e^2 h| [m], e = 0.5, h = 1 m", _ball(0.5)),
+        *(
+            Case(f"sliding_{h}", f"relative error of the stopping distance, heading {h} deg", _sliding(h))
+            for h in (0, 15, 30, 45)
+        ),
+        Case("incline_stick", "creep [m] at mu = tan(theta) + 0.01", _incline(-0.01)),
+        Case("incline_slide", "relative error of the travel at mu = tan(theta) - 0.01", _incline(0.01)),
+        Case(
+            "pendulum_limits",
+            "largest limit violation [rad]",
+            _scene_file("pendulum_limits", _pendulum_limits),
+        ),
+        Case("fourbar", "largest loop-closure drift [m]", _scene_file("fourbar", _fourbar)),
+        *(
+            Case(f"stack_{r:g}", f"largest penetration [m], 1 kg under {r:g} kg", _stack(r))
+            for r in (1, 10, 100, 1000)
+        ),
+        Case("solo12", "|sum f_z - m g| / m g", _scene_file("solo12_standing", _standing)),
+        Case("talos", "|sum f_z - m g| / m g", _scene_file("talos_standing", _standing)),
+    ]
+}
+QUICK_CASES = ("ball_rest", "ball_bounce", "sliding_30", "incline_stick", "stack_100", "solo12")
+
+
+def options_with(**knobs: object) -> Options:
+    """Default options with ``knobs`` changed (validated by Options)."""
+    return dataclasses.replace(Options(), **knobs)  # type: ignore[arg-type]

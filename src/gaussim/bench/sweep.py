@@ -1,0 +1,187 @@
+"""Knob sweeps over the reference cases: points, where they run, and the file they go to.
+
+A point is one case run with the default options but one knob changed (one knob at a time: the
+effect of each is read against the same default). Points run in a local process pool, or on a Dask
+cluster when given its scheduler address; each finished point is appended to a JSON-lines file at
+once, so an interrupted sweep keeps what it finished and a new one skips it.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import traceback
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+from .cases import CASES, options_with
+
+# Each knob and the values swept (the default options' value is the reference row).
+KNOBS: dict[str, list[object]] = {
+    "dt": [1e-4, 5e-4, 2e-3, 5e-3, 1e-2, 2e-2],
+    "scheme": ["acceleration"],
+    "friction_facets": [8, 16],
+    "friction_mode": ["pyramid", "exact"],
+    "eps_abs": [1e-3, 1e-5, 1e-7],
+    "max_iter": [10, 100],
+    "stabilisation": [0.05, 0.5],
+}
+QUICK_KNOBS: dict[str, list[object]] = {"dt": [5e-3], "scheme": ["acceleration"]}
+DEFAULT = ("default", None)
+
+
+@dataclass(frozen=True)
+class Point:
+    """One run: ``engine`` ("gaussim" or a peer's name) on ``case`` with ``knob`` set to ``value``
+    (``"default"``: the default options)."""
+
+    case: str
+    knob: str
+    value: object
+    engine: str = "gaussim"
+    quick: bool = False
+
+    @property
+    def key(self) -> str:
+        return f"{self.engine}|{self.case}|{self.knob}={self.value}"
+
+
+def points(cases: Iterable[str], quick: bool, peers: Iterable[str] = ()) -> list[Point]:
+    """The sweep: every case at the default options and with each knob changed, then the peers."""
+    knobs = QUICK_KNOBS if quick else KNOBS
+    result = []
+    for case in cases:
+        result.append(Point(case, *DEFAULT, quick=quick))
+        result += [
+            Point(case, knob, value, quick=quick) for knob, values in knobs.items() for value in values
+        ]
+    from .peers import PEERS
+
+    for engine in peers:
+        result += [
+            Point(case, *DEFAULT, engine=engine, quick=quick) for case in PEERS[engine].cases if case in cases
+        ]
+    return result
+
+
+def run_point(point: Point) -> dict:
+    """A point's record: the point, its metrics, and "ok" or the error that stopped it."""
+    record: dict = {**asdict(point), "key": point.key}
+    try:
+        if point.engine == "gaussim":
+            options = options_with() if point.knob == "default" else options_with(**{point.knob: point.value})
+            metrics = CASES[point.case].run(options, point.quick)
+        else:
+            from .peers import PEERS
+
+            metrics = PEERS[point.engine].run(point.case, point.quick)
+        record["metrics"] = {k: float(v) for k, v in metrics.items()}
+        record["status"] = "ok"
+    except Exception as err:  # a failing point is a result: it is recorded and the sweep goes on
+        record["metrics"] = {}
+        record["status"] = f"{type(err).__name__}: {err}"
+        record["traceback"] = traceback.format_exc(limit=3)
+    return record
+
+
+def load(path: Path) -> list[dict]:
+    """The records of a results file (none when it does not exist); a torn last line is skipped."""
+    if not path.exists():
+        return []
+    records = []
+    for line in path.read_text().splitlines():
+        try:
+            records.append(json.loads(line))
+        except json.JSONDecodeError:
+            continue
+    return records
+
+
+def sweep(
+    todo: list[Point],
+    path: Path,
+    workers: int | None = None,
+    scheduler: Any = None,
+    progress: Callable[[int, int, dict], None] | None = None,
+) -> list[dict]:
+    """Run the points not already in ``path``, appending each record as it finishes; return all the
+    records of ``todo``.
+
+    Args:
+        workers: local processes (default: the machine's cores).
+        scheduler: a Dask scheduler address ("tcp://host:8786"), or a ``dask.distributed.Client``-like
+            object with ``map``; the points then run on that cluster.
+        progress: called with (done, total, record) after each point.
+    """
+    path.parent.mkdir(parents=True, exist_ok=True)
+    done = {r["key"]: r for r in load(path)}
+    remaining = [p for p in todo if p.key not in done]
+    with path.open("a") as out:
+        for count, record in enumerate(_results(remaining, workers, scheduler), start=1):
+            out.write(json.dumps(record, default=str) + "\n")
+            out.flush()
+            done[record["key"]] = record
+            if progress is not None:
+                progress(count, len(remaining), record)
+    return [done[p.key] for p in todo if p.key in done]
+
+
+def _results(todo: list[Point], workers: int | None, scheduler: Any) -> Iterator[dict]:
+    if not todo:
+        return
+    if scheduler is not None:
+        from dask.distributed import Client
+        from dask.distributed import as_completed as dask_completed
+
+        client = Client(scheduler) if isinstance(scheduler, str) else scheduler
+        try:
+            for future in dask_completed(client.map(run_point, todo, pure=False)):
+                yield future.result()
+        finally:
+            if isinstance(scheduler, str):
+                client.close()
+        return
+    workers = workers or os.cpu_count() or 1
+    if workers == 1:
+        yield from map(run_point, todo)
+        return
+    with ProcessPoolExecutor(workers) as pool:
+        for future in as_completed([pool.submit(run_point, p) for p in todo]):
+            yield future.result()
+
+
+METRICS = (
+    "error",
+    "penetration",
+    "signorini",
+    "cone",
+    "dissipation",
+    "iterations",
+    "us_per_step",
+    "us_per_step_p90",
+    "wall_per_sim_s",
+)
+
+
+def table(records: list[dict], case: str) -> str:
+    """A markdown table of one case's records: a row per engine and knob setting."""
+    rows = [r for r in records if r["case"] == case]
+    header = "| engine | setting | " + " | ".join(METRICS) + " | status |"
+    lines = [header, "|" + "---|" * 2 + "---:|" * len(METRICS) + "---|"]
+    for r in rows:
+        setting = "default" if r["knob"] == "default" else f"{r['knob']} = {r['value']}"
+        values = [_number(r["metrics"].get(m)) for m in METRICS]
+        lines.append(f"| {r['engine']} | {setting} | " + " | ".join(values) + f" | {r['status']} |")
+    return "\n".join(lines)
+
+
+def _number(value: float | None) -> str:
+    if value is None:
+        return ""
+    if value == 0 or not math.isfinite(value):
+        return f"{value:g}"
+    return f"{value:.3g}"
