@@ -70,6 +70,7 @@ def main(argv: list[str] | None = None) -> int:
     bench.add_argument("--scheduler", help="run on a Dask cluster: its scheduler address")
     bench.add_argument("--no-peers", action="store_true", help="gaussim only")
     bench.add_argument("--list", action="store_true", help="list the cases and what their error measures")
+    bench.add_argument("--report", type=Path, help="markdown report (default: OUT/benchmarks.md)")
 
     args = parser.parse_args(argv)
     try:
@@ -117,9 +118,11 @@ def _bench(args: argparse.Namespace) -> int:
         workers=args.workers,
         scheduler=args.scheduler,
         progress=progress,
+        report_path=args.report,
     )
     failed = [r for r in records if r["status"] != "ok"]
-    print(f"{len(records)} runs, {len(failed)} failed; tables and plots: {args.out / 'benchmarks.md'}")
+    report = args.report or args.out / "benchmarks.md"
+    print(f"{len(records)} runs, {len(failed)} failed; tables and plots: {report}")
     return EXIT_FAILURE if failed else 0
 
 

@@ -26,10 +26,11 @@ def run_bench(
     workers: int | None = None,
     scheduler: Any = None,
     progress: Callable[[int, int, dict], None] | None = None,
+    report_path: Path | None = None,
 ) -> list[dict]:
     """Run the sweep of ``cases`` (default: all, or QUICK_CASES with ``quick``) into
-    ``out/results.jsonl``, then write ``out/benchmarks.md`` and a Pareto plot per case; return the
-    records. ``peers`` default to the installed ones."""
+    ``out/results.jsonl``, then write the report (default ``out/benchmarks.md``) and a Pareto plot per
+    case in ``out``; return the records. ``peers`` default to the installed ones."""
     from .peers import available
 
     chosen = list(cases or (QUICK_CASES if quick else CASES))
@@ -38,26 +39,42 @@ def run_bench(
         raise ValueError(f"unknown benchmark cases {unknown}; known: {', '.join(CASES)}")
     todo = points(chosen, quick, available() if peers is None else peers)
     records = sweep(todo, out / "results.jsonl", workers, scheduler, progress)
-    report(records, out, chosen)
+    report(records, out, chosen, report_path or out / "benchmarks.md")
     return records
 
 
-def report(records: list[dict], out: Path, cases: Sequence[str]) -> Path:
-    """``out/benchmarks.md``: per case, what its error measures, its table and its Pareto plot."""
+HEADER = """# Benchmark results
+
+Made by `{command}`. Each case runs gaussim at the default options and with one knob changed at a
+time (dt, scheme, friction facets and mode, ProxQP tolerance and iteration cap, stabilisation), and
+the peers installed (MuJoCo Newton and PGS, pyramidal and elliptic cones, on Solo-12) on the same
+scene. `error` is the case's own error against its analytic reference (named above each table);
+`penetration` [m], `signorini` [W], `cone` [N] and `dissipation` [W] are the largest ContactBench
+residuals of the run (see `gaussim.bench.metrics`); `iterations` are ProxQP's per step;
+`us_per_step` (median) and its p90 time the step alone, `wall_per_sim_s` is the wall time per
+simulated second. Runs share the machine's cores (`--workers`): compare times within a table, and
+use `benchmarks/step_cost.py` for the step cost itself. The plots put error against wall time per
+simulated second, one curve per knob (through the default point) and one point per peer.
+"""
+
+
+def report(
+    records: list[dict], out: Path, cases: Sequence[str], path: Path, command: str = "gaussim bench"
+) -> Path:
+    """The markdown report at ``path``: per case, what its error measures, its table and its Pareto
+    plot (written to ``out`` and linked relative to the report)."""
+    import os
+
     from ..plots import pareto_figure
 
-    lines = [
-        "# Benchmark results",
-        "",
-        "Made by `gaussim bench`; each table row is one run (see docs/benchmarks.md).",
-        "",
-    ]
+    lines = [HEADER.format(command=command)]
     for case in cases:
         mine = [r for r in records if r["case"] == case]
         if not mine:
             continue
-        figure = pareto_figure(mine, f"{case}: {CASES[case].error}")
-        figure.savefig(out / f"pareto_{case}.png", dpi=90)
+        image = out / f"pareto_{case}.png"
+        pareto_figure(mine, f"{case}: {CASES[case].error}").savefig(image, dpi=90)
+        link = os.path.relpath(image, path.parent)
         lines += [
             f"## {case}",
             "",
@@ -65,9 +82,9 @@ def report(records: list[dict], out: Path, cases: Sequence[str]) -> Path:
             "",
             table(records, case),
             "",
-            f"![{case}](pareto_{case}.png)",
+            f"![{case}]({link})",
             "",
         ]
-    path = out / "benchmarks.md"
+    path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text("\n".join(lines))
     return path
