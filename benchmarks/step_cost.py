@@ -1,5 +1,6 @@
 """Cost of one step of Solo-12 standing (dt 1e-3, velocity scheme, hard contacts), split by stage,
-and MuJoCo's step on the same robot in the same run when MuJoCo is installed (`pip install -e '.[bench]'`).
+and MuJoCo's step on the same robot in the same run when MuJoCo is installed (`pip install -e '.[bench]'`);
+then Solo-12 in free fall against a loop of pin.aba and semi-implicit integration.
 
 Run:  python benchmarks/step_cost.py [--steps 3000] [--repeats 3]
 """
