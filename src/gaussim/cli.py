@@ -72,6 +72,10 @@ def main(argv: list[str] | None = None) -> int:
     bench.add_argument("--list", action="store_true", help="list the cases and what their error measures")
     bench.add_argument("--report", type=Path, help="markdown report (default: OUT/benchmarks.md)")
 
+    stability = commands.add_parser("stability", help="run the stability cases and write their table")
+    stability.add_argument("--long", action="store_true", help="add the long cases (1e6 steps, tiny dt)")
+    stability.add_argument("--report", type=Path, default=Path("out/stability.md"), help="markdown table")
+
     args = parser.parse_args(argv)
     try:
         commands_ = {
@@ -81,6 +85,7 @@ def main(argv: list[str] | None = None) -> int:
             "replay": _replay,
             "plot": _plot,
             "bench": _bench,
+            "stability": _stability,
         }
         return commands_[args.command](args)
     except KeyboardInterrupt:
@@ -123,6 +128,22 @@ def _bench(args: argparse.Namespace) -> int:
     failed = [r for r in records if r["status"] != "ok"]
     report = args.report or args.out / "benchmarks.md"
     print(f"{len(records)} runs, {len(failed)} failed; tables and plots: {report}")
+    return EXIT_FAILURE if failed else 0
+
+
+def _stability(args: argparse.Namespace) -> int:
+    from .bench.stability import cases, markdown
+
+    rows = []
+    for case in cases(args.long):
+        row = case()
+        rows.append(row)
+        print(f"{'pass' if row.passed else 'FAIL'}  {row.case}, {row.setting}: {row.result}", file=sys.stderr)
+    command = "gaussim stability" + (" --long" if args.long else "") + f" --report {args.report}"
+    args.report.parent.mkdir(parents=True, exist_ok=True)
+    args.report.write_text(markdown(rows, command))
+    failed = sum(not row.passed for row in rows)
+    print(f"{len(rows)} cases, {failed} failed; table: {args.report}")
     return EXIT_FAILURE if failed else 0
 
 

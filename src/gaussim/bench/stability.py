@@ -1,0 +1,273 @@
+"""Numerical stability at the extremes: each case runs a setting and says whether it passed, and why.
+
+The fast settings run with the test suite (tests/stress); ``long=True`` adds the long ones (small
+time steps, long horizons). ``gaussim stability [--long] --report docs/stability.md`` writes the
+table.
+"""
+
+from __future__ import annotations
+
+import tempfile
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from functools import partial
+from pathlib import Path
+
+import numpy as np
+
+from ..exceptions import GaussimError
+from ..options import Options
+from ..robot import load_robot
+from ..scene import Ground, Scene
+from ..scenefile import load_scene
+from ..simulator import Simulator
+from .cases import BOX_HALF_HEIGHT, BOX_SIDE, SCENES_DIR, two_boxes
+
+G = 9.81
+
+
+@dataclass(frozen=True)
+class Row:
+    """One case at one setting: what was measured, and whether it meets the case's criterion."""
+
+    case: str
+    setting: str
+    result: str
+    passed: bool
+
+
+def _guard(case: str, setting: str, body: Callable[[], Row]) -> Row:
+    """A case that raises fails with the error as its result (the suite goes on)."""
+    try:
+        return body()
+    except GaussimError as err:
+        return Row(case, setting, f"{type(err).__name__}: {str(err)[:120]}", False)
+
+
+def ball_time_step(dt: float, scheme: str) -> Row:
+    """A ball dropped from 1 m onto the ground (e = 0.5), 2 s: finite, penetration below max(1 mm, two
+    steps' travel at impact speed) (the acceleration scheme finds a contact once it is closed, up to
+    a step late; the velocity scheme closes a gap within the step when the margin sees it coming)."""
+    setting = f"dt = {dt:g}, {scheme}"
+
+    def body() -> Row:
+        ball = load_robot("ball", floating_base=True)
+        radius = float(ball.collision_model.geometryObjects[0].geometry.radius)
+        sim = Simulator(Scene(ball, ground=Ground(restitution=0.5)), Options(dt=dt, scheme=scheme))
+        q = ball.neutral()
+        q[2] = radius + 1.0
+        state, lowest = sim.reset(q), np.inf
+        for _ in range(round(2.0 / dt)):
+            state = sim.step(state)
+            lowest = min(lowest, state.q[2] - radius)
+        bound = max(1e-3, 2 * np.sqrt(2 * G) * dt)
+        passed = bool(np.isfinite(state.q).all()) and -lowest <= bound
+        result = f"penetration {max(0.0, -lowest):.2e} m (bound {bound:.1e})"
+        return Row("ball drop, time step", setting, result, passed)
+
+    return _guard("ball drop, time step", setting, body)
+
+
+def solo12_time_step(dt: float, scheme: str, seconds: float = 1.0) -> Row:
+    """Solo-12 dropped 1 cm, standing under its PD hold for ``seconds``: finite, feet penetration below
+    1 mm, base height within 2 cm of where it settles at dt = 1e-3 (0.219 m)."""
+    setting = f"dt = {dt:g}, {scheme}"
+
+    def body() -> Row:
+        spec = load_scene(SCENES_DIR / "solo12_standing.toml", dt=dt, scheme=scheme)
+        sim = Simulator(spec.scene, spec.options)
+        state, penetration = sim.reset(spec.initial.q, spec.initial.v), 0.0
+        for _ in range(round(seconds / dt)):
+            state = sim.step(state, spec.controller(state))
+            report = sim.last_step
+            assert report is not None
+            penetration = max([penetration, *(-c.gap for c in report.contacts)])
+        height = state.q[2]
+        passed = bool(np.isfinite(state.q).all()) and penetration < 1e-3 and abs(height - 0.219) < 0.02
+        result = f"penetration {penetration:.2e} m, base {height:.3f} m"
+        return Row("Solo-12 standing, time step", setting, result, passed)
+
+    return _guard("Solo-12 standing, time step", setting, body)
+
+
+def fast_impact(speed: float, scheme: str, dt: float = 1e-3) -> Row:
+    """A ball thrown down at ``speed`` onto the ground (e = 0): it must not tunnel (a half-space is
+    found at any depth), its penetration stays below the travel of one step, and it rests on the
+    ground within 1e-6 m after 1 s."""
+    setting = f"{speed:g} m/s, dt = {dt:g}, {scheme}"
+
+    def body() -> Row:
+        ball = load_robot("ball", floating_base=True)
+        radius = float(ball.collision_model.geometryObjects[0].geometry.radius)
+        sim = Simulator(Scene(ball, ground=Ground()), Options(dt=dt, scheme=scheme))
+        q = ball.neutral()
+        q[2] = radius + 0.5
+        state, lowest = sim.reset(q, np.array([0, 0, -speed, 0, 0, 0])), np.inf
+        for _ in range(round(1.0 / dt)):
+            state = sim.step(state)
+            lowest = min(lowest, state.q[2] - radius)
+        rest = state.q[2] - radius
+        passed = -lowest <= speed * dt and abs(rest) < 1e-6
+        result = f"penetration {max(0.0, -lowest):.2e} m, rest gap {rest:.1e} m"
+        return Row("fast impact", setting, result, passed)
+
+    return _guard("fast impact", setting, body)
+
+
+def friction_extremes(mu: float) -> Row:
+    """A 0.2 x 0.2 x 0.1 m block sliding at 1 m/s on ground of friction ``mu`` for 0.5 s, finite, and:
+    below mu = 2 (where friction cannot tip it: half-width / half-height) no lift-off (1e-6 m) and the
+    distance v^2 / (2 mu g) within 1 % (0.5 m travelled when frictionless); from mu = 2 on (it may
+    tip) no energy gain: its centre never rises above v^2 / (2 g)."""
+    setting = f"mu = {mu:g}"
+
+    def body() -> Row:
+        box = load_robot("box", floating_base=True)
+        sim = Simulator(Scene(box, ground=Ground(friction=mu)), Options())
+        q = box.neutral()
+        q[2] = BOX_HALF_HEIGHT
+        state, lift = sim.reset(q, np.array([1.0, 0, 0, 0, 0, 0])), 0.0
+        for _ in range(500):
+            state = sim.step(state)
+            lift = max(lift, abs(state.q[2] - BOX_HALF_HEIGHT))
+        distance = state.q[0]
+        expected = min(0.5, 1.0 / (2 * mu * G)) if mu > 0 else 0.5
+        if mu < 2:
+            passed = lift < 1e-6 and abs(distance / expected - 1) < 0.01
+        else:
+            passed = lift <= 1.0 / (2 * G)
+        passed = passed and bool(np.isfinite(state.q).all())
+        result = f"distance {distance:.4g} m (v^2/(2 mu g) {expected:.4g}), largest rise {lift:.1e} m"
+        return Row("friction extremes", setting, result, passed)
+
+    return _guard("friction extremes", setting, body)
+
+
+def stack(ratio: float, heavy: str, seconds: float) -> Row:
+    """Two 0.2 m cubes resting one on the other, masses 1 and ``ratio`` kg (``heavy`` on top or at the
+    bottom): penetration below 1e-4 m at every step, the top box moves less than 1e-5 m after 1 s."""
+    setting = f"ratio {ratio:g}, heavy {heavy}, {seconds:g} s"
+
+    def body() -> Row:
+        masses = (1.0, ratio) if heavy == "top" else (ratio, 1.0)
+        with tempfile.TemporaryDirectory() as folder:
+            robot = two_boxes(Path(folder) / "pair.urdf", *masses)
+        contacts = [("bottom_0", "ground"), ("top_0", "bottom_0")]
+        sim = Simulator(Scene(robot, ground=Ground(friction=0.8), contacts=contacts), Options())
+        q = robot.neutral()
+        q[2], q[9] = BOX_SIDE / 2, 1.5 * BOX_SIDE
+        state, penetration, settled = sim.reset(q), 0.0, None
+        for _ in range(round(seconds / 1e-3)):
+            state = sim.step(state)
+            penetration = max(penetration, BOX_SIDE / 2 - state.q[2], BOX_SIDE - (state.q[9] - state.q[2]))
+            if settled is None and state.t >= 1.0:
+                settled = state.q[9]
+        sinking = abs(state.q[9] - settled) if settled is not None else 0.0
+        passed = penetration < 1e-4 and sinking < 1e-5
+        result = f"penetration {penetration:.1e} m, sinking {sinking:.1e} m"
+        return Row("mass ratio stack", setting, result, passed)
+
+    return _guard("mass ratio stack", setting, body)
+
+
+def long_pendulum(steps: int) -> Row:
+    """A passive pendulum released at 1 rad, ``steps`` steps of 1 ms: finite, energy never above its
+    initial value by more than 1e-6 of it (the scheme dissipates, it must not gain)."""
+    setting = f"{steps:g} steps"
+
+    def body() -> Row:
+        import pinocchio as pin
+
+        robot = load_robot("pendulum")
+        sim = Simulator(Scene(robot), Options())
+        model, data = robot.model, robot.model.createData()
+
+        def energy(s) -> float:  # type: ignore[no-untyped-def]
+            kinetic = pin.computeKineticEnergy(model, data, s.q, s.v)
+            return kinetic + pin.computePotentialEnergy(model, data, s.q)
+
+        state = sim.reset(np.array([1.0]))
+        start = energy(state)
+        scale, worst = abs(start) + pin.computeTotalMass(model) * G, -np.inf
+        for k in range(steps):
+            state = sim.step(state)
+            if k % 100 == 0:
+                worst = max(worst, (energy(state) - start) / scale)
+        passed = bool(np.isfinite(state.q).all()) and worst <= 1e-6
+        return Row("long horizon: pendulum", setting, f"largest energy gain {worst:.1e} (relative)", passed)
+
+    return _guard("long horizon: pendulum", setting, body)
+
+
+def long_resting_box(steps: int) -> Row:
+    """A box resting on the ground, ``steps`` steps of 1 ms: it moves less than 1e-6 m."""
+    setting = f"{steps:g} steps"
+
+    def body() -> Row:
+        box = load_robot("box", floating_base=True)
+        sim = Simulator(Scene(box, ground=Ground()), Options())
+        q = box.neutral()
+        q[2] = BOX_HALF_HEIGHT
+        state = sim.reset(q)
+        for _ in range(steps):
+            state = sim.step(state)
+        drift = float(np.linalg.norm(state.q[:3] - q[:3]))
+        passed = bool(np.isfinite(state.q).all()) and drift < 1e-6
+        return Row("long horizon: resting box", setting, f"drift {drift:.1e} m", passed)
+
+    return _guard("long horizon: resting box", setting, body)
+
+
+def cases(long: bool = False) -> Iterator[Callable[[], Row]]:
+    """The suite, fast settings first; ``long`` adds the long ones."""
+    schemes = ("velocity", "acceleration")
+    for scheme in schemes:
+        for dt in (1e-4, 1e-3, 5e-3, 1e-2, 2e-2, 5e-2) + ((1e-5,) if long else ()):
+            yield partial(ball_time_step, dt, scheme)
+        for dt in (1e-3, 5e-3, 1e-2, 2e-2) + ((1e-4, 5e-2) if long else ()):
+            yield partial(solo12_time_step, dt, scheme)
+        for speed in (10.0, 50.0):
+            yield partial(fast_impact, speed, scheme)
+    for mu in (0.0, 1e-6, 10.0, 1e3):
+        yield partial(friction_extremes, mu)
+    for ratio in (1.0, 1e2, 1e4, 1e6):
+        for heavy in ("top", "bottom"):
+            yield partial(stack, ratio, heavy, 10.0)
+    if long:
+        yield partial(long_pendulum, 1_000_000)
+        yield partial(long_resting_box, 1_000_000)
+
+
+def largest_stable(rows: list[Row], case: str) -> dict[str, float]:
+    """Per scheme, the largest time step at which ``case`` passed with every smaller one passing."""
+    result: dict[str, float] = {}
+    for scheme in ("velocity", "acceleration"):
+        mine = sorted(
+            (float(r.setting.split(",")[0].split("=")[1]), r.passed)
+            for r in rows
+            if r.case == case and r.setting.endswith(scheme)
+        )
+        stable = 0.0
+        for dt, passed in mine:
+            if not passed:
+                break
+            stable = dt
+        result[scheme] = stable
+    return result
+
+
+def markdown(rows: list[Row], command: str) -> str:
+    """The report: the largest stable time steps, then every row."""
+    lines = [
+        "# Stability at the extremes",
+        "",
+        f"Made by `{command}`. Each row is one run; its pass criterion is the docstring of its case in",
+        "`gaussim.bench.stability`. A failing row stays in the table with what it measured.",
+        "",
+    ]
+    for case in ("ball drop, time step", "Solo-12 standing, time step"):
+        stable = largest_stable(rows, case)
+        lines.append(f"- {case}: largest stable dt " + ", ".join(f"{s} {dt:g} s" for s, dt in stable.items()))
+    lines += ["", "| case | setting | result | pass |", "|---|---|---|---|"]
+    lines += [f"| {r.case} | {r.setting} | {r.result} | {'pass' if r.passed else 'FAIL'} |" for r in rows]
+    return "\n".join(lines) + "\n"
