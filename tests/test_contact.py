@@ -174,3 +174,23 @@ def test_no_stale_contact_force_after_lift_off(ball):
         if sim.last_step.contacts:  # still within the detection margin
             assert np.linalg.norm(sim.last_step.contacts[0].force) < 1e-9
         assert (state.v[2] - v_before) / sim.options.dt == pytest.approx(G, rel=1e-9)
+
+
+def test_very_high_friction_neither_sinks_nor_gains_energy(box):
+    """mu = 1000, a block sliding at 1 m/s: the De Saxce shift's fixed point is out of reach (each pass
+    divides its error by 1 + 1/mu^2), and the lagged shift let the block sink through the ground under
+    a tiny normal force, then threw it 0.9 m up. The step now drops the shift (and says so): the
+    block stops at once and tips on its leading edge, never below the ground nor above the height its
+    kinetic energy allows."""
+    sim = gaussim.Simulator(gaussim.Scene(box, ground=gaussim.Ground(friction=1000.0)))
+    state = sim.reset(at_height(box, HALF_HEIGHT), np.array([1.0, 0, 0, 0, 0, 0]))
+    state = sim.step(state)
+    assert sim.last_step.friction_relaxed
+    lowest = highest = HALF_HEIGHT
+    for _ in range(500):
+        state = sim.step(state)
+        assert min(c.gap for c in sim.last_step.contacts) > -1e-6 if sim.last_step.contacts else True
+        lowest, highest = min(lowest, state.q[2]), max(highest, state.q[2])
+    assert lowest > HALF_HEIGHT - 1e-6
+    assert highest < HALF_HEIGHT + 1.0 / (2 * G)
+    assert np.linalg.norm(state.q[:2]) < 1e-3, "it stops at once"

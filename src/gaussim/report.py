@@ -78,6 +78,13 @@ class StepReport:
         return None
 
     @property
+    def friction_relaxed(self) -> bool:
+        """True when the De Saxce shift's fixed point was not reached within
+        ``Options.friction_iterations`` and the step kept the plain pyramid relaxation (see
+        gaussim.constraints.contact)."""
+        return any(m.name == "contact" and rows.data.relaxed for m, rows, _, _ in self.blocks)  # type: ignore[attr-defined]
+
+    @property
     def converged(self) -> bool:
         """True when every QP of the step converged (vacuously true when none was needed)."""
         return all(c.converged for c in self.certificates)

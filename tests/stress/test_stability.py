@@ -18,9 +18,6 @@ KNOWN_FAILURES = {
     "solo12_time_step(0.02, 'velocity')": "ProxQP does not converge at a 20 ms step (primal residual "
     "1e-4 at the cap)",
     "solo12_time_step(0.02, 'acceleration')": "ProxQP does not converge at a 20 ms step",
-    "friction_extremes(1000.0)": "accurate friction at mu = 1000 gains energy: the De Saxce shift's "
-    "fixed point converges by a factor 1 + 1/mu^2 per pass, so the lagged slip error, times mu, lifts "
-    "the block",
 }
 
 

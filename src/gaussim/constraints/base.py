@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Literal, Protocol
+from typing import Any, Literal, Protocol
 
 import numpy as np
 import pinocchio as pin
@@ -64,7 +64,8 @@ class Context:
         level: which Gauss problem is posed.
         lagged: per-contact arrays carried between fixed-point iterations of one step, aligned with
             the contacts that produced rows (slip velocity for the De Saxce shift, normal force and
-            stick decisions for acceleration-level sliding).
+            stick decisions for acceleration-level sliding), and the iteration's own bookkeeping
+            (its passes; whether the shift was dropped).
     """
 
     model: pin.Model
@@ -75,7 +76,7 @@ class Context:
     contacts: Contacts
     options: Options
     level: Level
-    lagged: dict[str, np.ndarray] = field(default_factory=dict)
+    lagged: dict[str, Any] = field(default_factory=dict)
 
 
 class ConstraintModule(Protocol):

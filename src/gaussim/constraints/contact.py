@@ -10,8 +10,13 @@ sum_i lambda_i (n + mu d_i), which lies in the friction pyramid inscribed in the
 b is the stabilised normal bound (with restitution), s the De Saxce shift mu |u_t+| that removes
 the relaxation's lift-off while sliding. The shift needs the slip u_t+ of the solution: it starts
 from the current slip and, while a contact slides, the QP is solved again with the slip of the last
-solution until it moves less than SLIP_TOLERANCE[mode] (a lagged slip lets a decelerating contact
-sink by mu (|u_t| - |u_t+|) dt per step; each pass divides that error by about 1 + 1/mu^2).
+solution until max(1, mu) times its change is below SLIP_TOLERANCE[mode] (a lagged slip lets a
+decelerating contact sink at mu (|u_t| - |u_t+|), an accelerating one lift off at as much; each pass
+divides that error by about 1 + 1/mu^2). When the passes of ``Options.friction_iterations`` do not
+come within RELAX_TOLERANCE of that fixed point (measured: mu = 1000, where a block sank through the
+ground under a tiny normal force whose friction relaxed the shifted bound), the last QP drops the shift: the
+plain relaxation, which may lift a sliding contact at mu |u_t+| but never lets it sink; the step's
+report says so (``StepReport.friction_relaxed``).
 d_1 is turned against the tangential velocity the contact would have without friction, so a
 sliding or pulled contact sees the full cone, not a facet of the pyramid ("pyramid" mode keeps a
 fixed basis and no shift). With mu = 0 a contact is the single row n^T J x >= b.
@@ -42,8 +47,11 @@ from .base import LEVELS, Context, Rows, bound_of, is_active
 
 # Below this tangential speed a contact sticks at the acceleration level [m/s].
 SLIP_SPEED = 1e-4
-# Fixed-point iterations on the slip stop when it moves less than this [m/s].
+# Fixed-point iterations on the slip stop when max(1, mu) times its change is below this [m/s].
 SLIP_TOLERANCE = {"accurate": 1e-4, "exact": 1e-9}
+# Still above this after the step's passes, the iteration is far from its fixed point: the last QP
+# drops the De Saxce shift [m/s] (below it, the last shifted solution is kept).
+RELAX_TOLERANCE = 1e-3
 # Acceleration-level sliding friction iterations stop when the normal force moves less than this [N].
 NORMAL_FORCE_TOLERANCE = 1e-8
 
@@ -96,6 +104,7 @@ class _Batch:
         starts: first row of each contact, then the number of rows, shape (m + 1,).
         sliding: which contacts get that friction force, shape (m,), or None when none does.
         shifts: True when the contacts with a full pyramid refine their De Saxce shift.
+        relaxed: True when these rows dropped the shift: its fixed point was not reached.
     """
 
     def __init__(
@@ -105,9 +114,10 @@ class _Batch:
         starts: np.ndarray,
         sliding: np.ndarray | None,
         shifts: bool,
+        relaxed: bool,
     ) -> None:
         self.contacts, self.packed, self.starts = contacts, packed, starts
-        self.sliding, self.shifts = sliding, shifts
+        self.sliding, self.shifts, self.relaxed = sliding, shifts, relaxed
 
     @cached_property
     def _views(self) -> tuple[np.ndarray, ...]:
@@ -329,7 +339,8 @@ class ContactModule:
                 for r in range(count)
             ]
 
-        return Rows(rows, bound, False, labels, _Batch(contacts, packed, starts, sliding, shifts), force)
+        batch = _Batch(contacts, packed, starts, sliding, shifts, "relaxed" in lagged)
+        return Rows(rows, bound, False, labels, batch, force)
 
     def _jacobians(self, data: pin.Data) -> np.ndarray:
         """The joint Jacobians data.J (6, nv): a view of Pinocchio's array that follows every pass on
@@ -372,20 +383,26 @@ class ContactModule:
             lam, previous = multipliers[b.starts[:-1]], lagged.get("normal", np.zeros(m))
             changed |= bool((np.abs(lam - previous) > NORMAL_FORCE_TOLERANCE)[slides].any())
             lagged["normal"] = np.where(slides, lam, previous)
-        if b.shifts:
-            slip = _slips(b.packed, b.starts, x, normals, SLIP_TOLERANCE[self.mode])
+        if b.shifts and not b.relaxed:
+            mu = b.contacts.friction
+            slip = _slips(b.packed, b.starts, x, normals, mu, SLIP_TOLERANCE[self.mode])
             if slip is not None:
+                passes = lagged["passes"] = lagged.get("passes", 0) + 1
+                last = passes >= ctx.options.friction_iterations - 1  # one QP left in the step
+                if last and _slips(b.packed, b.starts, x, normals, mu, RELAX_TOLERANCE) is not None:
+                    lagged["relaxed"] = True  # far from the fixed point: that QP drops the shift
+                    slip = np.zeros_like(slip)
                 lagged["slip"] = slip
                 changed = True
         return changed
 
 
 @njit(cache=True)
-def _slips(packed, starts, x, normal, tolerance):  # type: ignore[no-untyped-def]
+def _slips(packed, starts, x, normal, mu, tolerance):  # type: ignore[no-untyped-def]
     """When the slip of a contact that refines its shift (one with a full pyramid) and is moving (a
-    sticking contact has no shift to refine) moved more than ``tolerance``: the slips (m, 3) of
-    solution x for those contacts, the others' unchanged; else None. ``packed`` and ``starts`` are
-    :func:`_pyramids`'."""
+    sticking contact has no shift to refine) moved by more than ``tolerance`` / max(1, mu) (the
+    normal velocity error it causes is mu times that): the slips (m, 3) of solution x for those
+    contacts, the others' unchanged; else None. ``packed`` and ``starts`` are :func:`_pyramids`'."""
     J, _, slip, _ = _unpacked(packed, len(normal), len(x))
     result, moved = slip.copy(), False
     for i in range(len(slip)):
@@ -395,7 +412,7 @@ def _slips(packed, starts, x, normal, tolerance):  # type: ignore[no-untyped-def
         u -= (u[0] * normal[i, 0] + u[1] * normal[i, 1] + u[2] * normal[i, 2]) * normal[i]
         speed = np.sqrt(slip[i, 0] ** 2 + slip[i, 1] ** 2 + slip[i, 2] ** 2)
         if speed > SLIP_SPEED or np.sqrt(u[0] ** 2 + u[1] ** 2 + u[2] ** 2) > SLIP_SPEED:
-            moved |= np.abs(u - slip[i]).max() > tolerance
+            moved |= max(1.0, mu[i]) * np.abs(u - slip[i]).max() > tolerance
             result[i] = u
     return result if moved else None
 
