@@ -90,8 +90,73 @@ def test_unknown_robot_lists_choices():
 def test_malformed_urdf_names_the_file(tmp_path):
     path = tmp_path / "broken.urdf"
     path.write_text("<robot name='x'><link name='a'>")
-    with pytest.raises(gaussim.InvalidRobot, match="broken.urdf"):
+    with pytest.raises(gaussim.InvalidRobot, match=r"broken.urdf: not well-formed XML .*line 1"):
         gaussim.load_robot(path)
+
+
+_URDF = """<?xml version="1.0"?>
+<robot name="r">
+  <link name="base">
+    <inertial>
+      <mass value="{mass}"/><inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" izz="0.1"/>
+    </inertial>
+    <collision><origin xyz="{origin}"/><geometry>{geometry}</geometry></collision>
+  </link>
+  <link name="arm">{arm}</link>
+  <joint name="j" type="{joint}"><parent link="base"/><child link="arm"/><axis xyz="0 0 1"/>
+    <limit lower="-1" upper="1" effort="1" velocity="1"/></joint>
+</robot>
+"""
+_ARM = (
+    '<inertial><mass value="1"/><inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" izz="0.1"/></inertial>'
+)
+_GOOD = {
+    "mass": "1",
+    "origin": "0 0 0",
+    "geometry": '<box size="0.1 0.1 0.1"/>',
+    "arm": _ARM,
+    "joint": "revolute",
+}
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        ({"origin": "0 nan 0"}, r"link 'base': <origin xyz> must be 3 finite number\(s\), got '0 nan 0'"),
+        ({"geometry": '<box size="0.1 0.1"/>'}, r"link 'base': <box size> must be 3 finite"),
+        ({"mass": "-2"}, r"link 'base': negative mass -2"),
+        ({"mass": "inf"}, r"link 'base': <mass value> must be 1 finite"),
+        ({"joint": "screwy"}, r"joint 'j' has type 'screwy'; known: revolute"),
+        (
+            {"geometry": '<mesh filename="meshes/foot.stl"/>'},
+            r"link 'base': mesh file 'meshes/foot.stl' not found",
+        ),
+        ({"arm": ""}, r"mass matrix is not positive definite"),  # a moving body with no inertia
+    ],
+    ids=[
+        "nan-origin",
+        "short-size",
+        "negative-mass",
+        "infinite-mass",
+        "joint-type",
+        "missing-mesh",
+        "no-inertia",
+    ],
+)
+def test_malformed_urdf_names_the_element(tmp_path, change, message):
+    """Each fault names the file and the element (urdfdom alone drops a collision whose origin does
+    not parse, without an error: that robot fell through the ground)."""
+    path = tmp_path / "robot.urdf"
+    path.write_text(_URDF.format(**{**_GOOD, **change}))
+    with pytest.raises(gaussim.InvalidRobot, match=message) as info:
+        gaussim.load_robot(path, floating_base=True)
+    assert str(path) in str(info.value)
+
+
+def test_the_well_formed_urdf_of_those_loads(tmp_path):
+    path = tmp_path / "robot.urdf"
+    path.write_text(_URDF.format(**_GOOD))
+    assert gaussim.load_robot(path, floating_base=True).model.nv == 7
 
 
 def test_unknown_frame_and_geometry_list_choices(ball, solo12):

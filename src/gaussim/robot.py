@@ -11,6 +11,7 @@ import numpy as np
 import pinocchio as pin
 
 from .exceptions import FrameNotFound, GeometryNotFound, InvalidRobot, RobotNotFound
+from .urdfcheck import check_urdf, missing_mesh
 
 ROBOTS_DIR = Path(__file__).resolve().parents[2] / "robots"
 
@@ -140,13 +141,15 @@ def _from_urdf(
     path: Path, package_dirs: tuple[str, ...] | list[str], floating: bool, name: str | None = None
 ) -> Robot:
     dirs = [str(d) for d in (*package_dirs, path.parent)]
+    check_urdf(path)
     try:
         if floating:
             model, collision, visual = pin.buildModelsFromUrdf(str(path), dirs, pin.JointModelFreeFlyer())
         else:
             model, collision, visual = pin.buildModelsFromUrdf(str(path), dirs)
     except (RuntimeError, ValueError, OSError) as err:
-        raise InvalidRobot(f"{path}: cannot build a model from this URDF: {err}") from err
+        cause = missing_mesh(path, dirs) or str(err)
+        raise InvalidRobot(f"{path}: cannot build a model from this URDF: {cause}") from err
     return _finish(name or path.stem, model, collision, visual, str(path), tuple(dirs), {})
 
 
