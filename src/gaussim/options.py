@@ -76,7 +76,7 @@ class Options:
         _positive("active_tolerance", self.active_tolerance)
         _non_negative("restitution_threshold", self.restitution_threshold)
         _non_negative("limit_margin", self.limit_margin)
-        if not (_is_real(self.stabilisation) and 0.0 < self.stabilisation <= 1.0):
+        if not (is_real(self.stabilisation) and 0.0 < self.stabilisation <= 1.0):
             raise InvalidOptions("stabilisation", f"must be in (0, 1], got {self.stabilisation!r}")
 
     def replace(self, **changes: object) -> Options:
@@ -90,17 +90,18 @@ class Options:
         return Options(**values)  # type: ignore[arg-type]
 
 
-def _is_real(value: object) -> bool:
+def is_real(value: object) -> bool:
+    """True for a finite int or float (not a bool)."""
     return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
 
 
 def _positive(field: str, value: object) -> None:
-    if not (_is_real(value) and value > 0):  # type: ignore[operator]
+    if not (is_real(value) and value > 0):  # type: ignore[operator]
         raise InvalidOptions(field, f"must be a finite number > 0, got {value!r}")
 
 
 def _non_negative(field: str, value: object) -> None:
-    if not (_is_real(value) and value >= 0):  # type: ignore[operator]
+    if not (is_real(value) and value >= 0):  # type: ignore[operator]
         raise InvalidOptions(field, f"must be a finite number >= 0, got {value!r}")
 
 

@@ -10,6 +10,7 @@ import numpy as np
 import pinocchio as pin
 
 from .exceptions import GeometryNotFound, InvalidOptions
+from .options import is_real
 from .robot import Robot
 
 
@@ -21,9 +22,9 @@ def _vector(field_name: str, value: object, size: int) -> np.ndarray:
 
 
 def _material(owner: str, friction: float, restitution: float) -> None:
-    if not (np.isfinite(friction) and friction >= 0):
+    if not (is_real(friction) and friction >= 0):
         raise InvalidOptions(f"{owner}.friction", f"must be a finite number >= 0, got {friction!r}")
-    if not (np.isfinite(restitution) and 0 <= restitution <= 1):
+    if not (is_real(restitution) and 0 <= restitution <= 1):
         raise InvalidOptions(f"{owner}.restitution", f"must be in [0, 1], got {restitution!r}")
 
 

@@ -1,0 +1,145 @@
+"""Property-based checks (hypothesis) over options, states and scene files: every invalid value gets an
+error naming the field, every valid one is accepted, and no NaN reaches a state."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import gaussim
+from gaussim.options import Options
+
+from .conftest import at_height
+
+ANY_NUMBER = st.one_of(
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.integers(min_value=-(10**6), max_value=10**6),
+    st.booleans(),
+    st.none(),
+    st.text(max_size=3),
+)
+NUMERIC_FIELDS = [
+    f.name for f in dataclasses.fields(Options) if f.name not in ("scheme", "friction_mode", "on_failure")
+]
+
+
+def _valid(field: str, value: object) -> bool:
+    """The rule each field states in its error message (the specification under test)."""
+    real = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    integer = isinstance(value, int) and not isinstance(value, bool)
+    minimum = {"friction_facets": 3, "friction_iterations": 1, "max_iter": 1}
+    if field in minimum:
+        return integer and value >= minimum[field]  # type: ignore[operator]
+    if field in ("restitution_threshold", "limit_margin"):
+        return real and value >= 0  # type: ignore[operator]
+    if field == "stabilisation":
+        return real and 0 < value <= 1  # type: ignore[operator]
+    return real and value > 0  # type: ignore[operator]
+
+
+@settings(max_examples=300, deadline=None)
+@given(field=st.sampled_from(NUMERIC_FIELDS), value=ANY_NUMBER)
+def test_every_option_value_is_accepted_or_named(field, value):
+    if _valid(field, value):
+        assert getattr(Options(**{field: value}), field) == value
+    else:
+        with pytest.raises(gaussim.InvalidOptions) as info:
+            Options(**{field: value})
+        assert info.value.field == field
+
+
+@pytest.fixture(scope="module")
+def ball_sim(ball):
+    return gaussim.Simulator(gaussim.Scene(ball, ground=gaussim.Ground()))
+
+
+@settings(max_examples=100, deadline=None)
+@given(
+    index=st.integers(min_value=0, max_value=12),
+    bad=st.sampled_from([np.nan, np.inf, -np.inf]),
+    height=st.floats(min_value=0.0, max_value=2.0),
+)
+def test_a_non_finite_entry_is_named_and_never_stepped(ball_sim, ball, index, bad, height):
+    """q (7), v (6): a non-finite entry anywhere is rejected with its place."""
+    q, v = at_height(ball, 0.05 + height), np.zeros(6)
+    name, array, where = ("q", q, index) if index < 7 else ("v", v, index - 7)
+    array[where] = bad
+    with pytest.raises(gaussim.InvalidState, match=rf"{name} has non-finite entries at \[{where}\]"):
+        ball_sim.reset(q, v)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    position=st.lists(st.floats(min_value=-1, max_value=1), min_size=3, max_size=3),
+    rotation=st.lists(st.floats(min_value=-1, max_value=1), min_size=4, max_size=4).filter(
+        lambda r: np.linalg.norm(r) > 1e-3
+    ),
+    velocity=st.lists(st.floats(min_value=-20, max_value=20), min_size=6, max_size=6),
+)
+def test_any_valid_state_steps_to_a_finite_state(ball_sim, position, rotation, velocity):
+    """A ball anywhere near the ground, any orientation and velocity up to 20 m/s (or rad/s): the step
+    returns a finite state, or a clear error, never NaN."""
+    q = np.concatenate([position, np.array(rotation) / np.linalg.norm(rotation)])
+    q[2] += 0.1
+    state = ball_sim.reset(q, np.array(velocity))
+    for _ in range(5):
+        state = ball_sim.step(state)
+    assert np.isfinite(state.q).all() and np.isfinite(state.v).all()
+
+
+SCENE = """[robot]
+name = "ball"
+floating_base = true
+
+[initial]
+q = [0.0, 0.0, 0.5, 0.0, 0.0, 0.0, 1.0]
+
+[ground]
+friction = {friction}
+restitution = {restitution}
+
+[options]
+dt = {dt}
+"""
+TOML_NUMBER = st.one_of(
+    st.floats(allow_nan=False, allow_infinity=False, width=32),
+    st.integers(min_value=-10, max_value=10),
+    st.just("nan"),
+    st.just("inf"),
+    st.just('"text"'),
+)
+
+
+@settings(max_examples=150, deadline=None)
+@given(friction=TOML_NUMBER, restitution=TOML_NUMBER, dt=TOML_NUMBER)
+def test_scene_file_values_are_accepted_or_named(tmp_path_factory, friction, restitution, dt):
+    """A scene file's numbers: valid ones load; an invalid one is reported with the file and its key."""
+    path = tmp_path_factory.mktemp("scene") / "scene.toml"
+    path.write_text(SCENE.format(friction=friction, restitution=restitution, dt=dt))
+
+    def number(text: object) -> float | None:
+        try:
+            value = float(text)  # type: ignore[arg-type]
+        except ValueError:
+            return None
+        return value if math.isfinite(value) else None
+
+    f, e, step = number(friction), number(restitution), number(dt)
+    valid = {
+        "ground.friction": f is not None and f >= 0,
+        "ground.restitution": e is not None and 0 <= e <= 1,
+        "options.dt": step is not None and step > 0,
+    }
+    if all(valid.values()):
+        spec = gaussim.load_scene(path)
+        assert spec.options.dt == pytest.approx(step)
+    else:
+        with pytest.raises(gaussim.InvalidOptions) as info:
+            gaussim.load_scene(path)
+        assert str(path) in str(info.value)
+        assert any(key in str(info.value) for key, ok in valid.items() if not ok), str(info.value)
