@@ -2,35 +2,23 @@
 docstring). The long ones (1e6 steps, dt 1e-5) run with ``gaussim stability --long``, which writes
 docs/stability.md.
 
-A case known to fail is marked xfail with the reason (strict: if it starts passing, the mark must go);
-docs/stability.md lists the same failures with what was measured.
+A case known to fail (gaussim.bench.stability.KNOWN_FAILURES, with the reason) is marked xfail
+(strict: if it starts passing, its entry must go); docs/stability.md lists the same failures with
+what was measured and why.
 """
 
 from __future__ import annotations
 
 import pytest
 
-from gaussim.bench.stability import cases
-
-KNOWN_FAILURES = {
-    "solo12_time_step(0.005, 'acceleration')": "the acceleration-level QP of a 5 ms step is infeasible "
-    "to ProxQP's tolerance (primal residual 0.7 at the cap)",
-    "solo12_time_step(0.02, 'velocity')": "ProxQP does not converge at a 20 ms step (primal residual "
-    "1e-4 at the cap)",
-    "solo12_time_step(0.02, 'acceleration')": "ProxQP does not converge at a 20 ms step",
-}
-
-
-def _name(case) -> str:  # type: ignore[no-untyped-def]
-    return f"{case.func.__name__}({', '.join(map(repr, case.args[:2]))})"
-
+from gaussim.bench.stability import KNOWN_FAILURES, cases, name
 
 CASES = [
     pytest.param(
-        case, id=_name(case), marks=[pytest.mark.xfail(strict=True, reason=KNOWN_FAILURES[_name(case)])]
+        case, id=name(case), marks=[pytest.mark.xfail(strict=True, reason=KNOWN_FAILURES[name(case)])]
     )
-    if _name(case) in KNOWN_FAILURES
-    else pytest.param(case, id=_name(case))
+    if name(case) in KNOWN_FAILURES
+    else pytest.param(case, id=name(case))
     for case in cases()
 ]
 

@@ -7,6 +7,7 @@ table.
 
 from __future__ import annotations
 
+import dataclasses
 import tempfile
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -28,12 +29,38 @@ G = 9.81
 
 @dataclass(frozen=True)
 class Row:
-    """One case at one setting: what was measured, and whether it meets the case's criterion."""
+    """One case at one setting: what was measured, whether it meets the case's criterion, and for a
+    known failure why it fails."""
 
     case: str
     setting: str
     result: str
     passed: bool
+    why: str = ""
+
+
+# The failures this suite knows, by case and setting, with what was found about them.
+KNOWN_FAILURES = {
+    "solo12_time_step(0.005, 'acceleration')": "the acceleration-level QP does not converge at a 5 ms "
+    "step (ProxQP at its cap); not yet understood",
+    "solo12_time_step(0.02, 'velocity')": "the scene's explicit PD hold diverges at 20 ms (joint "
+    "velocities reach 7e7 rad/s within 34 steps; the passive robot stays finite at that dt): a "
+    "controller limit, kd dt against the light lower legs' inertia",
+    "solo12_time_step(0.02, 'acceleration')": "the explicit PD hold diverges at 20 ms (as above)",
+    "solo12_time_step(0.05, 'velocity')": "the explicit PD hold diverges (as at 20 ms)",
+    "solo12_time_step(0.05, 'acceleration')": "the explicit PD hold diverges (as at 20 ms)",
+}
+
+
+def name(case: Callable[[], Row]) -> str:
+    """A case's name: its function and settings, ``solo12_time_step(0.02, 'velocity')``."""
+    return f"{case.func.__name__}({', '.join(map(repr, case.args[:2]))})"  # type: ignore[attr-defined]
+
+
+def run(case: Callable[[], Row]) -> Row:
+    """Run a case; a failure that is known carries its reason."""
+    row = case()
+    return row if row.passed else dataclasses.replace(row, why=KNOWN_FAILURES.get(name(case), ""))
 
 
 def _guard(case: str, setting: str, body: Callable[[], Row]) -> Row:
@@ -171,8 +198,10 @@ def stack(ratio: float, heavy: str, seconds: float) -> Row:
 
 
 def long_pendulum(steps: int) -> Row:
-    """A passive pendulum released at 1 rad, ``steps`` steps of 1 ms: finite, energy never above its
-    initial value by more than 1e-6 of it (the scheme dissipates, it must not gain)."""
+    """A passive pendulum (1 m, 1 kg) released at 1 rad, ``steps`` steps of 1 ms: finite, its energy
+    error bounded by omega dt (relative to m g l; semi-implicit Euler is symplectic: its energy
+    oscillates by O(omega dt) and does not drift), and no drift: the largest gain over the last tenth
+    of the run at most 10 % above that over the first tenth."""
     setting = f"{steps:g} steps"
 
     def body() -> Row:
@@ -187,14 +216,21 @@ def long_pendulum(steps: int) -> Row:
             return kinetic + pin.computePotentialEnergy(model, data, s.q)
 
         state = sim.reset(np.array([1.0]))
-        start = energy(state)
-        scale, worst = abs(start) + pin.computeTotalMass(model) * G, -np.inf
+        start, scale = energy(state), pin.computeTotalMass(model) * G * 1.0
+        tenth, first, last = steps // 10, -np.inf, -np.inf
         for k in range(steps):
             state = sim.step(state)
             if k % 100 == 0:
-                worst = max(worst, (energy(state) - start) / scale)
-        passed = bool(np.isfinite(state.q).all()) and worst <= 1e-6
-        return Row("long horizon: pendulum", setting, f"largest energy gain {worst:.1e} (relative)", passed)
+                gain = (energy(state) - start) / scale
+                first = max(first, gain) if k < tenth else first
+                last = max(last, gain) if k >= steps - tenth else last
+        bound = np.sqrt(G / 1.0) * sim.options.dt
+        worst = max(first, last)
+        passed = bool(np.isfinite(state.q).all()) and worst <= bound and last <= 1.1 * max(first, 0.0) + 1e-12
+        result = (
+            f"energy gain {first:.2e} (first tenth), {last:.2e} (last tenth), bound {bound:.1e} (relative)"
+        )
+        return Row("long horizon: pendulum", setting, result, passed)
 
     return _guard("long horizon: pendulum", setting, body)
 
@@ -268,6 +304,8 @@ def markdown(rows: list[Row], command: str) -> str:
     for case in ("ball drop, time step", "Solo-12 standing, time step"):
         stable = largest_stable(rows, case)
         lines.append(f"- {case}: largest stable dt " + ", ".join(f"{s} {dt:g} s" for s, dt in stable.items()))
-    lines += ["", "| case | setting | result | pass |", "|---|---|---|---|"]
-    lines += [f"| {r.case} | {r.setting} | {r.result} | {'pass' if r.passed else 'FAIL'} |" for r in rows]
+    lines += ["", "| case | setting | result | pass | why it fails |", "|---|---|---|---|---|"]
+    lines += [
+        f"| {r.case} | {r.setting} | {r.result} | {'pass' if r.passed else 'FAIL'} | {r.why} |" for r in rows
+    ]
     return "\n".join(lines) + "\n"
