@@ -3,7 +3,14 @@
 import numpy as np
 import pinocchio as pin
 
-from gaussim.dynamics import compute_dynamics, point_drifts, point_jacobians, point_placements, support_masks
+from gaussim.dynamics import (
+    free_acceleration,
+    gauss_problem,
+    point_drifts,
+    point_jacobians,
+    point_placements,
+    support_masks,
+)
 
 FD_STEP = 1e-7
 FD_TOLERANCE = 1e-5
@@ -24,7 +31,7 @@ def test_point_jacobians_and_drifts_match_finite_differences(solo12):
         return np.array([scratch.oMi[j].act(p) for j, p in zip(joints, local)])
 
     scratch = model.createData()
-    compute_dynamics(model, data, q, v, np.zeros(model.nv), dt=None)
+    gauss_problem(model, data, q, v, free_acceleration(model, data, q, v, np.zeros(model.nv)), dt=None)
     p = points(q)
     placements = point_placements(data, joints, p)
     J = point_jacobians(data, masks, np.array(joints), world, p)
@@ -34,7 +41,7 @@ def test_point_jacobians_and_drifts_match_finite_differences(solo12):
     q_next = pin.integrate(model, q, FD_STEP * v)
     np.testing.assert_allclose(J @ v, (points(q_next) - p) / FD_STEP, atol=FD_TOLERANCE)
     # Jdot v: derivative of the body-point velocity J(q) v along the motion, at constant v
-    compute_dynamics(model, data, q_next, v, np.zeros(model.nv), dt=1e-3)
+    gauss_problem(model, data, q_next, v, np.zeros(model.nv), dt=1e-3)
     J_next = point_jacobians(data, masks, np.array(joints), world, points(q_next))
     np.testing.assert_allclose(drift, (J_next @ v - J @ v) / FD_STEP, atol=FD_TOLERANCE * 10)
 
@@ -46,7 +53,7 @@ def test_relative_point_jacobians_are_differences_of_the_two_bodies(solo12):
     data = model.createData()
     rng = np.random.default_rng(5)
     q = pin.randomConfiguration(model, -np.ones(model.nq), np.ones(model.nq))
-    compute_dynamics(model, data, q, rng.normal(size=model.nv), np.zeros(model.nv), dt=1e-3)
+    gauss_problem(model, data, q, rng.normal(size=model.nv), np.zeros(model.nv), dt=1e-3)
     masks = support_masks(model)
     joints = np.array([model.getJointId("FL_KFE"), model.getJointId("FL_KFE")])
     others = np.array([model.getJointId("FR_KFE"), model.getJointId("FL_HAA")])
@@ -61,8 +68,9 @@ def test_relative_point_jacobians_are_differences_of_the_two_bodies(solo12):
 
 
 def test_dynamics_match_pinocchio(solo12):
-    """Both levels' free Gauss problems: M is CRBA's, x_free is ABA's acceleration (acceleration level)
-    or v + dt times it (velocity level), and g = -M x_free; actuated-joint torques are padded."""
+    """Both levels' free Gauss problems: a_free is ABA's (actuated-joint torques padded), M is CRBA's,
+    x_free is a_free (acceleration level) or v + dt a_free (velocity level), g = -M x_free = -F or
+    -(M v + dt F) with F = tau - b."""
     model = solo12.model
     data = model.createData()
     rng = np.random.default_rng(4)
@@ -71,11 +79,13 @@ def test_dynamics_match_pinocchio(solo12):
     ref = model.createData()
     for tau_given in (tau, tau[6:]):
         tau_ref = tau if len(tau_given) == model.nv else np.concatenate([np.zeros(6), tau[6:]])
-        a = pin.aba(model, ref, q, v, tau_ref)
-        acceleration = compute_dynamics(model, data, q, v, tau_given, dt=None)
+        a = free_acceleration(model, data, q, v, tau_given)
+        np.testing.assert_allclose(a, pin.aba(model, ref, q, v, tau_ref), atol=1e-9)
+        F = tau_ref - pin.nonLinearEffects(model, ref, q, v)
+        acceleration = gauss_problem(model, data, q, v, a, dt=None)
         np.testing.assert_allclose(acceleration.M, pin.crba(model, ref, q), atol=1e-12)
-        np.testing.assert_allclose(acceleration.x_free, a, atol=1e-9)
-        np.testing.assert_allclose(acceleration.g, -(acceleration.M @ a), atol=1e-9)
-        velocity = compute_dynamics(model, data, q, v, tau_given, dt=dt)
+        np.testing.assert_allclose(acceleration.x_free, a, atol=1e-12)
+        np.testing.assert_allclose(acceleration.g, -F, atol=1e-8)
+        velocity = gauss_problem(model, data, q, v, a, dt=dt)
         np.testing.assert_allclose(velocity.x_free, v + dt * a, atol=1e-12)
-        np.testing.assert_allclose(velocity.g, -(velocity.M @ (v + dt * a)), atol=1e-9)
+        np.testing.assert_allclose(velocity.g, -(velocity.M @ v + dt * F), atol=1e-8)

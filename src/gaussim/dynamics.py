@@ -1,4 +1,5 @@
-"""Stage 1, dynamics and kinematics (Pinocchio): M(q), F = tau - b(q, v), Jacobians, drifts."""
+"""Stage 1, dynamics and kinematics (Pinocchio): the free acceleration (ABA), M(q) and the joint Jacobians
+(CRBA) when a constraint needs them, drifts."""
 
 from __future__ import annotations
 
@@ -25,10 +26,9 @@ class Dynamics:
 
     Attributes:
         M: joint-space inertia, shape (nv, nv), symmetric positive definite (a copy of data.M).
-        g: linear term, shape (nv,): -(M v + dt F) at the velocity level (x = v+), -F at the
+        g: linear term -M x_free, shape (nv,): -(M v + dt F) at the velocity level (x = v+), -F at the
             acceleration level (x = a), with F = tau - b(q, v) [N or N m].
-        x_free: the unconstrained solution, shape (nv,): v + dt M^-1 F or M^-1 F (Pinocchio's sparse
-            Cholesky solve).
+        x_free: the unconstrained solution, shape (nv,): v + dt a_free or a_free.
     """
 
     M: np.ndarray
@@ -36,41 +36,59 @@ class Dynamics:
     x_free: np.ndarray
 
 
-def compute_dynamics(
-    model: pin.Model, data: pin.Data, q: np.ndarray, v: np.ndarray, tau: np.ndarray, dt: float | None
-) -> Dynamics:
-    """M, joint placements and Jacobians (one CRBA pass), b (RNEA), and the free Gauss problem of the
-    velocity level (time step ``dt``) or, for ``dt=None``, of the acceleration level, with the spatial
-    accelerations at a = 0 that its constraint terms Jdot v read (see :func:`point_drifts`). Frame
-    placements are left to the modules that use frames.
+def free_acceleration(
+    model: pin.Model, data: pin.Data, q: np.ndarray, v: np.ndarray, tau: np.ndarray
+) -> np.ndarray:
+    """a_free = M^-1 (tau - b(q, v)) by Pinocchio's ABA (WORLD convention, which also fills data.oMi).
 
     ``tau`` has shape (nv,), or fewer entries: the torques of the last joints (a floating base's
     actuated joints), the first ones unactuated. Raises :class:`InvalidState` when it is not finite
-    (checked here, in the kernel that reads it).
+    (checked here, in the kernel that pads it).
     """
-    M = pin.crba(model, data, q, _WORLD)  # a copy of data.M; the WORLD convention also fills data.oMi, data.J
-    nle = pin.nonLinearEffects(model, data, q, v)
-    if dt is None:
-        pin.forwardKinematics(model, data, q, v, np.zeros(model.nv))
-    finite, f, g = _linear_term(M, v, tau, nle, 0.0 if dt is None else dt)
-    if not finite:
+    full = _full_torque(tau, len(v))
+    if full is None:
         raise InvalidState.non_finite("tau", tau)
-    pin.cholesky.decompose(model, data)
-    return Dynamics(M, g, pin.cholesky.solve(model, data, f))
+    return pin.aba(model, data, q, v, full, _WORLD)
+
+
+def gauss_problem(
+    model: pin.Model, data: pin.Data, q: np.ndarray, v: np.ndarray, a_free: np.ndarray, dt: float | None
+) -> Dynamics:
+    """The free Gauss problem of the velocity level (time step ``dt``) or, for ``dt=None``, of the
+    acceleration level: M and the joint Jacobians data.J (one CRBA pass, WORLD convention), x_free
+    and g = -M x_free; at the acceleration level first the spatial accelerations at a = 0 that the
+    constraint terms Jdot v read (see :func:`point_drifts`). Frame placements are left to the modules
+    that use frames."""
+    if dt is None:
+        pin.forwardKinematics(model, data, q, v, np.zeros(len(v)))
+    M = pin.crba(model, data, q, _WORLD)  # a copy of data.M
+    x_free, g = _free_problem(M, v, a_free, 0.0 if dt is None else dt)
+    return Dynamics(M, g, x_free)
 
 
 @njit(cache=True)
-def _linear_term(M, v, tau, nle, dt):  # type: ignore[no-untyped-def]
-    """(True, f, -f): f = M v + dt F at the velocity level (dt > 0), F at the acceleration level
-    (dt = 0), with F = tau - b and tau's missing first entries zero; (False, ...) when tau is not
-    finite."""
-    F, head = -nle, len(nle) - len(tau)
+def free_velocity(v, a_free, dt):  # type: ignore[no-untyped-def]
+    """v + dt a_free: the next velocity when nothing restricts the motion."""
+    return v + dt * a_free
+
+
+@njit(cache=True)
+def _full_torque(tau, nv):  # type: ignore[no-untyped-def]
+    """tau with its missing first entries zero, shape (nv,); None when it is not finite."""
+    full, head = np.zeros(nv), nv - len(tau)
     for i in range(len(tau)):
         if not np.isfinite(tau[i]):
-            return False, F, F
-        F[head + i] += tau[i]
-    f = matvec(M, v) + dt * F if dt > 0 else F
-    return True, f, -f
+            return None
+        full[head + i] = tau[i]
+    return full
+
+
+@njit(cache=True)
+def _free_problem(M, v, a_free, dt):  # type: ignore[no-untyped-def]
+    """(x_free, -M x_free): x_free = v + dt a_free at the velocity level (dt > 0), a_free at the
+    acceleration level (dt = 0)."""
+    x_free = v + dt * a_free if dt > 0 else a_free.copy()
+    return x_free, -matvec(M, x_free)
 
 
 def point_placements(

@@ -1,8 +1,9 @@
 """The simulator: a short ``step`` that reads as the algorithm.
 
 velocity scheme (default), the discrete Gauss principle (Moreau-Jean time stepping):
-    M, F = dynamics(q, v);  contacts = detect(q)
-    v+ = argmin 1/2 (w - v_free)^T M (w - v_free)  over the velocity-level rows,  v_free = v + dt M^-1 F
+    a_free = M^-1 (tau - b(q, v)) (ABA);  contacts = detect(q)
+    v+ = argmin 1/2 (w - v_free)^T M (w - v_free)  over the velocity-level rows,  v_free = v + dt a_free
+         (M from CRBA only when a module can produce rows; else v+ = v_free)
     q+ = q (+) dt v+
 
 acceleration scheme, the paper's:
@@ -23,7 +24,7 @@ from .assembly import assemble
 from .collision import NO_CONTACTS, ContactDetector, Contacts
 from .constraints import BilateralModule, ContactModule, LimitModule
 from .constraints.base import ConstraintModule, Context, Level, Rows
-from .dynamics import Dynamics, compute_dynamics
+from .dynamics import Dynamics, free_acceleration, free_velocity, gauss_problem
 from .exceptions import InvalidState, SolverError
 from .integrator import integrate
 from .linalg import finite
@@ -50,6 +51,8 @@ class Simulator:
         self.data = self.model.createData()
         self.detector = ContactDetector(scene, self.options.contact_margin) if scene.pairs else None
         self.modules = self._modules(scene, self.options)
+        # modules whose rows do not come from detected contacts: with one, every step poses the QP
+        self._rows_without_contact = any(not isinstance(m, ContactModule) for m in self.modules)
         self.solvers: dict[Level, GaussSolver] = {
             level: GaussSolver(self.options) for level in ("velocity", "impulse", "acceleration")
         }
@@ -150,17 +153,22 @@ class Simulator:
         mark = report.marks.append
         mark(("", _clock()))
         acceleration = o.scheme == "acceleration"
-        dyn = compute_dynamics(self.model, self.data, state.q, state.v, tau, None if acceleration else o.dt)
+        a_free = free_acceleration(self.model, self.data, state.q, state.v, tau)
         mark(("dynamics", _clock()))
         contacts = self.detector.detect(self.data) if self.detector else NO_CONTACTS
         mark(("collision", _clock()))
         if acceleration:
+            dyn = self._problem(state.q, state.v, a_free, None, report)
             v = self._impact(state, dyn.M, contacts, report)
             if v is not state.v:
-                dyn = compute_dynamics(self.model, self.data, state.q, v, tau, None)
+                a_free = free_acceleration(self.model, self.data, state.q, v, tau)
+                dyn = self._problem(state.q, v, a_free, None, report)
             v_next = v + o.dt * self._gauss("acceleration", state.q, v, dyn, contacts, report, 1.0)
-        else:
+        elif len(contacts.gap) or self._rows_without_contact:
+            dyn = self._problem(state.q, state.v, a_free, o.dt, report)
             v_next = self._gauss("velocity", state.q, state.v, dyn, contacts, report, 1.0 / o.dt)
+        else:  # nothing can restrict the motion: no Gauss problem to pose
+            v_next = free_velocity(state.v, a_free, o.dt)
         mark(("", _clock()))
         q_next = integrate(self.model, state.q, v_next, o.dt)
         mark(("integrate", _clock()))
@@ -169,6 +177,15 @@ class Simulator:
         self.last_step = report
         self._last_state = State.adopt(state.t + o.dt, q_next, v_next)  # both arrays are this step's own
         return self._last_state
+
+    def _problem(
+        self, q: np.ndarray, v: np.ndarray, a_free: np.ndarray, dt: float | None, report: StepReport
+    ) -> Dynamics:
+        """The free Gauss problem of the velocity level (``dt``) or the acceleration level (None)."""
+        report.marks.append(("", _clock()))
+        dyn = gauss_problem(self.model, self.data, q, v, a_free, dt)
+        report.marks.append(("dynamics", _clock()))
+        return dyn
 
     def _impact(self, state: State, M: np.ndarray, contacts: Contacts, report: StepReport) -> np.ndarray:
         """The impulsive Gauss projection of v when v violates an impulse-level row, else v itself."""
