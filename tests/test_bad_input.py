@@ -56,15 +56,15 @@ def test_non_finite_actuated_torque_names_its_entry(solo12):
 def test_non_finite_velocity_never_reaches_the_state(sim, ball, monkeypatch):
     """A non-finite free motion (forced here: a broken dynamics stage) stops the step with a
     SolverError; the state given stays valid and no new state is made."""
-    import gaussim.simulator
+    from gaussim.dynamics import DynamicsStage
 
-    real = gaussim.simulator.free_acceleration
+    real = DynamicsStage.free_motion
 
-    def broken(*args):
-        return np.full_like(real(*args), np.nan)
+    def broken(self, *args):
+        return np.full_like(real(self, *args), np.nan)
 
-    state = sim.reset(at_height(ball, 1.0))  # free flight: v + dt a_free is the next velocity
-    monkeypatch.setattr(gaussim.simulator, "free_acceleration", broken)
+    state = sim.reset(at_height(ball, 1.0))  # free flight: the free motion is the next velocity
+    monkeypatch.setattr(DynamicsStage, "free_motion", broken)
     with pytest.raises(gaussim.SolverError, match="non-finite velocity"):
         sim.step(state)
     assert np.isfinite(state.q).all() and sim.last_step is None

@@ -4,6 +4,8 @@ import numpy as np
 import pinocchio as pin
 
 from gaussim.dynamics import (
+    DynamicsStage,
+    compute_dynamics,
     free_acceleration,
     gauss_problem,
     point_drifts,
@@ -31,7 +33,7 @@ def test_point_jacobians_and_drifts_match_finite_differences(solo12):
         return np.array([scratch.oMi[j].act(p) for j, p in zip(joints, local)])
 
     scratch = model.createData()
-    gauss_problem(model, data, q, v, free_acceleration(model, data, q, v, np.zeros(model.nv)), dt=None)
+    compute_dynamics(model, data, q, v, np.zeros(model.nv), dt=None)
     p = points(q)
     placements = point_placements(data, joints, p)
     J = point_jacobians(data, masks, np.array(joints), world, p)
@@ -41,7 +43,7 @@ def test_point_jacobians_and_drifts_match_finite_differences(solo12):
     q_next = pin.integrate(model, q, FD_STEP * v)
     np.testing.assert_allclose(J @ v, (points(q_next) - p) / FD_STEP, atol=FD_TOLERANCE)
     # Jdot v: derivative of the body-point velocity J(q) v along the motion, at constant v
-    gauss_problem(model, data, q_next, v, np.zeros(model.nv), dt=1e-3)
+    compute_dynamics(model, data, q_next, v, np.zeros(model.nv), dt=1e-3)
     J_next = point_jacobians(data, masks, np.array(joints), world, points(q_next))
     np.testing.assert_allclose(drift, (J_next @ v - J @ v) / FD_STEP, atol=FD_TOLERANCE * 10)
 
@@ -53,7 +55,7 @@ def test_relative_point_jacobians_are_differences_of_the_two_bodies(solo12):
     data = model.createData()
     rng = np.random.default_rng(5)
     q = pin.randomConfiguration(model, -np.ones(model.nq), np.ones(model.nq))
-    gauss_problem(model, data, q, rng.normal(size=model.nv), np.zeros(model.nv), dt=1e-3)
+    compute_dynamics(model, data, q, rng.normal(size=model.nv), np.zeros(model.nv), dt=1e-3)
     masks = support_masks(model)
     joints = np.array([model.getJointId("FL_KFE"), model.getJointId("FL_KFE")])
     others = np.array([model.getJointId("FR_KFE"), model.getJointId("FL_HAA")])
@@ -68,9 +70,9 @@ def test_relative_point_jacobians_are_differences_of_the_two_bodies(solo12):
 
 
 def test_dynamics_match_pinocchio(solo12):
-    """Both levels' free Gauss problems: a_free is ABA's (actuated-joint torques padded), M is CRBA's,
-    x_free is a_free (acceleration level) or v + dt a_free (velocity level), g = -M x_free = -F or
-    -(M v + dt F) with F = tau - b."""
+    """Both levels' free Gauss problems, by both orders of the dynamics stage: M is CRBA's, x_free is
+    ABA's acceleration (acceleration level) or v + dt times it (velocity level), g = -F or
+    -(M v + dt F) with F = tau - b; actuated-joint torques are padded."""
     model = solo12.model
     data = model.createData()
     rng = np.random.default_rng(4)
@@ -79,13 +81,33 @@ def test_dynamics_match_pinocchio(solo12):
     ref = model.createData()
     for tau_given in (tau, tau[6:]):
         tau_ref = tau if len(tau_given) == model.nv else np.concatenate([np.zeros(6), tau[6:]])
-        a = free_acceleration(model, data, q, v, tau_given)
-        np.testing.assert_allclose(a, pin.aba(model, ref, q, v, tau_ref), atol=1e-9)
+        a = pin.aba(model, ref, q, v, tau_ref)
         F = tau_ref - pin.nonLinearEffects(model, ref, q, v)
-        acceleration = gauss_problem(model, data, q, v, a, dt=None)
+        acceleration = compute_dynamics(model, data, q, v, tau_given, dt=None)
         np.testing.assert_allclose(acceleration.M, pin.crba(model, ref, q), atol=1e-12)
-        np.testing.assert_allclose(acceleration.x_free, a, atol=1e-12)
-        np.testing.assert_allclose(acceleration.g, -F, atol=1e-8)
-        velocity = gauss_problem(model, data, q, v, a, dt=dt)
-        np.testing.assert_allclose(velocity.x_free, v + dt * a, atol=1e-12)
-        np.testing.assert_allclose(velocity.g, -(velocity.M @ v + dt * F), atol=1e-8)
+        np.testing.assert_allclose(acceleration.x_free, a, atol=1e-9)
+        np.testing.assert_allclose(acceleration.g, -F, atol=1e-9)
+        cholesky_first = compute_dynamics(model, data, q, v, tau_given, dt=dt)
+        aba_first = gauss_problem(model, data, q, v, free_acceleration(model, data, q, v, tau_given), dt)
+        for velocity in (cholesky_first, aba_first):
+            np.testing.assert_allclose(velocity.x_free, v + dt * a, atol=1e-12)
+            np.testing.assert_allclose(velocity.g, -(velocity.M @ v + dt * F), atol=1e-9)
+
+
+def test_the_stage_takes_the_order_the_last_step_needed(solo12):
+    """Free flight runs ABA alone; a step after one that posed a problem runs CRBA + RNEA + Cholesky
+    at once; either way the problem, when asked for, is the same."""
+    model = solo12.model
+    stage, reference = DynamicsStage(model, model.createData()), model.createData()
+    rng = np.random.default_rng(6)
+    q, v, tau, dt = solo12.configuration("standing"), rng.normal(size=model.nv), rng.normal(size=12), 1e-3
+    expected = compute_dynamics(model, reference, q, v, tau, dt)
+    for posed_before in (True, False, True):
+        x_free = stage.free_motion(q, v, tau, dt)
+        assert (stage._dynamics is not None) == posed_before
+        np.testing.assert_allclose(x_free, expected.x_free, atol=1e-12)
+        if posed_before:
+            continue  # this step poses nothing: the next runs ABA alone
+        problem = stage.problem()
+        np.testing.assert_allclose(problem.g, expected.g, atol=1e-9)
+        np.testing.assert_allclose(problem.M, expected.M, atol=1e-12)

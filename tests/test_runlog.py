@@ -63,6 +63,29 @@ def test_interrupted_run_keeps_the_steps_made(tmp_path):
     assert log.steps == 120 and len(log.t) == 121
 
 
+def test_a_ctrl_c_inside_compiled_code_is_an_interruption(tmp_path):
+    """A Ctrl-C that lands while numba converts a kernel's result surfaces as "SystemError: ...
+    returned a result with an exception set", the KeyboardInterrupt as its context (seen in the CLI
+    test): the run treats it as the interruption it is."""
+    out = tmp_path / "run.npz"
+    spec = _short("ball_bounce", 500)
+    control = spec.controller
+
+    def interrupt_inside_a_kernel_at_step_80(state):
+        if round(state.t / spec.options.dt) == 80:
+            try:
+                raise KeyboardInterrupt
+            except KeyboardInterrupt:
+                raise SystemError("CPUDispatcher returned a result with an exception set")  # noqa: B904
+        return control(state)
+
+    spec.controller = interrupt_inside_a_kernel_at_step_80
+    with pytest.raises(KeyboardInterrupt):
+        gaussim.run(spec, out)
+    log = gaussim.RunLog.load(out)
+    assert not log.complete and "interrupted" in log.reason and log.steps == 80
+
+
 def test_failed_run_keeps_the_steps_made_and_says_why(tmp_path):
     out = tmp_path / "run.npz"
     spec = _short("box_incline", 300)

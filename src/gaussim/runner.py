@@ -69,6 +69,10 @@ def run(
         _save_and_close(log, out, progress)
         raise
     except Exception as err:  # a GaussimError, or a bug: either way the steps made are kept
+        if _interrupted(err):  # a Ctrl-C that arrived inside a compiled call comes out as its SystemError
+            log.finish(False, f"interrupted (Ctrl-C) at step {step}, t = {state.t:.6g} s")
+            _save_and_close(log, out, progress)
+            raise KeyboardInterrupt from err
         log.finish(False, f"{type(err).__name__} at step {step}, t = {state.t:.6g} s: {err}")
         _save_and_close(log, out, progress)
         raise
@@ -76,6 +80,17 @@ def run(
     log.wall_time = time.perf_counter() - start
     _save_and_close(log, out, progress)
     return log
+
+
+def _interrupted(err: BaseException) -> bool:
+    """True when a KeyboardInterrupt caused ``err`` (numba turns one raised while it converts a
+    result into "SystemError: ... returned a result with an exception set")."""
+    cause: BaseException | None = err
+    while cause is not None:
+        if isinstance(cause, KeyboardInterrupt):
+            return True
+        cause = cause.__cause__ or cause.__context__
+    return False
 
 
 def _save_and_close(log: RunLog, out: str | Path | None, progress: TextIO | None) -> None:

@@ -24,7 +24,7 @@ from .assembly import assemble
 from .collision import NO_CONTACTS, ContactDetector, Contacts
 from .constraints import BilateralModule, ContactModule, LimitModule
 from .constraints.base import ConstraintModule, Context, Level, Rows
-from .dynamics import Dynamics, free_acceleration, free_velocity, gauss_problem
+from .dynamics import Dynamics, DynamicsStage
 from .exceptions import InvalidState, SolverError
 from .integrator import integrate
 from .linalg import finite
@@ -49,6 +49,7 @@ class Simulator:
         self.model = scene.robot.model.copy()
         self.model.gravity.linear = scene.gravity
         self.data = self.model.createData()
+        self.dynamics = DynamicsStage(self.model, self.data)
         self.detector = ContactDetector(scene, self.options.contact_margin) if scene.pairs else None
         self.modules = self._modules(scene, self.options)
         # modules whose rows do not come from detected contacts: with one, every step poses the QP
@@ -153,22 +154,23 @@ class Simulator:
         mark = report.marks.append
         mark(("", _clock()))
         acceleration = o.scheme == "acceleration"
-        a_free = free_acceleration(self.model, self.data, state.q, state.v, tau)
+        x_free = self.dynamics.free_motion(state.q, state.v, tau, None if acceleration else o.dt)
         mark(("dynamics", _clock()))
         contacts = self.detector.detect(self.data) if self.detector else NO_CONTACTS
         mark(("collision", _clock()))
         if acceleration:
-            dyn = self._problem(state.q, state.v, a_free, None, report)
+            dyn = self.dynamics.problem()
             v = self._impact(state, dyn.M, contacts, report)
             if v is not state.v:
-                a_free = free_acceleration(self.model, self.data, state.q, v, tau)
-                dyn = self._problem(state.q, v, a_free, None, report)
+                self.dynamics.free_motion(state.q, v, tau, None)
+                dyn = self.dynamics.problem()
             v_next = v + o.dt * self._gauss("acceleration", state.q, v, dyn, contacts, report, 1.0)
         elif len(contacts.gap) or self._rows_without_contact:
-            dyn = self._problem(state.q, state.v, a_free, o.dt, report)
-            v_next = self._gauss("velocity", state.q, state.v, dyn, contacts, report, 1.0 / o.dt)
+            v_next = self._gauss(
+                "velocity", state.q, state.v, self._problem(report), contacts, report, 1 / o.dt
+            )
         else:  # nothing can restrict the motion: no Gauss problem to pose
-            v_next = free_velocity(state.v, a_free, o.dt)
+            v_next = x_free
         mark(("", _clock()))
         q_next = integrate(self.model, state.q, v_next, o.dt)
         mark(("integrate", _clock()))
@@ -178,12 +180,10 @@ class Simulator:
         self._last_state = State.adopt(state.t + o.dt, q_next, v_next)  # both arrays are this step's own
         return self._last_state
 
-    def _problem(
-        self, q: np.ndarray, v: np.ndarray, a_free: np.ndarray, dt: float | None, report: StepReport
-    ) -> Dynamics:
-        """The free Gauss problem of the velocity level (``dt``) or the acceleration level (None)."""
+    def _problem(self, report: StepReport) -> Dynamics:
+        """The step's free Gauss problem (its CRBA, when the free motion skipped it, timed as dynamics)."""
         report.marks.append(("", _clock()))
-        dyn = gauss_problem(self.model, self.data, q, v, a_free, dt)
+        dyn = self.dynamics.problem()
         report.marks.append(("dynamics", _clock()))
         return dyn
 
