@@ -68,3 +68,166 @@ def test_non_finite_velocity_never_reaches_the_state(sim, ball, monkeypatch):
     with pytest.raises(gaussim.SolverError, match="non-finite velocity"):
         sim.step(state)
     assert np.isfinite(state.q).all() and sim.last_step is None
+
+
+def test_non_unit_quaternion(sim, ball):
+    q = at_height(ball, 1.0)
+    q[3:7] = [0, 0, 0, 2.0]
+    with pytest.raises(
+        gaussim.InvalidState, match=r"q\[3:7\] of joint 'root_joint' must be a unit quaternion"
+    ):
+        sim.reset(q)
+
+
+def test_unknown_robot_lists_choices():
+    with pytest.raises(gaussim.RobotNotFound, match=r"no robot 'solo13'.*known names:.*solo12"):
+        gaussim.load_robot("solo13")
+    with pytest.raises(gaussim.RobotNotFound, match=r"no robot 'missing.urdf'"):
+        gaussim.load_robot("missing.urdf")
+
+
+def test_malformed_urdf_names_the_file(tmp_path):
+    path = tmp_path / "broken.urdf"
+    path.write_text("<robot name='x'><link name='a'>")
+    with pytest.raises(gaussim.InvalidRobot, match=r"broken.urdf: not well-formed XML .*line 1"):
+        gaussim.load_robot(path)
+
+
+_URDF = """<?xml version="1.0"?>
+<robot name="r">
+  <link name="base">
+    <inertial>
+      <mass value="{mass}"/><inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" izz="0.1"/>
+    </inertial>
+    <collision><origin xyz="{origin}"/><geometry>{geometry}</geometry></collision>
+  </link>
+  <link name="arm">{arm}</link>
+  <joint name="j" type="{joint}"><parent link="base"/><child link="arm"/><axis xyz="0 0 1"/>
+    <limit lower="-1" upper="1" effort="1" velocity="1"/></joint>
+</robot>
+"""
+_ARM = (
+    '<inertial><mass value="1"/><inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" izz="0.1"/></inertial>'
+)
+_GOOD = {
+    "mass": "1",
+    "origin": "0 0 0",
+    "geometry": '<box size="0.1 0.1 0.1"/>',
+    "arm": _ARM,
+    "joint": "revolute",
+}
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        ({"origin": "0 nan 0"}, r"link 'base': <origin xyz> must be 3 finite number\(s\), got '0 nan 0'"),
+        ({"geometry": '<box size="0.1 0.1"/>'}, r"link 'base': <box size> must be 3 finite"),
+        ({"mass": "-2"}, r"link 'base': negative mass -2"),
+        ({"mass": "inf"}, r"link 'base': <mass value> must be 1 finite"),
+        ({"joint": "screwy"}, r"joint 'j' has type 'screwy'; known: revolute"),
+        (
+            {"geometry": '<mesh filename="meshes/foot.stl"/>'},
+            r"link 'base': mesh file 'meshes/foot.stl' not found",
+        ),
+        ({"arm": ""}, r"mass matrix is not positive definite"),  # a moving body with no inertia
+    ],
+    ids=[
+        "nan-origin",
+        "short-size",
+        "negative-mass",
+        "infinite-mass",
+        "joint-type",
+        "missing-mesh",
+        "no-inertia",
+    ],
+)
+def test_malformed_urdf_names_the_element(tmp_path, change, message):
+    """Each fault names the file and the element (urdfdom alone drops a collision whose origin does
+    not parse, without an error: that robot fell through the ground)."""
+    path = tmp_path / "robot.urdf"
+    path.write_text(_URDF.format(**{**_GOOD, **change}))
+    with pytest.raises(gaussim.InvalidRobot, match=message) as info:
+        gaussim.load_robot(path, floating_base=True)
+    assert str(path) in str(info.value)
+
+
+def test_the_well_formed_urdf_of_those_loads(tmp_path):
+    path = tmp_path / "robot.urdf"
+    path.write_text(_URDF.format(**_GOOD))
+    assert gaussim.load_robot(path, floating_base=True).model.nv == 7
+
+
+def test_unknown_frame_and_geometry_list_choices(ball, solo12):
+    with pytest.raises(gaussim.FrameNotFound, match=r"no frame 'FL_TOE'.*FL_FOOT"):
+        gaussim.Scene(solo12, bilaterals=[gaussim.Anchor("FL_TOE", (0, 0, 0))])
+    with pytest.raises(gaussim.GeometryNotFound, match=r"no collision geometry 'FL_TOE_0'.*FL_FOOT_0"):
+        gaussim.Scene(solo12, ground=gaussim.Ground(), contacts=[("FL_TOE_0", "ground")])
+    with pytest.raises(gaussim.GeometryNotFound, match=r"no obstacle 'table'.*ground"):
+        gaussim.Scene(ball, ground=gaussim.Ground(), contacts=[("ball_0", "table")])
+    with pytest.raises(gaussim.FrameNotFound, match=r"no configuration 'sitting'.*standing"):
+        solo12.configuration("sitting")
+
+
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [
+        ("dt", -1e-3),
+        ("dt", 0.0),
+        ("dt", np.nan),
+        ("scheme", "implicit"),
+        ("friction_mode", "cone"),
+        ("friction_facets", 2),
+        ("friction_facets", 4.0),
+        ("stabilisation", 0.0),
+        ("eps_abs", -1.0),
+        ("max_iter", 0),
+        ("on_failure", "ignore"),
+        ("contact_margin", -1.0),
+    ],
+)
+def test_bad_options_name_the_field(field, value):
+    with pytest.raises(gaussim.InvalidOptions, match=rf"^{field}: "):
+        gaussim.Options(**{field: value})
+
+
+def test_unknown_option_lists_known():
+    with pytest.raises(gaussim.InvalidOptions, match=r"unknown option; known:.*dt"):
+        gaussim.Options().replace(timestep=1e-3)
+
+
+@pytest.mark.parametrize(
+    ("field", "kwargs"),
+    [
+        ("ground.friction", {"friction": -0.1}),
+        ("ground.restitution", {"restitution": 1.5}),
+        ("ground.normal", {"normal": (0, 0, 0)}),
+    ],
+)
+def test_bad_materials_name_the_field(field, kwargs):
+    with pytest.raises(gaussim.InvalidOptions, match=rf"^{field}: "):
+        gaussim.Ground(**kwargs)
+
+
+def test_non_convergence_is_reported_or_raised(box):
+    scene = gaussim.Scene(box, ground=gaussim.Ground())
+    strict = gaussim.Simulator(scene, gaussim.Options(max_iter=1))
+    q = at_height(box, 0.05)
+    with pytest.raises(gaussim.SolverError, match="did not converge: PROXQP_MAX_ITER_REACHED"):
+        for _ in range(5):
+            strict.step(strict.reset(q))
+    lenient = gaussim.Simulator(scene, gaussim.Options(max_iter=1, on_failure="report"))
+    state = lenient.step(lenient.reset(q))
+    assert not lenient.last_step.converged
+    assert lenient.last_step.certificates[-1].status == "PROXQP_MAX_ITER_REACHED"
+    assert np.all(np.isfinite(state.q))
+
+
+def test_infeasible_constraints_name_the_rows(ball):
+    """A ball anchored 0.5 m below the ground: both cannot hold."""
+    scene = gaussim.Scene(ball, ground=gaussim.Ground(), bilaterals=[gaussim.Anchor("ball", (0, 0, -0.5))])
+    sim = gaussim.Simulator(scene)
+    with pytest.raises(gaussim.InfeasibleConstraints) as info:
+        sim.step(sim.reset(at_height(ball, 0.1)))
+    assert any(row.startswith("contact ball_0/ground") for row in info.value.rows)
+    assert any(row.startswith("anchor ball") for row in info.value.rows)

@@ -188,7 +188,13 @@ def point_jacobians(
     the point moves at v_O + w x p over the columns of the joint's ancestors, and the ancestors the
     two bodies share cancel.
     """
-    return point_jacobians_from(data.J, masks, joints, other_joints, points)
+    return point_jacobians_from(joint_jacobians(data), masks, joints, other_joints, points)
+
+
+def joint_jacobians(data: pin.Data) -> np.ndarray:
+    """data.J, shape (6, nv), as a view (eigenpy returns a 6 x 1 matrix as a vector of shape (6,): a
+    one-dof robot's)."""
+    return data.J.reshape(6, -1)
 
 
 @njit(cache=True)

@@ -18,7 +18,8 @@ from .options import Options
 _proxqp = proxsuite.proxqp
 _STATUS = {status: status.name for status in _proxqp.QPSolverOutput.__members__.values()}
 _SOLVED = _proxqp.QPSolverOutput.PROXQP_SOLVED  # compared by identity: hashing the enum costs more
-# A row whose residual exceeds this at ProxQP's closest-feasible point is named as conflicting.
+# A row violated by more than this at ProxQP's last point, or an inequality within it of its bound, is
+# named as involved in an infeasibility.
 INFEASIBLE_ROW_TOLERANCE = 1e-6
 INFEASIBLE = ("PROXQP_PRIMAL_INFEASIBLE", "PROXQP_SOLVED_CLOSEST_PRIMAL_FEASIBLE", "PROXQP_DUAL_INFEASIBLE")
 # A solution is accepted when its relative KKT residual (see Certificate) is below KKT_RTOL * eps_abs.
@@ -247,7 +248,7 @@ class GaussSolver:
         c = solution.certificate
         finite = math.isfinite(c.kkt_residual)  # NaN or inf anywhere in x or the multipliers shows there
         if c.status in ("PROXQP_PRIMAL_INFEASIBLE", "PROXQP_SOLVED_CLOSEST_PRIMAL_FEASIBLE"):
-            rows = self._violated(problem, solution.x)
+            rows = self._involved(problem, solution.x)
             raise InfeasibleConstraints(
                 f"the admissible set is empty ({c.status}); conflicting rows: {', '.join(rows) or 'unknown'}",
                 rows,
@@ -265,10 +266,12 @@ class GaussSolver:
             )
 
     @staticmethod
-    def _violated(problem: GaussProblem, x: np.ndarray) -> list[str]:
+    def _involved(problem: GaussProblem, x: np.ndarray) -> list[str]:
+        """The rows behind an infeasibility, at ProxQP's last point x: the violated ones, and the
+        inequalities at their bound (a joint limit that holds while the anchor it blocks is violated)."""
         names = []
         eq = np.abs(problem.A @ x - problem.b)
         names += [n for n, r in zip(problem.labels(True), eq) if r > INFEASIBLE_ROW_TOLERANCE]
         ineq = problem.l - problem.C @ x
-        names += [n for n, r in zip(problem.labels(False), ineq) if r > INFEASIBLE_ROW_TOLERANCE]
+        names += [n for n, r in zip(problem.labels(False), ineq) if r > -INFEASIBLE_ROW_TOLERANCE]
         return names

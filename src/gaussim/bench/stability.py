@@ -197,6 +197,90 @@ def stack(ratio: float, heavy: str, seconds: float) -> Row:
     return _guard("mass ratio stack", setting, body)
 
 
+def redundant_box(seconds: float = 2.0) -> Row:
+    """A box resting flat on the ground (four coplanar corners, 12 force unknowns for 6 dofs): the
+    report flags the forces as not unique, and they do not chatter: after 0.5 s no corner's normal
+    force changes by more than 1 % of the weight from a step to the next, and their sum is the weight
+    within 1e-6."""
+    setting = f"{seconds:g} s"
+
+    def body() -> Row:
+        box = load_robot("box", floating_base=True)
+        sim = Simulator(Scene(box, ground=Ground()), Options())
+        q = box.neutral()
+        q[2] = BOX_HALF_HEIGHT
+        state, weight = sim.reset(q), box.mass * G
+        previous, jump, balance, flagged = None, 0.0, 0.0, True
+        for _ in range(round(seconds / 1e-3)):
+            state = sim.step(state)
+            report = sim.last_step
+            assert report is not None
+            forces = np.array([c.normal_force for c in report.contacts])
+            if state.t > 0.5:
+                flagged = flagged and report.redundant
+                balance = max(balance, abs(forces.sum() - weight) / weight)
+                if previous is not None and len(previous) == len(forces):
+                    jump = max(jump, float(np.abs(forces - previous).max()) / weight)
+            previous = forces
+        passed = flagged and jump < 0.01 and balance < 1e-6
+        result = f"largest force jump {jump:.1e} mg, balance {balance:.1e}, flagged redundant: {flagged}"
+        return Row("redundant contacts", setting, result, passed)
+
+    return _guard("redundant contacts", setting, body)
+
+
+def duplicate_loop(seconds: float = 1.0) -> Row:
+    """The four-bar loop closure declared twice (rank-deficient equality rows): it runs, and the loop
+    stays closed within 1e-6 m."""
+    setting = f"{seconds:g} s, the loop declared twice"
+
+    def body() -> Row:
+        import pinocchio as pin
+
+        spec = load_scene(SCENES_DIR / "fourbar.toml")
+        loops = [*spec.scene.bilaterals, *spec.scene.bilaterals]
+        sim = Simulator(Scene(spec.robot, bilaterals=loops, gravity=tuple(spec.scene.gravity)), spec.options)
+        model, data = spec.robot.model, spec.robot.model.createData()
+        tip, anchor = model.getFrameId("tip"), model.getFrameId("anchor")
+        state, drift = sim.reset(spec.initial.q, spec.initial.v), 0.0
+        for _ in range(round(seconds / sim.options.dt)):
+            state = sim.step(state)
+            pin.framesForwardKinematics(model, data, state.q)
+            drift = max(
+                drift, float(np.linalg.norm(data.oMf[tip].translation - data.oMf[anchor].translation))
+            )
+        return Row("duplicate constraints", setting, f"closure drift {drift:.1e} m", drift < 1e-6)
+
+    return _guard("duplicate constraints", setting, body)
+
+
+def elastic_bounce(dt: float = 1e-3) -> Row:
+    """A ball dropped from 1 m onto ground of restitution 1: its first rebound reaches 1 m within
+    2 |v_impact| dt (the impact is resolved up to a step early or late)."""
+    setting = f"e = 1, dt = {dt:g}"
+
+    def body() -> Row:
+        ball = load_robot("ball", floating_base=True)
+        radius = float(ball.collision_model.geometryObjects[0].geometry.radius)
+        sim = Simulator(Scene(ball, ground=Ground(restitution=1.0)), Options(dt=dt))
+        q = ball.neutral()
+        q[2] = radius + 1.0
+        state, apex, rising = sim.reset(q), 0.0, False
+        while state.t < 3.0:
+            state = sim.step(state)
+            rising = rising or state.v[2] > 0
+            if rising:
+                apex = max(apex, state.q[2] - radius)
+                if state.v[2] < 0:
+                    break
+        bound = 2 * np.sqrt(2 * G) * dt
+        return Row(
+            "restitution", setting, f"rebound {apex:.4f} m of 1 m (bound {bound:.1e})", abs(apex - 1) <= bound
+        )
+
+    return _guard("restitution", setting, body)
+
+
 def long_pendulum(steps: int) -> Row:
     """A passive pendulum (1 m, 1 kg) released at 1 rad, ``steps`` steps of 1 ms: finite, its energy
     error bounded by omega dt (relative to m g l; semi-implicit Euler is symplectic: its energy
@@ -266,6 +350,9 @@ def cases(long: bool = False) -> Iterator[Callable[[], Row]]:
             yield partial(fast_impact, speed, scheme)
     for mu in (0.0, 1e-6, 10.0, 1e3):
         yield partial(friction_extremes, mu)
+    yield partial(elastic_bounce)
+    yield partial(redundant_box)
+    yield partial(duplicate_loop)
     for ratio in (1.0, 1e2, 1e4, 1e6):
         for heavy in ("top", "bottom"):
             yield partial(stack, ratio, heavy, 10.0)

@@ -44,7 +44,7 @@ class _Side:
         if self.frame is None:
             return self.position, self.rotation, np.zeros((6, ctx.model.nv)), np.zeros(6)  # type: ignore[return-value]
         placement = pin.updateFramePlacement(ctx.model, ctx.data, self.frame)
-        J = pin.getFrameJacobian(ctx.model, ctx.data, self.frame, LWA)
+        J = pin.getFrameJacobian(ctx.model, ctx.data, self.frame, LWA).reshape(6, -1)  # (6,) for one dof
         drift = (
             pin.getFrameClassicalAcceleration(ctx.model, ctx.data, self.frame, LWA).vector
             if acceleration

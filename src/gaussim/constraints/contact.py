@@ -41,7 +41,14 @@ import pinocchio as pin
 from numba import njit
 
 from ..collision import Contacts
-from ..dynamics import point_drifts, point_jacobians, point_jacobians_from, point_placements, support_masks
+from ..dynamics import (
+    joint_jacobians,
+    point_drifts,
+    point_jacobians,
+    point_jacobians_from,
+    point_placements,
+    support_masks,
+)
 from ..linalg import dot
 from .base import LEVELS, Context, Rows, bound_of, is_active
 
@@ -346,7 +353,7 @@ class ContactModule:
         """The joint Jacobians data.J (6, nv): a view of Pinocchio's array that follows every pass on
         that data (made once per data object)."""
         if data is not self._data:
-            self._data, self._joint_jacobians = data, data.J  # the reference keeps the memory alive
+            self._data, self._joint_jacobians = data, joint_jacobians(data)  # keeps the memory alive
         return self._joint_jacobians
 
     def _blank(self, m: int) -> tuple[np.ndarray, ...]:
