@@ -21,6 +21,7 @@ from ..robot import Robot, load_robot
 from ..scene import Ground, Scene
 from ..scenefile import load_scene
 from ..simulator import Simulator
+from ..state import State
 from .metrics import Recorder
 
 G = 9.81
@@ -76,17 +77,24 @@ def _ball(restitution: float) -> Callable[[Options, bool], dict[str, float]]:
             state = rec.run(state, 1.0 if quick else 2.0)
             metrics = rec.summary()
             return {**metrics, "error": max(0.0, radius - state.q[2])}
-        apex, rising = -np.inf, False  # bounce: the first rebound's apex against e^2 h
-        while state.t < 2.0:
-            state = rec.step(state)
-            rising = rising or state.v[2] > 0
-            if rising:
-                apex = max(apex, state.q[2] - radius)
-                if state.v[2] < 0:
-                    break
+        apex = rebound_apex(rec.step, state, radius, 2.0)  # bounce: the first rebound against e^2 h
         return {**rec.summary(), "error": abs(apex - restitution**2 * height), "apex": apex}
 
     return run
+
+
+def rebound_apex(step: Callable[[State], State], state: State, radius: float, until: float) -> float:
+    """The height of a falling ball's (``radius``) lowest point at the top of its first rebound,
+    stepping with ``step`` until then or until the time ``until`` [s] (-inf when it never rises)."""
+    apex, rising = -np.inf, False
+    while state.t < until:
+        state = step(state)
+        rising = rising or state.v[2] > 0
+        if rising:
+            apex = max(apex, state.q[2] - radius)
+            if state.v[2] < 0:
+                break
+    return apex
 
 
 def _ball_radius(ball: Robot) -> float:

@@ -18,11 +18,11 @@ import numpy as np
 
 from ..exceptions import GaussimError
 from ..options import Options
-from ..robot import load_robot
+from ..robot import Robot, load_robot
 from ..scene import Ground, Scene
 from ..scenefile import load_scene
 from ..simulator import Simulator
-from .cases import BOX_HALF_HEIGHT, BOX_SIDE, SCENES_DIR, two_boxes
+from .cases import BOX_HALF_HEIGHT, BOX_SIDE, SCENES_DIR, rebound_apex, two_boxes
 
 G = 9.81
 
@@ -204,6 +204,14 @@ def stack(ratio: float, heavy: str, seconds: float) -> Row:
     return _guard("mass ratio stack", setting, body)
 
 
+def _resting_box() -> tuple[Robot, Simulator, np.ndarray]:
+    """robots/box.urdf on the ground at the default options: (robot, simulator, its resting q)."""
+    box = load_robot("box", floating_base=True)
+    q = box.neutral()
+    q[2] = BOX_HALF_HEIGHT
+    return box, Simulator(Scene(box, ground=Ground()), Options()), q
+
+
 def redundant_box(seconds: float = 2.0) -> Row:
     """A box resting flat on the ground (four coplanar corners, 12 force unknowns for 6 dofs): the
     report flags the forces as not unique, and they do not chatter: after 0.5 s no corner's normal
@@ -212,10 +220,7 @@ def redundant_box(seconds: float = 2.0) -> Row:
     setting = f"{seconds:g} s"
 
     def body() -> Row:
-        box = load_robot("box", floating_base=True)
-        sim = Simulator(Scene(box, ground=Ground()), Options())
-        q = box.neutral()
-        q[2] = BOX_HALF_HEIGHT
+        box, sim, q = _resting_box()
         state, weight = sim.reset(q), box.mass * G
         previous, jump, balance, flagged = None, 0.0, 0.0, True
         for _ in range(round(seconds / 1e-3)):
@@ -272,14 +277,7 @@ def elastic_bounce(dt: float = 1e-3) -> Row:
         sim = Simulator(Scene(ball, ground=Ground(restitution=1.0)), Options(dt=dt))
         q = ball.neutral()
         q[2] = radius + 1.0
-        state, apex, rising = sim.reset(q), 0.0, False
-        while state.t < 3.0:
-            state = sim.step(state)
-            rising = rising or state.v[2] > 0
-            if rising:
-                apex = max(apex, state.q[2] - radius)
-                if state.v[2] < 0:
-                    break
+        apex = rebound_apex(sim.step, sim.reset(q), radius, 3.0)
         bound = 2 * np.sqrt(2 * G) * dt
         return Row(
             "restitution", setting, f"rebound {apex:.4f} m of 1 m (bound {bound:.1e})", abs(apex - 1) <= bound
@@ -331,10 +329,7 @@ def long_resting_box(steps: int) -> Row:
     setting = f"{steps:g} steps"
 
     def body() -> Row:
-        box = load_robot("box", floating_base=True)
-        sim = Simulator(Scene(box, ground=Ground()), Options())
-        q = box.neutral()
-        q[2] = BOX_HALF_HEIGHT
+        _, sim, q = _resting_box()
         state = sim.reset(q)
         for _ in range(steps):
             state = sim.step(state)
