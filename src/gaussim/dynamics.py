@@ -101,7 +101,7 @@ def _linear_term(M, v, tau, nle, dt):  # type: ignore[no-untyped-def]
     (dt = 0), with F = tau - b and tau's missing first entries zero; (False, ...) when tau is not
     finite."""
     F, head = -nle, len(nle) - len(tau)
-    for i in range(len(tau)):
+    for i in range(len(tau)):  # padded_torque fused with the subtraction (this runs every step)
         if not np.isfinite(tau[i]):
             return False, F, F
         F[head + i] += tau[i]
@@ -118,7 +118,7 @@ def free_acceleration(
     actuated joints), the first ones unactuated. Raises :class:`InvalidState` when it is not finite
     (checked here, in the kernel that pads it).
     """
-    full = _full_torque(tau, len(v))
+    full = padded_torque(tau, len(v))
     if full is None:
         raise InvalidState.non_finite("tau", tau)
     return pin.aba(model, data, q, v, full, _WORLD)
@@ -142,8 +142,9 @@ def free_velocity(v, a_free, dt):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def _full_torque(tau, nv):  # type: ignore[no-untyped-def]
-    """tau with its missing first entries zero, shape (nv,); None when it is not finite."""
+def padded_torque(tau, nv):  # type: ignore[no-untyped-def]
+    """tau with its missing first entries zero (a floating base's unactuated coordinates), shape (nv,);
+    None when it is not finite."""
     full, head = np.zeros(nv), nv - len(tau)
     for i in range(len(tau)):
         if not np.isfinite(tau[i]):
@@ -155,7 +156,7 @@ def _full_torque(tau, nv):  # type: ignore[no-untyped-def]
 @njit(cache=True)
 def _free_problem(M, v, a_free, dt):  # type: ignore[no-untyped-def]
     """(x_free, -M x_free) with x_free = v + dt a_free."""
-    x_free = v + dt * a_free
+    x_free = free_velocity(v, a_free, dt)
     return x_free, -matvec(M, x_free)
 
 

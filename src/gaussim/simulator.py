@@ -18,16 +18,14 @@ from time import perf_counter as _clock
 
 import numpy as np
 import pinocchio as pin
-from numba import njit
 
 from .assembly import assemble
 from .collision import NO_CONTACTS, ContactDetector, Contacts
 from .constraints import BilateralModule, ContactModule, LimitModule
 from .constraints.base import ConstraintModule, Context, Level, Rows
-from .dynamics import Dynamics, DynamicsStage
+from .dynamics import Dynamics, DynamicsStage, padded_torque
 from .exceptions import InvalidState, SolverError
 from .integrator import integrate
-from .linalg import finite
 from .options import Options
 from .report import StepReport
 from .scene import Scene
@@ -119,9 +117,10 @@ class Simulator:
         """Validate ``tau`` and return it with shape (nv,) (zeros for None; a floating robot's
         actuated-joint torques (nv - 6,) are padded with zeros on the base)."""
         tau = self._shaped_torque(tau)
-        if not finite(tau):
+        full = padded_torque(tau, self._nv)
+        if full is None:
             raise InvalidState.non_finite("tau", tau)
-        return tau if len(tau) == self._nv else _padded(tau, 6)
+        return full
 
     def _shaped_torque(self, tau: np.ndarray | None) -> np.ndarray:
         """``tau`` as a float array of shape (nv,) or, for a floating robot, (nv - 6,) (zeros for None);
@@ -255,11 +254,3 @@ class Simulator:
             parts = None
         report.blocks += [(module, rows, multipliers, scale) for module, rows, multipliers in blocks]
         return solution.x
-
-
-@njit(cache=True)
-def _padded(tau: np.ndarray, head: int) -> np.ndarray:
-    """tau after ``head`` zeros (a floating base's unactuated coordinates)."""
-    full = np.zeros(head + len(tau))
-    full[head:] = tau
-    return full
