@@ -152,6 +152,26 @@ def test_malformed_urdf_names_the_element(tmp_path, change, message):
     assert str(path) in str(info.value)
 
 
+@pytest.mark.parametrize(
+    ("content", "reason"),
+    [
+        (b"solid x\n facet nonsense 1 2\nendsolid\n", "invalid primitive type"),
+        (bytes(range(256)) * 2, "STL storage representation"),
+        (b"", "File is empty"),
+    ],
+    ids=["bad-ascii", "random-bytes", "empty"],
+)
+def test_corrupt_mesh_names_the_file_and_the_reason(tmp_path, content, reason):
+    (tmp_path / "meshes").mkdir()
+    (tmp_path / "meshes" / "foot.stl").write_bytes(content)
+    path = tmp_path / "robot.urdf"
+    path.write_text(_URDF.format(**{**_GOOD, "geometry": '<mesh filename="meshes/foot.stl"/>'}))
+    with pytest.raises(
+        gaussim.InvalidRobot, match=rf"link 'base': mesh file 'meshes/foot.stl' cannot be read: .*{reason}"
+    ):
+        gaussim.load_robot(path, floating_base=True)
+
+
 def test_the_well_formed_urdf_of_those_loads(tmp_path):
     path = tmp_path / "robot.urdf"
     path.write_text(_URDF.format(**_GOOD))

@@ -279,8 +279,24 @@ class ContactDetector:
     """
 
     def __init__(self, scene: Scene, margin: float) -> None:
-        self.margin = margin
+        self.base_margin = self.margin = margin
         self.pairs = [_Pair(scene, p) for p in scene.pairs]
+        model = scene.robot.model
+        # per pair and velocity coordinate, how fast (at most) the pair's two geometries approach per
+        # unit of |v_k| [m/s per unit]: the margin covers what a step can travel (see cover)
+        self.levers = np.array(
+            [
+                _speed_levers(model, p.joint, p.local.act(p.center), p.radius)
+                + (
+                    _speed_levers(
+                        model, p.other_joint, p.other_local.act(p.obstacle_local_center), p.obstacle_radius
+                    )
+                    if p.other_local is not None
+                    else 0.0
+                )
+                for p in self.pairs
+            ]
+        )
         self.hulls = _GroundHulls(self.pairs)
         self.others = [k for k, pair in enumerate(self.pairs) if pair.vertices is None]
         self.request = self._request(margin, coal.GJKVariant.DefaultGJK)
@@ -297,6 +313,16 @@ class ContactDetector:
         self.joint = np.array([pair.joint for pair in self.pairs], dtype=int)
         self.other_joint = np.array([pair.other_joint for pair in self.pairs], dtype=int)
         self._layouts: dict[bytes, tuple] = {}  # what does not move, per set of touching pairs
+
+    def cover(self, v: np.ndarray, x: np.ndarray, dt: float, x_scale: float) -> None:
+        """Widen the margin to what the pairs can close in one step, at velocity v and free velocity
+        x (``x_scale`` 1) or free acceleration x (``x_scale`` dt): a contact is then found the step
+        before it closes, at any speed. The margin changes by factors of 1.5 or more, so coal's
+        requests are rarely rewritten."""
+        needed = self.base_margin + _travel(self.levers, v, x, dt, x_scale)
+        if needed > self.margin or (self.margin > self.base_margin and 3 * needed < self.margin):
+            self.margin = max(self.base_margin, 1.5 * needed)
+            self.request.security_margin = self.retry_request.security_margin = self.margin
 
     def detect(self, data: pin.Data) -> Contacts:
         """Contacts at the placements held in ``data`` (after forward kinematics), in the order of the
@@ -437,6 +463,45 @@ class ContactDetector:
         """Bounding-sphere test that skips the narrow phase for far pairs."""
         gap = np.linalg.norm(placement.act(pair.center) - pair.obstacle_center) - pair.radius
         return gap - pair.obstacle_radius <= self.margin
+
+
+def _speed_levers(model: pin.Model, joint: int, center: np.ndarray, radius: float) -> np.ndarray:
+    """For a body's sphere (``center`` in the frame of ``joint``, ``radius``), bounds on the speed of
+    its points per unit |v_k|, shape (nv,): |linear| + |angular| reach for each velocity coordinate k
+    of the joint and its ancestors, with reach the farthest the sphere can be from that joint's
+    origin (the joint placements along the chain, a prismatic joint's limits, |center| + radius)."""
+    levers = np.zeros(model.nv)
+    reach = float(np.linalg.norm(center)) + radius
+    while joint > 0:
+        jmodel = model.joints[joint]
+        jdata = jmodel.createData()
+        jmodel.calc(jdata, pin.neutral(model))
+        S = np.asarray(jdata.S).reshape(6, -1)
+        for i in range(jmodel.nv):
+            levers[jmodel.idx_v + i] = np.linalg.norm(S[:3, i]) + np.linalg.norm(S[3:, i]) * reach
+        if not np.linalg.norm(S[3:]):  # prismatic: how far it carries the body
+            limits = np.concatenate(
+                [
+                    model.lowerPositionLimit[jmodel.idx_q : jmodel.idx_q + jmodel.nq],
+                    model.upperPositionLimit[jmodel.idx_q : jmodel.idx_q + jmodel.nq],
+                ]
+            )
+            reach += float(np.abs(limits[np.isfinite(limits)]).max(initial=0.0))
+        reach += float(np.linalg.norm(model.jointPlacements[joint].translation))
+        joint = model.parents[joint]
+    return levers
+
+
+@njit(cache=True)
+def _travel(levers, v, x, dt, x_scale):  # type: ignore[no-untyped-def]
+    """The farthest a pair can close in a step: max_k dt sum_i levers[k, i] (|v_i| + x_scale |x_i|)."""
+    farthest = 0.0
+    for k in range(levers.shape[0]):
+        total = 0.0
+        for i in range(levers.shape[1]):
+            total += levers[k, i] * (abs(v[i]) + x_scale * abs(x[i]))
+        farthest = max(farthest, total)
+    return dt * farthest
 
 
 def _convex(shape: coal.CollisionGeometry) -> coal.CollisionGeometry:

@@ -1,15 +1,31 @@
-"""Controllers: joint torques tau(state), shape (nv,), for runs driven from scene files."""
+"""Controllers for runs driven from scene files: joint torques tau(state), shape (nv,) (or a floating
+robot's actuated (nv - 6,)), or a :class:`Command` that adds implicit damping."""
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import NamedTuple
 
 import numpy as np
 import pinocchio as pin
 
 from .state import State
 
-Controller = Callable[[State], np.ndarray | None]
+
+class Command(NamedTuple):
+    """A step's actuation: the joints get tau - damping v+, v+ the step's new velocity
+    (``Simulator.step(state, *command)``)."""
+
+    tau: np.ndarray | None
+    damping: np.ndarray | None = None
+
+
+Controller = Callable[[State], np.ndarray | Command | None]
+
+
+def command(output: np.ndarray | Command | None) -> Command:
+    """A controller's output as a :class:`Command`."""
+    return output if isinstance(output, Command) else Command(output)
 
 
 def zero_torque(state: State) -> None:
@@ -28,11 +44,29 @@ def constant_torque(tau: np.ndarray) -> Controller:
 
 
 class PDHold:
-    """tau = kp (q_ref (-) q) - kd v on the actuated joints [N m]."""
+    """A posture hold on the actuated joints [N m]: tau = kp (q_ref (-) q) - kd v.
 
-    def __init__(self, model: pin.Model, q_ref: np.ndarray, kp: float, kd: float, actuated: slice) -> None:
+    With the time step ``dt`` it is implicit: the step evaluates it at its end, tau = kp (q_ref (-) q+)
+    - kd v+ to first order in dt, that is kp (q_ref (-) q) with damping kd + dt kp on v+ (a
+    :class:`Command`); stable at any dt. Without, it is the explicit law, which diverges once
+    (kd + dt kp) dt exceeds about twice a joint's inertia (Solo-12's lower legs at dt = 20 ms).
+    """
+
+    def __init__(
+        self,
+        model: pin.Model,
+        q_ref: np.ndarray,
+        kp: float,
+        kd: float,
+        actuated: slice,
+        dt: float | None = None,
+    ) -> None:
         self.model, self.q_ref, self.kp, self.kd, self.actuated = model, np.asarray(q_ref), kp, kd, actuated
+        size = len(range(model.nv)[actuated])
+        self.damping = None if dt is None else np.full(size, kd + dt * kp)
 
-    def __call__(self, state: State) -> np.ndarray:
+    def __call__(self, state: State) -> np.ndarray | Command:
         error = pin.difference(self.model, state.q, self.q_ref)
-        return (self.kp * error - self.kd * state.v)[self.actuated]
+        if self.damping is None:
+            return (self.kp * error - self.kd * state.v)[self.actuated]
+        return Command((self.kp * error)[self.actuated], self.damping)

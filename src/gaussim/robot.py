@@ -11,7 +11,7 @@ import numpy as np
 import pinocchio as pin
 
 from .exceptions import FrameNotFound, GeometryNotFound, InvalidRobot, RobotNotFound
-from .urdfcheck import check_urdf, missing_mesh
+from .urdfcheck import check_urdf, mesh_fault
 
 ROBOTS_DIR = Path(__file__).resolve().parents[2] / "robots"
 
@@ -61,10 +61,13 @@ class Robot:
         return self.reference_configurations[name].copy()
 
     def frame_id(self, name: str) -> int:
-        """Index of a frame; raises :class:`FrameNotFound` listing every frame name."""
-        if not self.model.existFrame(name):
+        """Index of a frame; raises :class:`FrameNotFound` listing every frame name. A URDF may give a
+        link and a joint the same name: the link's (body) frame is the one meant."""
+        matches = [i for i, frame in enumerate(self.model.frames) if frame.name == name]
+        if not matches:
             raise FrameNotFound(name, [f.name for f in self.model.frames])
-        return int(self.model.getFrameId(name))
+        bodies = [i for i in matches if self.model.frames[i].type == pin.FrameType.BODY]
+        return (bodies or matches)[0]
 
     def geometry_id(self, name: str) -> int:
         """Index of a collision geometry; raises :class:`GeometryNotFound` listing them."""
@@ -148,7 +151,7 @@ def _from_urdf(
         else:
             model, collision, visual = pin.buildModelsFromUrdf(str(path), dirs)
     except (RuntimeError, ValueError, OSError) as err:
-        cause = missing_mesh(path, dirs) or str(err)
+        cause = mesh_fault(path, dirs, str(err)) or str(err)
         raise InvalidRobot(f"{path}: cannot build a model from this URDF: {cause}") from err
     return _finish(name or path.stem, model, collision, visual, str(path), tuple(dirs), {})
 

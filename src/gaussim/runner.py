@@ -7,6 +7,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TextIO
 
+from .control import command
 from .report import StepReport
 from .runlog import RunLog
 from .scenefile import SceneSpec
@@ -47,11 +48,11 @@ def run(
     step = 0
     try:
         for step in range(steps):
-            tau = sim.full_torque(spec.controller(state))
-            state = sim.step(state, tau)
+            tau, damping = command(spec.controller(state))
+            state = sim.step(state, tau, damping)
             report = sim.last_step
             assert report is not None  # set by every step
-            log.record(state, tau, report)
+            log.record(state, sim.full_torque(tau, damping, state.v), report)
             if observer is not None:
                 observer(state, report)
             now = time.perf_counter()

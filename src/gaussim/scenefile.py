@@ -40,7 +40,7 @@ SECTIONS = {
     "contacts": {"pairs", "friction", "restitution"},
     "limits": {"enabled"},
     "bilaterals": {"type", "frame", "position", "rpy", "frames", "orientation"},
-    "control": {"type", "tau", "target", "kp", "kd"},
+    "control": {"type", "tau", "target", "kp", "kd", "implicit"},
     "simulation": {"duration"},
     "options": {f.name for f in fields(Options)},
 }
@@ -176,7 +176,8 @@ class _Reader:
         if duration <= 0:
             self.fail("simulation.duration", f"must be > 0, got {duration}")
         initial = self.initial(scene)
-        return SceneSpec(self.path, text, scene, options, initial, self.controller(robot), duration)
+        controller = self.controller(robot, options.dt)
+        return SceneSpec(self.path, text, scene, options, initial, controller, duration)
 
     def wrap(self, key: str, build, owned: bool = False):  # type: ignore[no-untyped-def]
         """Run ``build``; a GaussimError it raises is prefixed with the file and key (``owned``: the
@@ -274,7 +275,7 @@ class _Reader:
             q = self.wrap("initial.ground_clearance", lambda: place_on_ground(scene, q, clearance))
         return State(0.0, q, v)
 
-    def controller(self, robot: Robot) -> Controller:
+    def controller(self, robot: Robot, dt: float) -> Controller:
         section = self.table("control")
         kind = section.get("type", "zero")
         nv = robot.model.nv
@@ -294,7 +295,10 @@ class _Reader:
             kd = self.number("control.kd", section.get("kd", 0.0))
             if kp < 0 or kd < 0:
                 self.fail("control", f"gains must be >= 0, got kp={kp}, kd={kd}")
-            return PDHold(robot.model, q_ref, kp, kd, actuated)
+            implicit = section.get("implicit", True)
+            if not isinstance(implicit, bool):
+                self.fail("control.implicit", f"must be true or false, got {implicit!r}")
+            return PDHold(robot.model, q_ref, kp, kd, actuated, dt if implicit else None)
         self.fail("control.type", f"{kind!r} is not one of zero, constant, pd")
         raise AssertionError  # unreachable
 

@@ -6,6 +6,11 @@ velocity scheme (default), the discrete Gauss principle (Moreau-Jean time steppi
          (M from CRBA only when a module can produce rows; else v+ = v_free)
     q+ = q (+) dt v+
 
+implicit damping D (``step(..., damping=D)``, e.g. a PD drive's kd + dt kp): the joints get tau - D v+,
+    which is M + dt D in place of M and tau - D v in place of tau (Pinocchio's armature carries dt D
+    through CRBA and ABA alike); stable at any dt, where explicit damping diverges once D dt exceeds
+    about twice a joint's inertia.
+
 acceleration scheme, the paper's:
     if v is not admissible (an impact): v = argmin 1/2 (w - v)^T M (w - v) over the impulse-level rows
     a  = argmin 1/2 a^T M a - a^T F  over the acceleration-level rows (second-order tangent sets)
@@ -61,6 +66,8 @@ class Simulator:
         self._nv = self.model.nv  # read each step: a plain int, not a property of the Pinocchio model
         self._no_torque = np.zeros(self._nv)
         self._no_torque.flags.writeable = False
+        self._armature = self.model.armature.copy()  # the robot's own (rotor inertias)
+        self._damping: np.ndarray | None = None  # the implicit damping D, (nv,), whose dt D is added to it
         # (slice, what) of each joint whose configuration ends with a unit quaternion or (cos, sin)
         self._unit_parts = []
         for j in range(1, self.model.njoints):
@@ -113,16 +120,26 @@ class Simulator:
             if abs(norm - 1.0) > UNIT_TOLERANCE:
                 raise InvalidState(f"{message}, got norm {norm:.9g}; normalize it (pinocchio.normalize)")
 
-    def full_torque(self, tau: np.ndarray | None) -> np.ndarray:
-        """Validate ``tau`` and return it with shape (nv,) (zeros for None; a floating robot's
-        actuated-joint torques (nv - 6,) are padded with zeros on the base)."""
+    def full_torque(
+        self, tau: np.ndarray | None, damping: np.ndarray | None = None, v: np.ndarray | None = None
+    ) -> np.ndarray:
+        """The joint torques a step applies, shape (nv,): ``tau`` validated (zeros for None; a floating
+        robot's actuated-joint torques (nv - 6,) are padded with zeros on the base), minus D v for an
+        implicit damping D at the step's new velocity ``v``."""
         tau = self._shaped_torque(tau)
         full = padded_torque(tau, self._nv)
         if full is None:
             raise InvalidState.non_finite("tau", tau)
-        return full
+        return full if damping is None else full - self._full_damping(damping) * v
 
-    def _shaped_torque(self, tau: np.ndarray | None) -> np.ndarray:
+    def _full_damping(self, damping: np.ndarray) -> np.ndarray:
+        """An implicit damping validated, shape (nv,) (zeros on an unactuated floating base)."""
+        D = padded_torque(self._shaped_torque(damping, "damping"), self._nv)
+        if D is None or np.any(D < 0):
+            raise InvalidState(f"damping must be finite and >= 0 [N m s/rad], got {damping}")
+        return D
+
+    def _shaped_torque(self, tau: np.ndarray | None, name: str = "tau") -> np.ndarray:
         """``tau`` as a float array of shape (nv,) or, for a floating robot, (nv - 6,) (zeros for None);
         its entries are checked by the dynamics stage, which reads them."""
         if tau is None:
@@ -131,14 +148,31 @@ class Simulator:
         nv = self._nv
         if tau.shape != (nv,) and not (self._floating and tau.shape == (nv - 6,)):
             hint = f" or ({nv - 6},) for the actuated joints" if self._floating else ""
-            raise InvalidState(f"tau must have shape ({nv},){hint}, got {tau.shape}")
+            raise InvalidState(f"{name} must have shape ({nv},){hint}, got {tau.shape}")
         return tau
+
+    def _damped_torque(self, tau: np.ndarray | None, damping: np.ndarray | None, v: np.ndarray) -> np.ndarray:
+        """tau - D v, with dt D added to the model's armature, for the implicit damping D (see the
+        module's docstring); without damping, ``tau`` shaped, and the robot's own armature."""
+        if damping is None:
+            if self._damping is not None:
+                self.model.armature = self._armature
+                self._damping = None
+            return self._shaped_torque(tau)
+        D = self._full_damping(damping)
+        if self._damping is None or not np.array_equal(D, self._damping):
+            self.model.armature = self._armature + self.options.dt * D
+            self._damping = D
+        return self.full_torque(tau) - D * v
 
     # -- the step ---------------------------------------------------------------------------------
 
-    def step(self, state: State, tau: np.ndarray | None = None) -> State:
+    def step(self, state: State, tau: np.ndarray | None = None, damping: np.ndarray | None = None) -> State:
         """Advance ``state`` by one time step under joint torques ``tau`` [N m], shape (nv,) (or, for a
         floating robot, (nv - 6,): the actuated joints'); return the new state.
+
+        ``damping`` D [N m s/rad], shaped as ``tau`` and >= 0, is velocity feedback applied implicitly:
+        the joints get tau - D v+, with v+ the new velocity (stable at any time step).
 
         Raises:
             InvalidState: bad state or torque.
@@ -147,7 +181,7 @@ class Simulator:
         """
         if state is not self._last_state:
             self._check_state(state)
-        tau = self._shaped_torque(tau)
+        tau = self._damped_torque(tau, damping, state.v)
         o = self.options
         report = StepReport(state.t)
         mark = report.marks.append
@@ -155,13 +189,18 @@ class Simulator:
         acceleration = o.scheme == "acceleration"
         x_free = self.dynamics.free_motion(state.q, state.v, tau, None if acceleration else o.dt)
         mark(("dynamics", _clock()))
-        contacts = self.detector.detect(self.data) if self.detector else NO_CONTACTS
+        if self.detector:
+            self.detector.cover(state.v, x_free, o.dt, o.dt if acceleration else 1.0)
+            contacts = self.detector.detect(self.data)
+        else:
+            contacts = NO_CONTACTS
         mark(("collision", _clock()))
         if acceleration:
             dyn = self.dynamics.problem()
             v = self._impact(state, dyn.M, contacts, report)
-            if v is not state.v:
-                self.dynamics.free_motion(state.q, v, tau, None)
+            if v is not state.v:  # the damping acts on the velocity after the impact
+                damped = tau if self._damping is None else tau - self._damping * (v - state.v)
+                self.dynamics.free_motion(state.q, v, damped, None)
                 dyn = self.dynamics.problem()
             v_next = v + o.dt * self._gauss("acceleration", state.q, v, dyn, contacts, report, 1.0)
         elif len(contacts.gap) or self._rows_without_contact:

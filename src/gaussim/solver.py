@@ -248,9 +248,11 @@ class GaussSolver:
         c = solution.certificate
         finite = math.isfinite(c.kkt_residual)  # NaN or inf anywhere in x or the multipliers shows there
         if c.status in ("PROXQP_PRIMAL_INFEASIBLE", "PROXQP_SOLVED_CLOSEST_PRIMAL_FEASIBLE"):
-            rows = self._involved(problem, solution.x)
+            x, shift = self._closest_feasible(problem)
+            rows = self._involved(problem, x)
             raise InfeasibleConstraints(
-                f"the admissible set is empty ({c.status}); conflicting rows: {', '.join(rows) or 'unknown'}",
+                f"the admissible set is empty ({c.status}); conflicting rows: {', '.join(rows) or 'unknown'}"
+                f"; the smallest change of their bounds that admits a motion is {shift:.3g} (2-norm)",
                 rows,
                 c,
             )
@@ -264,6 +266,23 @@ class GaussSolver:
                 "or set on_failure='report'",
                 c,
             )
+
+    def _closest_feasible(self, problem: GaussProblem) -> tuple[np.ndarray, float]:
+        """ProxQP's closest-feasible solution of an infeasible problem (the x that needs the smallest
+        change of the bounds, in the least-squares sense) and the size of that change."""
+        p = problem
+        dims = (len(p.g), len(p.b), len(p.l))
+        qp = self._new(*dims)
+        qp.settings.primal_infeasibility_solving = True
+        qp.settings.initial_guess = _proxqp.InitialGuess.NO_INITIAL_GUESS
+        qp.settings.max_iter = self.options.max_iter
+        equalities = (p.A, p.b) if dims[1] else (None, None)
+        inequalities = (p.C, p.l, np.full(dims[2], np.inf)) if dims[2] else (None, None, None)
+        qp.init(p.H, p.g, *equalities, *inequalities)
+        qp.solve()
+        x = np.array(qp.results.x)
+        shift = np.concatenate([p.A @ x - p.b, np.minimum(p.C @ x - p.l, 0.0)])
+        return x, float(np.linalg.norm(shift))
 
     @staticmethod
     def _involved(problem: GaussProblem, x: np.ndarray) -> list[str]:

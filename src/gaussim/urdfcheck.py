@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import xml.etree.ElementTree as ET
 from collections.abc import Iterator
 from pathlib import Path
@@ -43,11 +44,14 @@ def check_urdf(path: Path) -> None:
             raise InvalidRobot(f"{path}: {where}: negative mass {element.get('value')}")
 
 
-def missing_mesh(path: Path, package_dirs: list[str]) -> str | None:
-    """The first mesh of the URDF at ``path`` that is not where Pinocchio looks for it (``package://``
-    against ``package_dirs`` and ROS_PACKAGE_PATH, other paths against the URDF's folder), named with
-    its element and where it was looked for; None when every mesh is found."""
+def mesh_fault(path: Path, package_dirs: list[str], error: str) -> str | None:
+    """What is wrong with the meshes of the URDF at ``path``, given the ``error`` Pinocchio raised
+    building it: the first mesh that is not where Pinocchio looks for it (``package://`` against
+    ``package_dirs`` and ROS_PACKAGE_PATH, other paths against the URDF's folder), or the mesh the
+    loader (assimp, through coal) could not read, with its reason; each named with its element.
+    None when neither explains the error."""
     ros = [d for d in os.environ.get("ROS_PACKAGE_PATH", "").split(os.pathsep) if d]
+    unreadable = re.search(r"Could not load resource (.+)\n(.*)", error)
     for where, element in _elements(path):
         filename = element.get("filename", "") if element.tag == "mesh" else ""
         if not filename:
@@ -58,9 +62,13 @@ def missing_mesh(path: Path, package_dirs: list[str]) -> str | None:
         else:
             local = Path(filename.removeprefix("file://"))
             candidates = [local if local.is_absolute() else path.parent / local]
-        if not any(c.is_file() for c in candidates):
+        found = [c for c in candidates if c.is_file()]
+        if not found:
             looked = ", ".join(str(c) for c in candidates)
             return f"{where}: mesh file '{filename}' not found (looked in: {looked})"
+        if unreadable and Path(unreadable[1]).resolve() == found[0].resolve():
+            reason = unreadable[2].strip() or "unknown format"
+            return f"{where}: mesh file '{filename}' cannot be read: {reason}"
     return None
 
 

@@ -49,6 +49,47 @@ def two_boxes(path: Path, bottom: float, top: float) -> Robot:
     return load_robot(path)
 
 
+_ROD = """
+  <joint name="{joint}" type="revolute"><parent link="{parent}"/><child link="{link}"/>
+    <origin xyz="0 0 {z}"/><axis xyz="0 1 0"/>
+    <limit lower="{lower}" upper="{upper}" effort="1000" velocity="10000"/></joint>
+  <link name="{link}">
+    <inertial><origin xyz="0 0 -0.25"/><mass value="{mass}"/>
+      <inertia ixx="{i}" ixy="0" ixz="0" iyy="{i}" iyz="0" izz="{i_axial}"/></inertial>
+    <collision><origin xyz="0 0 -0.25"/>
+      <geometry><cylinder radius="0.02" length="0.5"/></geometry></collision>
+  </link>"""
+
+
+def arm(path: Path, masses: tuple[float, float], elbow: tuple[float, float]) -> Robot:
+    """A two-link arm, two 0.5 m rods of ``masses`` [kg] hinged about y from a pivot 2 m up (q = 0
+    hangs straight down), the shoulder free and the elbow within ``elbow`` [rad], written as a URDF
+    at ``path``; its tip frame is ``tip``."""
+    rods = "".join(
+        _ROD.format(
+            joint=joint,
+            parent=parent,
+            link=link,
+            z=z,
+            mass=mass,
+            i=mass * 0.25 / 12,
+            i_axial=mass * 2e-4,
+            lower=lower,
+            upper=upper,
+        )
+        for joint, parent, link, z, mass, (lower, upper) in (
+            ("shoulder", "base", "upper", 2.0, masses[0], (-10.0, 10.0)),
+            ("elbow", "upper", "lower", -0.5, masses[1], elbow),
+        )
+    )
+    tip = (
+        '<joint name="tip" type="fixed"><parent link="lower"/><child link="tip"/>'
+        '<origin xyz="0 0 -0.5"/></joint><link name="tip"/>'
+    )
+    path.write_text(f'<?xml version="1.0"?>\n<robot name="arm"><link name="base"/>{rods}{tip}\n</robot>\n')
+    return load_robot(path)
+
+
 @dataclass(frozen=True)
 class Case:
     """A reference scene: ``run(options, quick)`` returns its metrics; ``error`` says what the

@@ -16,14 +16,12 @@ The wall time of each step alone is timed (reading the reports for these metrics
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
 
 import numpy as np
 
+from ..control import Controller, command
 from ..simulator import Simulator
 from ..state import State
-
-Controller = Callable[[State], np.ndarray | None]
 
 
 class Recorder:
@@ -50,9 +48,9 @@ class Recorder:
         return state
 
     def step(self, state: State, controller: Controller | None = None) -> State:
-        tau = controller(state) if controller is not None else None
+        actuation = command(controller(state) if controller is not None else None)
         start = time.perf_counter()
-        state = self.sim.step(state, tau)
+        state = self.sim.step(state, *actuation)
         self.seconds.append(time.perf_counter() - start)
         self._contacts(state)
         return state

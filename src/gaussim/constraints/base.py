@@ -133,10 +133,13 @@ def is_active(ctx: Context, phi: np.ndarray, rate: np.ndarray, margin: float) ->
 
     Velocity level: the constraint could be reached within the step (phi + dt * rate <= margin).
     Impulse and acceleration levels: the constraint is closed or closes within the step
-    (phi + dt * rate <= active_tolerance) and is not separating.
+    (phi + dt * rate <= active_tolerance) and is not separating, or it is violated (phi <
+    -active_tolerance: its stabilised bound brings it back however fast it separates, where dropping
+    it let Solo-12's feet take turns sinking at dt = 10 ms).
     """
     options = ctx.options
     closing = phi + options.dt * np.minimum(rate, 0.0)
     if ctx.level == "velocity":
         return closing <= margin
-    return (closing <= options.active_tolerance) & (rate <= options.restitution_threshold)
+    tolerance = options.active_tolerance
+    return (closing <= tolerance) & ((rate <= options.restitution_threshold) | (phi < -tolerance))

@@ -232,8 +232,9 @@ def _pyramids(  # type: ignore[no-untyped-def]
         starts[i + 1] = starts[i] + (1 if mu[i] == 0 or sliding[i] else facets)
         contact_bound[i] = bound_of(level, dt, stabilisation, gap[i], 0.0, 0.0, True)
         if not acceleration:
-            # restitution: an approaching contact leaves at -e u_n at least; De Saxce shift mu |slip|
-            if e[i] > 0 and -u_n > threshold:
+            # restitution: an approaching contact that closes within the step (under the free motion:
+            # the margin finds contacts earlier) leaves at -e u_n at least; De Saxce shift mu |slip|
+            if e[i] > 0 and -u_n > threshold and gap[i] + dt * dot(n, J3[i] @ x_free) <= 0.0:
                 contact_bound[i] = max(contact_bound[i], -e[i] * u_n)
             if not pyramid:
                 contact_bound[i] -= mu[i] * speed

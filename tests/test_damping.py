@@ -1,0 +1,100 @@
+"""Implicit damping (``Simulator.step(..., damping=D)``) and the implicit PD hold built on it."""
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+import gaussim
+from gaussim.control import Command, PDHold, command
+from gaussim.scenefile import SceneFileError
+
+from .conftest import at_height
+
+
+@pytest.mark.parametrize("scheme", ["velocity", "acceleration"])
+def test_damping_is_applied_at_the_new_velocity(solo12, scheme):
+    """v+ solves M (v+ - v) = dt (tau - b(q, v) - D v+): backward Euler in the damping, for both schemes
+    (in free flight nothing else acts)."""
+    dt = 0.02
+    sim = gaussim.Simulator(gaussim.Scene(solo12), gaussim.Options(dt=dt, scheme=scheme))
+    rng = np.random.default_rng(0)
+    q = at_height(solo12, 5.0)
+    q[7:] = solo12.configuration("standing")[7:]
+    v = rng.normal(size=solo12.model.nv)
+    tau, D = rng.normal(size=12), rng.uniform(0.1, 2.0, size=12)
+    after = sim.step(sim.reset(q, v), tau, D)
+    model, data = solo12.model, solo12.model.createData()
+    M = pin.crba(model, data, q)
+    M = np.triu(M) + np.triu(M, 1).T
+    full_tau, full_D = np.r_[np.zeros(6), tau], np.r_[np.zeros(6), D]
+    residual = M @ (after.v - v) - dt * (
+        full_tau - pin.nonLinearEffects(model, data, q, v) - full_D * after.v
+    )
+    assert np.abs(residual).max() < 1e-9
+    assert np.allclose(sim.full_torque(tau, D, after.v), full_tau - full_D * after.v)
+
+
+def test_dropping_the_damping_restores_the_robot(solo12):
+    """A step without damping after damped ones is the undamped step (the armature is restored)."""
+    q = at_height(solo12, 5.0)
+    v = np.random.default_rng(1).normal(size=solo12.model.nv)
+    damped = gaussim.Simulator(gaussim.Scene(solo12))
+    state = damped.reset(q, v)
+    damped.step(state, None, np.full(12, 3.0))
+    plain = gaussim.Simulator(gaussim.Scene(solo12))
+    plain.step(plain.reset(q, v))  # the same path through the dynamics stage (CRBA, then ABA)
+    assert np.array_equal(damped.step(state).v, plain.step(state).v)
+
+
+@pytest.mark.parametrize(
+    ("damping", "message"),
+    [
+        (np.full(12, -1.0), r"damping must be finite and >= 0"),
+        (np.full(12, np.nan), r"damping must be finite and >= 0"),
+        (np.ones(5), r"damping must have shape \(18,\) or \(12,\)"),
+    ],
+)
+def test_bad_damping_is_refused(solo12, damping, message):
+    sim = gaussim.Simulator(gaussim.Scene(solo12))
+    with pytest.raises(gaussim.InvalidState, match=message):
+        sim.step(sim.reset(at_height(solo12, 1.0)), None, damping)
+
+
+def test_implicit_pd_holds_where_the_explicit_one_diverges(solo12):
+    """Solo-12 hanging in the air at dt = 20 ms under a stiff posture hold: the explicit law diverges
+    (kd dt is several times the lower legs' inertia), the implicit one settles on its target."""
+    dt, q_ref = 0.02, solo12.configuration("standing")
+    scene = gaussim.Scene(solo12, gravity=(0.0, 0.0, 0.0))
+    q0 = q_ref.copy()
+    q0[7:] += 0.3
+    finals = {}
+    for implicit in (False, True):
+        sim = gaussim.Simulator(scene, gaussim.Options(dt=dt))
+        hold = PDHold(solo12.model, q_ref, 5.0, 0.2, slice(6, 18), dt if implicit else None)
+        state = sim.reset(q0)
+        try:
+            for _ in range(100):
+                state = sim.step(state, *command(hold(state)))
+            finals[implicit] = np.abs(pin.difference(solo12.model, state.q, q_ref)[6:]).max()
+        except gaussim.GaussimError:
+            finals[implicit] = np.inf
+    assert finals[True] < 1e-2
+    assert not finals[False] < 1.0  # diverged (or raised)
+
+
+def test_pd_command_and_scene_file_switch(tmp_path):
+    text = (
+        '[robot]\nname = "pendulum"\n[control]\ntype = "pd"\nkp = 4.0\nkd = 0.5\n{extra}'
+        "[options]\ndt = 0.01\n"
+    )
+    path = tmp_path / "s.toml"
+    path.write_text(text.format(extra=""))
+    spec = gaussim.load_scene(path)
+    out = spec.controller(gaussim.State(0.0, np.array([0.2]), np.array([1.0])))
+    assert isinstance(out, Command) and np.allclose(out.tau, [-0.8]) and np.allclose(out.damping, [0.54])
+    path.write_text(text.format(extra="implicit = false\n"))
+    explicit = gaussim.load_scene(path).controller(gaussim.State(0.0, np.array([0.2]), np.array([1.0])))
+    assert np.allclose(explicit, [-0.8 - 0.5])
+    path.write_text(text.format(extra='implicit = "yes"\n'))
+    with pytest.raises(SceneFileError, match=r"control.implicit: must be true or false"):
+        gaussim.load_scene(path)
