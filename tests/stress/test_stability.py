@@ -1,5 +1,6 @@
-"""Stress: the fast stability cases of gaussim.bench.stability, each against its own criterion (its
-docstring). The long ones (1e6 steps, dt 1e-5) run with ``gaussim stability --long``, which writes
+"""Stress: the stability cases of gaussim.bench.stability, each against its own criterion (its
+docstring). The fast ones run with the suite; the long ones (1e6 steps, dt 1e-5) carry the ``long``
+marker (``pytest -m long tests/stress``) and run in ``gaussim stability --long``, which writes
 docs/stability.md.
 
 A case known to fail (gaussim.bench.stability.KNOWN_FAILURES, with the reason) is marked xfail
@@ -23,6 +24,12 @@ CASES = [
     if name(case) in KNOWN_FAILURES
     else pytest.param(case, id=name(case))
     for case in cases()
+]
+FAST = {name(case) for case in cases()}
+CASES += [
+    pytest.param(case, id=name(case), marks=[pytest.mark.long])
+    for case in cases(long=True)
+    if name(case) not in FAST
 ]
 
 
