@@ -132,11 +132,11 @@ def _bench(args: argparse.Namespace) -> int:
 
 
 def _stability(args: argparse.Namespace) -> int:
-    from .bench.stability import cases, markdown, run
+    from .bench.stability import cases, markdown
 
     rows = []
     for case in cases(args.long):
-        row = run(case)
+        row = case()
         rows.append(row)
         print(f"{'pass' if row.passed else 'FAIL'}  {row.case}, {row.setting}: {row.result}", file=sys.stderr)
     command = "gaussim stability" + (" --long" if args.long else "") + f" --report {args.report}"

@@ -470,12 +470,12 @@ def _speed_levers(model: pin.Model, joint: int, center: np.ndarray, radius: floa
     its points per unit |v_k|, shape (nv,): |linear| + |angular| reach for each velocity coordinate k
     of the joint and its ancestors, with reach the farthest the sphere can be from that joint's
     origin (the joint placements along the chain, a prismatic joint's limits, |center| + radius)."""
-    levers = np.zeros(model.nv)
+    levers, neutral = np.zeros(model.nv), pin.neutral(model)
     reach = float(np.linalg.norm(center)) + radius
     while joint > 0:
         jmodel = model.joints[joint]
         jdata = jmodel.createData()
-        jmodel.calc(jdata, pin.neutral(model))
+        jmodel.calc(jdata, neutral)
         S = np.asarray(jdata.S).reshape(6, -1)
         for i in range(jmodel.nv):
             levers[jmodel.idx_v + i] = np.linalg.norm(S[:3, i]) + np.linalg.norm(S[3:, i]) * reach

@@ -160,9 +160,7 @@ class GaussSolver:
     def solve(self, problem: GaussProblem) -> Solution:
         """Solve the Gauss problem; raise :class:`SolverError` as ``Options.on_failure`` says."""
         p = problem
-        dims = (len(p.g), len(p.b), len(p.l))
-        equalities = (p.A, p.b) if dims[1] else (None, None)
-        inequalities = (p.C, p.l) if dims[2] else (None, None)
+        dims, equalities, inequalities = _sides(p)
         if dims != self._dims:
             self._fresh(p, dims, equalities, inequalities)
             solution = self._run(problem)
@@ -190,8 +188,7 @@ class GaussSolver:
     ) -> None:
         """A new QP object for the problem's sizes, initialised with it."""
         self._qp, self._cap = self._new(*dims), 0
-        upper = np.full(dims[2], np.inf) if dims[2] else None  # every inequality row is one-sided
-        self._qp.init(p.H, p.g, *equalities, *inequalities, upper)
+        _initialise(self._qp, p, equalities, inequalities)
         self._dims = dims
         results = self._qp.results  # views that every solve of this QP object writes into
         self._results = results.x, results.y, results.z, results.info
@@ -271,14 +268,12 @@ class GaussSolver:
         """ProxQP's closest-feasible solution of an infeasible problem (the x that needs the smallest
         change of the bounds, in the least-squares sense) and the size of that change."""
         p = problem
-        dims = (len(p.g), len(p.b), len(p.l))
+        dims, equalities, inequalities = _sides(p)
         qp = self._new(*dims)
         qp.settings.primal_infeasibility_solving = True
         qp.settings.initial_guess = _proxqp.InitialGuess.NO_INITIAL_GUESS
         qp.settings.max_iter = self.options.max_iter
-        equalities = (p.A, p.b) if dims[1] else (None, None)
-        inequalities = (p.C, p.l, np.full(dims[2], np.inf)) if dims[2] else (None, None, None)
-        qp.init(p.H, p.g, *equalities, *inequalities)
+        _initialise(qp, p, equalities, inequalities)
         qp.solve()
         x = np.array(qp.results.x)
         shift = np.concatenate([p.A @ x - p.b, np.minimum(p.C @ x - p.l, 0.0)])
@@ -286,7 +281,7 @@ class GaussSolver:
 
     @staticmethod
     def _involved(problem: GaussProblem, x: np.ndarray) -> list[str]:
-        """The rows behind an infeasibility, at ProxQP's last point x: the violated ones, and the
+        """The rows behind an infeasibility, at the closest-feasible point x: the violated ones, and the
         inequalities at their bound (a joint limit that holds while the anchor it blocks is violated)."""
         names = []
         eq = np.abs(problem.A @ x - problem.b)
@@ -294,3 +289,16 @@ class GaussSolver:
         ineq = problem.l - problem.C @ x
         names += [n for n, r in zip(problem.labels(False), ineq) if r > -INFEASIBLE_ROW_TOLERANCE]
         return names
+
+
+def _sides(p: GaussProblem) -> tuple[tuple[int, int, int], tuple, tuple]:
+    """The problem's sizes (n, n_eq, n_in) and its (A, b) and (C, l) as ProxQP takes them (None, None
+    for an empty side)."""
+    dims = (len(p.g), len(p.b), len(p.l))
+    return dims, (p.A, p.b) if dims[1] else (None, None), (p.C, p.l) if dims[2] else (None, None)
+
+
+def _initialise(qp: Any, p: GaussProblem, equalities: tuple, inequalities: tuple) -> None:
+    """Initialise a new QP object with the problem (every inequality row is one-sided: u = +inf)."""
+    upper = np.full(len(p.l), np.inf) if len(p.l) else None
+    qp.init(p.H, p.g, *equalities, *inequalities, upper)

@@ -7,7 +7,6 @@ table.
 
 from __future__ import annotations
 
-import dataclasses
 import tempfile
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -30,29 +29,17 @@ G = 9.81
 
 @dataclass(frozen=True)
 class Row:
-    """One case at one setting: what was measured, whether it meets the case's criterion, and for a
-    known failure why it fails."""
+    """One case at one setting: what was measured, and whether it meets the case's criterion."""
 
     case: str
     setting: str
     result: str
     passed: bool
-    why: str = ""
-
-
-# The failures this suite knows, by case and setting, with what was found about them.
-KNOWN_FAILURES: dict[str, str] = {}
 
 
 def name(case: Callable[[], Row]) -> str:
     """A case's name: its function and settings, ``solo12_time_step(0.02, 'velocity')``."""
     return f"{case.func.__name__}({', '.join(map(repr, case.args[:2]))})"  # type: ignore[attr-defined]
-
-
-def run(case: Callable[[], Row]) -> Row:
-    """Run a case; a failure that is known carries its reason."""
-    row = case()
-    return row if row.passed else dataclasses.replace(row, why=KNOWN_FAILURES.get(name(case), ""))
 
 
 def _guard(case: str, setting: str, body: Callable[[], Row]) -> Row:
@@ -534,8 +521,6 @@ def markdown(rows: list[Row], command: str) -> str:
     for case in ("ball drop, time step", "Solo-12 standing, time step"):
         stable = largest_stable(rows, case)
         lines.append(f"- {case}: largest stable dt " + ", ".join(f"{s} {dt:g} s" for s, dt in stable.items()))
-    lines += ["", "| case | setting | result | pass | why it fails |", "|---|---|---|---|---|"]
-    lines += [
-        f"| {r.case} | {r.setting} | {r.result} | {'pass' if r.passed else 'FAIL'} | {r.why} |" for r in rows
-    ]
+    lines += ["", "| case | setting | result | pass |", "|---|---|---|---|"]
+    lines += [f"| {r.case} | {r.setting} | {r.result} | {'pass' if r.passed else 'FAIL'} |" for r in rows]
     return "\n".join(lines) + "\n"
