@@ -61,7 +61,7 @@ def test_sign_violation_is_judged_relative_to_the_problem_scale():
         H, g = np.eye(2), np.array([load, 0.0])
         C, l = np.eye(2), np.array([0.0, 0.0])  # x >= 0: the load presses row 0, row 1 is idle
         x, multipliers = np.zeros(2), np.array([load, z])
-        return _kkt_residuals(H, g, np.zeros((0, 2)), np.zeros(0), C, l, x, np.zeros(0), multipliers)
+        return _kkt_residuals(H, g, np.zeros((0, 2)), np.zeros(0), C, l, x, np.zeros(0), multipliers)[:2]
 
     absolute, relative = residuals(1e4, -1.6e-7)
     assert absolute == pytest.approx(1.6e-7)

@@ -154,6 +154,27 @@ def padded_torque(tau, nv):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
+def damped_torque(tau, damping, v, previous):  # type: ignore[no-untyped-def]
+    """(code, tau - D v, D, D == previous) for an implicit damping D at velocity v, tau and D padded as
+    :func:`padded_torque` pads them, shape (nv,); code 1 when tau is not finite, 2 when D is not finite
+    or negative (one kernel: this runs every damped step)."""
+    nv = len(v)
+    full, D, head = np.zeros(nv), np.zeros(nv), nv - len(tau)
+    code = 0
+    for i in range(len(tau)):
+        if not np.isfinite(tau[i]):
+            code = 1
+        if not (damping[i] >= 0 and np.isfinite(damping[i])):
+            code = max(code, 2)
+        D[head + i] = damping[i]
+        full[head + i] = tau[i] - damping[i] * v[head + i]
+    same = len(previous) == nv
+    for i in range(nv):
+        same = same and D[i] == previous[i]
+    return code, full, D, same
+
+
+@njit(cache=True)
 def _free_problem(M, v, a_free, dt):  # type: ignore[no-untyped-def]
     """(x_free, -M x_free) with x_free = v + dt a_free."""
     x_free = free_velocity(v, a_free, dt)

@@ -28,7 +28,7 @@ from .assembly import assemble
 from .collision import NO_CONTACTS, ContactDetector, Contacts
 from .constraints import BilateralModule, ContactModule, LimitModule
 from .constraints.base import ConstraintModule, Context, Level, Rows
-from .dynamics import Dynamics, DynamicsStage, padded_torque
+from .dynamics import Dynamics, DynamicsStage, damped_torque, padded_torque
 from .exceptions import InvalidState, SolverError
 from .integrator import integrate
 from .options import Options
@@ -126,18 +126,26 @@ class Simulator:
         """The joint torques a step applies, shape (nv,): ``tau`` validated (zeros for None; a floating
         robot's actuated-joint torques (nv - 6,) are padded with zeros on the base), minus D v for an
         implicit damping D at the step's new velocity ``v``."""
-        tau = self._shaped_torque(tau)
-        full = padded_torque(tau, self._nv)
-        if full is None:
-            raise InvalidState.non_finite("tau", tau)
-        return full if damping is None else full - self._full_damping(damping) * v
+        return self._torques(tau, damping, v)[0]
 
-    def _full_damping(self, damping: np.ndarray) -> np.ndarray:
-        """An implicit damping validated, shape (nv,) (zeros on an unactuated floating base)."""
-        D = padded_torque(self._shaped_torque(damping, "damping"), self._nv)
-        if D is None or np.any(D < 0):
+    def _torques(
+        self, tau: np.ndarray | None, damping: np.ndarray | None, v: np.ndarray | None
+    ) -> tuple[np.ndarray, np.ndarray | None, bool]:
+        """(tau - D v, D, whether D is the damping of the last step), validated and padded to (nv,);
+        D is None without damping."""
+        tau = self._shaped_torque(tau)
+        if damping is None:
+            full = padded_torque(tau, self._nv)
+            if full is None:
+                raise InvalidState.non_finite("tau", tau)
+            return full, None, self._damping is None
+        previous = self._no_torque[:0] if self._damping is None else self._damping
+        code, full, D, same = damped_torque(tau, self._shaped_torque(damping, "damping"), v, previous)
+        if code == 1:
+            raise InvalidState.non_finite("tau", tau)
+        if code == 2:
             raise InvalidState(f"damping must be finite and >= 0 [N m s/rad], got {damping}")
-        return D
+        return full, D, same
 
     def _shaped_torque(self, tau: np.ndarray | None, name: str = "tau") -> np.ndarray:
         """``tau`` as a float array of shape (nv,) or, for a floating robot, (nv - 6,) (zeros for None);
@@ -159,11 +167,12 @@ class Simulator:
                 self.model.armature = self._armature
                 self._damping = None
             return self._shaped_torque(tau)
-        D = self._full_damping(damping)
-        if self._damping is None or not np.array_equal(D, self._damping):
+        full, D, same = self._torques(tau, damping, v)
+        if not same:
+            assert D is not None
             self.model.armature = self._armature + self.options.dt * D
             self._damping = D
-        return self.full_torque(tau) - D * v
+        return full
 
     # -- the step ---------------------------------------------------------------------------------
 
