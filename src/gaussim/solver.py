@@ -105,7 +105,8 @@ class Certificate:
         status: ProxQP's status name (``PROXQP_SOLVED`` when converged), or gaussim's:
             ``GAUSSIM_CERTIFIED_AT_MAX_ITER`` (ProxQP reached its iteration cap at a point the KKT check
             below certifies: accepted), ``GAUSSIM_KKT_CHECK_FAILED`` (ProxQP said solved, the check
-            disagrees).
+            disagrees), ``GAUSSIM_PREVIOUS_SOLUTION_CERTIFIED`` (the previous solution solves this
+            problem to eps_abs by the KKT check below: ProxQP was not called).
         iterations: ProxQP iterations.
         primal_residual: max constraint violation of the returned x.
         dual_residual: norm of the stationarity residual H x + g + A^T y + C^T z.
