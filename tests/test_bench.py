@@ -25,7 +25,9 @@ def test_quick_bench_writes_tables_plots_and_finite_metrics(tmp_path):
     text = (tmp_path / "benchmarks.md").read_text()
     for case in QUICK_CASES:
         section = text.split(f"## {case}\n")[1].split("\n## ")[0]
-        rows = [line for line in section.splitlines() if line.startswith("| gaussim |")]
+        runs, matched = section.split("Matched accuracy") if "Matched" in section else (section, "")
+        rows = [line for line in runs.splitlines() if line.startswith("| gaussim |")]
+        assert (case == "solo12") == ("| gaussim | dt = 0.005 |" in matched)
         assert len(rows) == expected // len(QUICK_CASES)
         assert all(line.count("|") == len(METRICS) + 4 for line in rows)
         assert (tmp_path / f"pareto_{case}.png").stat().st_size > 1000
@@ -84,3 +86,73 @@ def test_cli_lists_cases_and_rejects_unknown_ones(capsys):
     assert "sliding_30" in capsys.readouterr().out
     assert main(["bench", "no_such_case"]) == 2
     assert "no_such_case" in capsys.readouterr().err
+
+
+def _record(engine: str, knob: str, value: object, penetration: float, slip: float, wall: float) -> dict:
+    metrics = {"standing_penetration": penetration, "slip_per_s": slip, "us_per_step": 1.0}
+    metrics["wall_per_sim_s"] = wall
+    return {
+        "case": "solo12",
+        "engine": engine,
+        "knob": knob,
+        "value": value,
+        "status": "ok",
+        "metrics": metrics,
+    }
+
+
+def test_matched_table_takes_each_engines_cheapest_run_that_meets_the_accuracy():
+    from gaussim.bench.sweep import MATCHED, matched_table
+
+    pen, slip = MATCHED["standing_penetration"], MATCHED["slip_per_s"]
+    records = [
+        _record("gaussim", "default", None, pen / 10, slip / 10, 0.2),
+        _record("gaussim", "dt", 0.02, pen / 2, slip / 2, 0.01),
+        _record("gaussim", "dt", 0.05, pen * 3, slip / 2, 0.004),  # cheaper, but too deep
+        _record("peer", "default", None, pen * 80, slip * 100, 0.02),
+        _record("peer", "setting", "stiff", pen / 2, slip / 3, 0.05),
+        _record("other", "default", None, pen * 1.1, slip / 2, 0.1),
+        _record("other", "setting", "small dt", pen * 1.02, slip / 2, 0.5),
+    ]
+    lines = matched_table(records, "solo12").splitlines()
+    rows = {line.split(" | ")[0].strip("| "): line.split(" | ") for line in lines[2:]}
+    assert rows["gaussim"][1] == "dt = 0.02" and rows["gaussim"][-2] == "1.00"
+    assert rows["peer"][1] == "setting = stiff" and rows["peer"][-2] == "5.00"  # 0.05 / 0.01
+    assert rows["peer"][-1] == "1 of 2 |"
+    assert rows["other"][1] == "none (closest: setting = small dt)" and rows["other"][-2] == ""
+    assert matched_table([{**records[0], "metrics": {"error": 0.0}}], "solo12") is None
+
+
+def test_the_self_consistency_reference_converges_at_first_order():
+    """The pendulum against its limit, compared with gaussim at dt / 16 and eps_abs 1e-12: the
+    semi-implicit scheme is first order, so a 10x smaller step cuts the trajectory error about 10x
+    (measured: 8x; the step in which the limit is hit adds its own first-order error)."""
+    from gaussim.bench.cases import options_with
+
+    case = CASES["pendulum_limits"]
+    error = {dt: case.run(options_with(dt=dt), True)["trajectory_error"] for dt in (1e-2, 1e-3)}
+    assert 4 < error[1e-2] / error[1e-3] < 25, error
+    assert error[1e-3] < 2e-3
+
+
+@pytest.mark.parametrize("name", ["mujoco-newton-pyramidal", "mujoco-pgs-elliptic", "pybullet"])
+def test_a_peer_stands_solo12_and_reports_the_cases_metrics(name):
+    from gaussim.bench.peers import PEERS
+
+    metrics = PEERS[name].run("solo12", True, {})
+    assert {"error", "penetration", "standing_penetration", "slip_per_s"} <= set(metrics)
+    assert set(METRICS) - {"signorini", "cone", "dissipation", "iterations"} <= set(metrics)
+    assert all(math.isfinite(v) for v in metrics.values()), metrics
+    assert metrics["error"] < 1e-2, "the feet carry the robot's weight"
+    assert 0 <= metrics["standing_penetration"] <= metrics["penetration"] < 0.01  # the drop's height
+    assert metrics["slip_per_s"] < 0.05
+
+
+def test_mujoco_stiff_contacts_cut_its_resting_penetration():
+    """MuJoCo's soft contacts rest 0.8 mm deep at its defaults; the 'stiff' setting (solref 2 dt,
+    solimp 0.99-0.999) is what the matched-accuracy table needs of it."""
+    from gaussim.bench.peers import PEERS
+
+    peer = PEERS["mujoco-newton-pyramidal"]
+    soft, stiff = (peer.run("solo12", True, s)["standing_penetration"] for s in ({}, {"stiff": 1}))
+    assert soft > 5e-4 and stiff < soft / 100

@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from .cases import CASES, QUICK_CASES
-from .sweep import points, sweep, table
+from .sweep import MATCHED, matched_table, points, sweep, table
 
 __all__ = ["CASES", "QUICK_CASES", "run_bench", "report"]
 
@@ -47,15 +47,27 @@ HEADER = """# Benchmark results
 
 Made by `{command}`. Each case runs gaussim at the default options and with one knob changed at a
 time (dt, scheme, friction facets and mode, ProxQP tolerance and iteration cap, stabilisation), and
-the peers installed (MuJoCo Newton and PGS, pyramidal and elliptic cones, on Solo-12) on the same
-scene. `error` is the case's own error against its analytic reference (named above each table);
-`penetration` [m], `signorini` [W], `cone` [N] and `dissipation` [W] are the largest ContactBench
-residuals of the run (see `gaussim.bench.metrics`); `iterations` are ProxQP's per step;
-`us_per_step` (median) and its p90 time the step alone, `wall_per_sim_s` is the wall time per
-simulated second. Runs share the machine's cores (`--workers`): compare times within a table, and
-use `benchmarks/step_cost.py` for the step cost itself. The plots put error against wall time per
-simulated second, one curve per knob (through the default point) and one point per peer.
+the peers installed on the same scene (Solo-12 standing: MuJoCo Newton and PGS with pyramidal and
+elliptic cones, and PyBullet, each at its defaults and at the settings a user turns to for accuracy:
+smaller steps, MuJoCo's stiff contacts and no-slip pass; see `gaussim.bench.peers`). `error` is the
+case's own error against its reference (named above each table); `penetration` [m], `signorini` [W],
+`cone` [N] and `dissipation` [W] are the largest ContactBench residuals of the run (see
+`gaussim.bench.metrics`); `iterations` are ProxQP's per step; `us_per_step` (median) and its p90
+time the step alone, `wall_per_sim_s` is the wall time per simulated second. Where a case has no
+analytic trajectory (the pendulum, the four-bar), `trajectory_error` is |q - q_ref| at 1 s against
+gaussim at dt / 16 with eps_abs 1e-12 (self-consistency), `energy_gain` the largest rise of the
+mechanical energy relative to the largest kinetic energy. A standing robot also reports its
+`standing_penetration` [m] and `slip_per_s` [m/s], and a matched-accuracy table: each engine's
+cheapest setting that meets a given penetration and slip. Runs share the machine's cores
+(`--workers`): compare times within a table, and use `benchmarks/step_cost.py` for the step cost
+itself. The plots put error against wall time per simulated second, one curve per knob (through the
+default point) and one per peer (its settings).
 """
+
+MATCHED_HEADER = (
+    "Matched accuracy: each engine's cheapest setting (wall time per simulated second) at which the "
+    "robot stands with penetration <= {standing_penetration:g} m and foot slip <= {slip_per_s:g} m/s."
+).format(**MATCHED)
 
 
 def report(
@@ -82,9 +94,11 @@ def report(
             "",
             table(records, case),
             "",
-            f"![{case}]({link})",
-            "",
         ]
+        matched = matched_table(records, case)
+        if matched is not None:
+            lines += [MATCHED_HEADER, "", matched, ""]
+        lines += [f"![{case}]({link})", ""]
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text("\n".join(lines))
     return path

@@ -11,6 +11,7 @@ import dataclasses
 import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import cache
 from pathlib import Path
 
 import numpy as np
@@ -28,6 +29,14 @@ G = 9.81
 SCENES_DIR = Path(__file__).resolve().parents[3] / "robots" / "scenes"
 BOX_HALF_HEIGHT = 0.05  # robots/box.urdf is 0.1 m high
 BOX_SIDE = 0.2  # [m], the cubes of two_boxes
+LANDING = 0.3  # [s] a standing robot's landing, before its measured window
+
+
+def standing_window(quick: bool) -> float:
+    """How long [s] a standing robot is measured after its landing."""
+    return 0.2 if quick else 1.0
+
+
 _FREE_CUBE = """
   <joint name="{name}_joint" type="floating"><parent link="world"/><child link="{name}"/></joint>
   <link name="{name}">
@@ -199,43 +208,94 @@ def _scene_file(
     return run
 
 
+# Where a case has no analytic trajectory, its reference is gaussim itself at a sixteenth of the
+# default time step with a tight ProxQP tolerance (self-consistency), compared at REFERENCE_TIME.
+REFERENCE_DIVISOR = 16
+REFERENCE_EPS = 1e-12
+REFERENCE_TIME = 1.0  # [s]
+
+
+@cache
+def self_reference(scene: str) -> np.ndarray:
+    """The configuration at REFERENCE_TIME of the shipped scene file ``scene`` (run without its
+    controller: the cases that use this have none) simulated by gaussim at the default dt /
+    REFERENCE_DIVISOR and eps_abs REFERENCE_EPS."""
+    spec = load_scene(SCENES_DIR / f"{scene}.toml")
+    options = options_with(dt=Options().dt / REFERENCE_DIVISOR, eps_abs=REFERENCE_EPS)
+    sim = Simulator(spec.scene, options)
+    state = sim.reset(spec.initial.q, spec.initial.v)
+    for _ in range(round(REFERENCE_TIME / options.dt)):
+        state = sim.step(state)
+    return state.q
+
+
+def _trajectory(spec, sim, rec, quick, measure) -> dict[str, float]:  # type: ignore[no-untyped-def]
+    """Run a scene file for 1 s (``quick``) or 5 s, calling ``measure(state)`` after each step; the
+    summary plus ``trajectory_error``, |q (-) q_reference| at REFERENCE_TIME against
+    :func:`self_reference`, and ``energy_gain``, the largest rise of the mechanical energy above its
+    initial value, relative to the largest kinetic energy of the run."""
+    model, data = sim.model, sim.model.createData()
+    name = Path(spec.path).stem
+    state = sim.reset(spec.initial.q, spec.initial.v)
+    energy = pin.computeMechanicalEnergy(model, data, state.q, state.v)
+    gain, error, kinetic = 0.0, np.nan, 0.0
+    for _ in range(round((1.0 if quick else 5.0) / sim.options.dt)):
+        state = rec.step(state)
+        measure(state)
+        gain = max(gain, pin.computeMechanicalEnergy(model, data, state.q, state.v) - energy)
+        kinetic = max(kinetic, data.kinetic_energy)
+        if abs(state.t - REFERENCE_TIME) < sim.options.dt / 2:
+            error = float(np.linalg.norm(pin.difference(model, self_reference(name), state.q)))
+    return {**rec.summary(), "trajectory_error": error, "energy_gain": gain / max(kinetic, 1e-12)}
+
+
 def _pendulum_limits(spec, sim, rec, quick) -> dict[str, float]:  # type: ignore[no-untyped-def]
     model = spec.robot.model
     lower, upper = model.lowerPositionLimit[0], model.upperPositionLimit[0]
-    state = sim.reset(spec.initial.q, spec.initial.v)
-    violation = 0.0
-    for _ in range(round((1.0 if quick else 2.0) / sim.options.dt)):
-        state = rec.step(state)
-        violation = max(violation, state.q[0] - upper, lower - state.q[0])
-    return {**rec.summary(), "error": violation}
+    violation = [0.0]
+
+    def measure(state: State) -> None:
+        violation[0] = max(violation[0], state.q[0] - upper, lower - state.q[0])
+
+    return {**_trajectory(spec, sim, rec, quick, measure), "error": violation[0]}
 
 
 def _fourbar(spec, sim, rec, quick) -> dict[str, float]:  # type: ignore[no-untyped-def]
     model = spec.robot.model
     data = model.createData()
     tip, anchor = model.getFrameId("tip"), model.getFrameId("anchor")
-    state = sim.reset(spec.initial.q, spec.initial.v)
-    drift = 0.0
-    for _ in range(round((1.0 if quick else 5.0) / sim.options.dt)):
-        state = rec.step(state)
+    drift = [0.0]
+
+    def measure(state: State) -> None:
         pin.framesForwardKinematics(model, data, state.q)
-        drift = max(drift, float(np.linalg.norm(data.oMf[tip].translation - data.oMf[anchor].translation)))
-    return {**rec.summary(), "error": drift}
+        gap = float(np.linalg.norm(data.oMf[tip].translation - data.oMf[anchor].translation))
+        drift[0] = max(drift[0], gap)
+
+    return {**_trajectory(spec, sim, rec, quick, measure), "error": drift[0]}
 
 
 def _standing(spec, sim, rec, quick) -> dict[str, float]:  # type: ignore[no-untyped-def]
-    """A legged robot standing under its PD hold: the contact forces' vertical sum against m g at the
-    end, foot slip per second after landing."""
+    """A legged robot standing under its PD hold: LANDING seconds, then a window of 1 s (0.2 s with
+    ``quick``): the contact forces' vertical sum against m g at the end, the largest horizontal
+    displacement of a contact point over the window per second, the deepest penetration in it."""
     state = sim.reset(spec.initial.q, spec.initial.v)
-    state = rec.run(state, 0.3, spec.controller)  # land
+    state = rec.run(state, LANDING, spec.controller)
     feet = [c.point for c in sim.last_step.contacts]
-    seconds = 0.2 if quick else 1.0
-    state = rec.run(state, seconds, spec.controller)
+    seconds = standing_window(quick)
+    standing = 0.0  # the deepest penetration in the window
+    for _ in range(max(1, round(seconds / sim.options.dt))):
+        state = rec.step(state, spec.controller)
+        standing = max(standing, max((-c.gap for c in sim.last_step.contacts), default=0.0))
     weight = spec.robot.mass * G
     total = sim.last_step.total_contact_force()
     now = [c.point for c in sim.last_step.contacts]
     slip = max((float(np.linalg.norm(a[:2] - b[:2])) for a, b in zip(feet, now)), default=0.0) / seconds
-    return {**rec.summary(), "error": abs(total[2] - weight) / weight, "slip_per_s": slip}
+    return {
+        **rec.summary(),
+        "error": abs(total[2] - weight) / weight,
+        "slip_per_s": slip,
+        "standing_penetration": standing,
+    }
 
 
 def _stack(ratio: float) -> Callable[[Options, bool], dict[str, float]]:

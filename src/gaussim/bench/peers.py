@@ -1,10 +1,21 @@
-"""Peer engines for the benchmark, run on the same robots in the same sweep when installed
-(``pip install -e '.[bench]'``). MuJoCo only for now, on Solo-12 standing.
+"""Peer engines for the benchmark, run on the same robot in the same sweep when installed
+(``pip install -e '.[bench]'``): MuJoCo (Newton and PGS, pyramidal and elliptic cones) and PyBullet,
+on Solo-12 standing.
 
-MuJoCo facts this relies on (measured here): its URDF import welds the root link to the world (the
-model is saved as MJCF and given a free joint), does not resolve ``package://`` meshes (collision
-geometry is replaced by primitives: sphere feet of gaussim's foot size), and ``fusestatic="false"``
-keeps the foot bodies; Pinocchio's quaternions are xyzw, MuJoCo's wxyz.
+Each peer follows the protocol of gaussim's solo12 case (see :func:`standing`) under the same PD hold,
+at its default settings and at the settings a user turns to for accuracy (smaller steps, stiffer
+contacts, MuJoCo's no-slip pass), so that the matched-accuracy table can pick each engine's cheapest
+setting that meets a given penetration and slip. Only each engine's own step is timed.
+
+Facts this relies on (measured here):
+- MuJoCo's URDF import welds the root link to the world (the model is saved as MJCF and given a free
+  joint), does not resolve ``package://`` meshes (the feet become spheres of gaussim's foot size),
+  and ``fusestatic="false"`` keeps the foot bodies; Pinocchio's quaternions are xyzw, MuJoCo's wxyz.
+- MuJoCo's contacts are soft: at its defaults (solref 0.02 s) Solo-12 rests 0.8 mm deep at any time
+  step; a time constant of 2 dt with solimp (0.99, 0.999) stiffens them as far as dt allows.
+- PyBullet: ``URDF_USE_INERTIA_FROM_FILE`` (else it recomputes inertias from the collision shapes), its
+  default velocity motors are disabled for torque control, and it multiplies the two bodies' friction
+  coefficients (the ground gets 1, the feet 0.8); restitution is set to 0 on both.
 """
 
 from __future__ import annotations
@@ -13,33 +24,95 @@ import re
 import tempfile
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from ..robot import Robot, load_robot
+from .cases import LANDING, G, standing_window
 
-G = 9.81
 FEET = ("FL", "FR", "HL", "HR")
 KP, KD = 5.0, 0.2  # robots/scenes/solo12_standing.toml's PD hold
+CLEARANCE = 0.01  # the scene's drop [m]
+
+Setting = dict[str, float]
 
 
 @dataclass(frozen=True)
 class Peer:
-    """An engine other than gaussim: the cases it runs and how (``run(case, quick)`` -> metrics)."""
+    """An engine other than gaussim: the cases it runs, how (``run(case, quick, setting)`` -> metrics)
+    and its settings by label (the default one is ``{}``)."""
 
     cases: tuple[str, ...]
-    run: Callable[[str, bool], dict[str, float]]
+    run: Callable[[str, bool, Setting], dict[str, float]]
+    settings: dict[str, Setting] = field(default_factory=dict)
 
 
-def mujoco_model(robot: Robot, dt: float = 1e-3):  # type: ignore[no-untyped-def]
-    """Solo-12 in MuJoCo: URDF without meshes, sphere feet of gaussim's foot size, a free joint, a floor."""
-    import mujoco
+def standing(
+    control: Callable[[], None],
+    advance: Callable[[], None],
+    feet: Callable[[], np.ndarray],
+    contacts: Callable[[], tuple[float, float]],
+    dt: float,
+    quick: bool,
+    weight: float,
+) -> dict[str, float]:
+    """The solo12 case's protocol for a peer: LANDING seconds, then the standing window;
+    ``control()`` applies the PD torques (untimed), ``advance()`` steps the
+    engine (timed), ``feet()`` gives the feet's world positions (4, 3), ``contacts()`` the deepest
+    penetration [m] and the sum of the normal forces [N] now.
 
+    Returns the metrics gaussim's solo12 case reports where the peer has them: error (force balance at
+    the end, |sum f_n - m g| / m g), penetration (the whole run) and standing_penetration (the window)
+    [m], slip_per_s [m/s] (the largest horizontal displacement of a foot over the window), the step's
+    wall time (median and p90 [us], per simulated second [s])."""
+    seconds: list[float] = []
+    penetration = window_penetration = 0.0
+    window = standing_window(quick)
+    landing_steps = round(LANDING / dt)
+    start = np.zeros((len(FEET), 3))
+    for k in range(landing_steps + round(window / dt)):
+        if k == landing_steps:
+            start = feet()
+        control()
+        tic = time.perf_counter()
+        advance()
+        seconds.append(time.perf_counter() - tic)
+        depth = contacts()[0]
+        penetration = max(penetration, depth)
+        if k >= landing_steps:
+            window_penetration = max(window_penetration, depth)
+    slip = float(np.max(np.linalg.norm((feet() - start)[:, :2], axis=1))) / window
+    times = np.array(seconds)
+    return {
+        "error": abs(contacts()[1] - weight) / weight,
+        "penetration": penetration,
+        "standing_penetration": window_penetration,
+        "slip_per_s": slip,
+        "us_per_step": float(np.median(times)) * 1e6,
+        "us_per_step_p90": float(np.percentile(times, 90)) * 1e6,
+        "wall_per_sim_s": float(times.sum()) / (len(times) * dt),
+    }
+
+
+def primitive_urdf(robot: Robot) -> tuple[str, float, np.ndarray]:
+    """(Solo-12's URDF without visuals or collision meshes, the radius [m] and the centre in the lower
+    leg's frame of gaussim's foot (the ball around its collision hull))."""
     text = Path(robot.urdf).read_text()
     text = re.sub(r"<visual>.*?</visual>", "", text, flags=re.S)
     text = re.sub(r"<collision>.*?</collision>", "", text, flags=re.S)
+    geometry = robot.collision_model.geometryObjects[robot.geometry_id("FL_FOOT_0")]
+    points = np.asarray(geometry.geometry.convex.points())
+    radius = float(np.max(np.linalg.norm(points - points.mean(axis=0), axis=1)))
+    return text, radius, geometry.placement.act(points.mean(axis=0))
+
+
+def mujoco_model(robot: Robot, dt: float = 1e-3):  # type: ignore[no-untyped-def]
+    """Solo-12 in MuJoCo: sphere feet of gaussim's foot size, a free joint, a floor."""
+    import mujoco
+
+    text, radius, center = primitive_urdf(robot)
     text = text.replace(
         "</robot>", '<mujoco><compiler fusestatic="false" discardvisual="true"/></mujoco></robot>'
     )
@@ -48,11 +121,7 @@ def mujoco_model(robot: Robot, dt: float = 1e-3):  # type: ignore[no-untyped-def
         path = Path(folder) / "solo12.xml"
         mujoco.mj_saveLastXML(str(path), spec_model)
         xml = path.read_text()
-    # foot spheres: radius and centre from the collision hull of the foot in gaussim's model
-    geometry = robot.collision_model.geometryObjects[robot.geometry_id("FL_FOOT_0")]
-    points = np.asarray(geometry.geometry.convex.points())
-    radius = float(np.max(np.linalg.norm(points - points.mean(axis=0), axis=1)))
-    pos = " ".join(f"{x:.5f}" for x in geometry.placement.act(points.mean(axis=0)))
+    pos = " ".join(f"{x:.5f}" for x in center)
     for leg in FEET:
         xml = re.sub(
             rf'(<body name="{leg}_LOWER_LEG"[^>]*>)',
@@ -65,15 +134,16 @@ def mujoco_model(robot: Robot, dt: float = 1e-3):  # type: ignore[no-untyped-def
     return mujoco.MjModel.from_xml_string(xml)
 
 
-def mujoco_standing(solver: str, cone: str) -> Callable[[str, bool], dict[str, float]]:
-    """MuJoCo on Solo-12 standing under the same PD hold as gaussim's solo12 case: dropped 1 cm,
-    0.3 s to land, then measured (the same metrics where MuJoCo has them)."""
+def mujoco_standing(solver: str, cone: str) -> Callable[[str, bool, Setting], dict[str, float]]:
+    """MuJoCo on Solo-12 standing; a setting may change ``dt``, make the contacts ``stiff`` (solref
+    (2 dt, 1), solimp (0.99, 0.999, 0.001)) and run ``noslip`` iterations."""
 
-    def run(case: str, quick: bool) -> dict[str, float]:
+    def run(case: str, quick: bool, setting: Setting) -> dict[str, float]:
         import mujoco
 
         robot = load_robot("solo12")
-        model = mujoco_model(robot)
+        dt = setting.get("dt", 1e-3)
+        model = mujoco_model(robot, dt)
         model.opt.solver = {"newton": mujoco.mjtSolver.mjSOL_NEWTON, "pgs": mujoco.mjtSolver.mjSOL_PGS}[
             solver
         ]
@@ -81,50 +151,155 @@ def mujoco_standing(solver: str, cone: str) -> Callable[[str, bool], dict[str, f
             "pyramidal": mujoco.mjtCone.mjCONE_PYRAMIDAL,
             "elliptic": mujoco.mjtCone.mjCONE_ELLIPTIC,
         }[cone]
+        if setting.get("stiff"):
+            model.geom_solref[:] = (2 * dt, 1.0)
+            model.geom_solimp[:] = (0.99, 0.999, 0.001, 0.5, 2.0)
+        model.opt.noslip_iterations = int(setting.get("noslip", 0))
         data = mujoco.MjData(model)
         q_ref = robot.configuration("standing")
         data.qpos[:3] = q_ref[:3]
-        data.qpos[2] += 0.01  # the scene's ground clearance (its feet start 1 cm up, as gaussim's)
+        data.qpos[2] += CLEARANCE
         data.qpos[3:7] = [q_ref[6], *q_ref[3:6]]  # Pinocchio xyzw -> MuJoCo wxyz
         data.qpos[7:] = q_ref[7:]
-        seconds, penetration = [], 0.0
+        feet = [g for g in range(model.ngeom) if model.geom_type[g] == mujoco.mjtGeom.mjGEOM_SPHERE]
         wrench = np.zeros(6)
-        dt = model.opt.timestep
-        for _ in range(round((0.3 + (0.2 if quick else 1.0)) / dt)):
+
+        def control() -> None:
             data.qfrc_applied[6:] = KP * (q_ref[7:] - data.qpos[7:]) - KD * data.qvel[6:]
-            start = time.perf_counter()
-            mujoco.mj_step(model, data)
-            seconds.append(time.perf_counter() - start)
-            if data.ncon:
-                penetration = max(penetration, -float(data.contact.dist.min()))
-        normal = 0.0
-        for i in range(data.ncon):
-            mujoco.mj_contactForce(model, data, i, wrench)
-            normal += wrench[0] * data.contact[i].frame[2]  # the normal is the contact frame's x axis
-        weight = float(np.sum(model.body_mass)) * G
-        times = np.array(seconds)
-        return {
-            "error": abs(normal - weight) / weight,
-            "penetration": penetration,
-            "us_per_step": float(np.median(times)) * 1e6,
-            "us_per_step_p90": float(np.percentile(times, 90)) * 1e6,
-            "wall_per_sim_s": float(times.sum()) / (len(times) * dt),
-        }
+
+        def contacts() -> tuple[float, float]:
+            if not data.ncon:
+                return 0.0, 0.0
+            normal = 0.0
+            for i in range(data.ncon):
+                mujoco.mj_contactForce(model, data, i, wrench)
+                normal += wrench[0]  # the normal is the contact frame's first axis
+            return max(0.0, -float(data.contact.dist.min())), normal
+
+        return standing(
+            control,
+            lambda: mujoco.mj_step(model, data),
+            lambda: data.geom_xpos[feet].copy(),
+            contacts,
+            dt,
+            quick,
+            float(np.sum(model.body_mass)) * G,
+        )
 
     return run
 
 
+def pybullet_standing(case: str, quick: bool, setting: Setting) -> dict[str, float]:
+    """PyBullet on Solo-12 standing; a setting may change ``dt`` and the solver's ``iterations``."""
+    import pybullet as p
+
+    robot = load_robot("solo12")
+    dt = setting.get("dt", 1e-3)
+    text, radius, center = primitive_urdf(robot)
+    pos = " ".join(f"{x:.6f}" for x in center)
+    sphere = (
+        f'<collision><origin xyz="{pos}"/><geometry><sphere radius="{radius:.6f}"/></geometry></collision>'
+    )
+    for leg in FEET:
+        text = text.replace(f'<link name="{leg}_LOWER_LEG">', f'<link name="{leg}_LOWER_LEG">{sphere}')
+    client = p.connect(p.DIRECT)
+    try:
+        with tempfile.TemporaryDirectory() as folder:
+            path = Path(folder) / "solo12.urdf"
+            path.write_text(text)
+            q_ref = robot.configuration("standing")
+            base = q_ref[:3] + [0.0, 0.0, CLEARANCE]
+            body = p.loadURDF(
+                str(path), base, q_ref[3:7], flags=p.URDF_USE_INERTIA_FROM_FILE, physicsClientId=client
+            )
+        p.setGravity(0, 0, -G, physicsClientId=client)
+        p.setTimeStep(dt, physicsClientId=client)
+        p.setPhysicsEngineParameter(
+            numSolverIterations=int(setting.get("iterations", 50)), physicsClientId=client
+        )
+        plane = p.createMultiBody(
+            0, p.createCollisionShape(p.GEOM_PLANE, physicsClientId=client), physicsClientId=client
+        )
+        index = {
+            p.getJointInfo(body, j, physicsClientId=client)[1].decode(): j
+            for j in range(p.getNumJoints(body, physicsClientId=client))
+        }
+        joints = [index[robot.model.names[j]] for j in range(2, robot.model.njoints)]  # Pinocchio's order
+        legs = [index[f"{leg}_KFE"] for leg in FEET]  # the lower legs (a link's index is its joint's)
+        for j, angle in zip(joints, q_ref[7:]):
+            p.resetJointState(body, j, angle, physicsClientId=client)
+        p.changeDynamics(plane, -1, lateralFriction=1.0, restitution=0.0, physicsClientId=client)
+        for link in legs:
+            p.changeDynamics(body, link, lateralFriction=0.8, restitution=0.0, physicsClientId=client)
+        motors = p.VELOCITY_CONTROL  # PyBullet's default motors, disabled by a zero force
+        p.setJointMotorControlArray(body, joints, motors, forces=[0.0] * 12, physicsClientId=client)
+        mass = sum(p.getDynamicsInfo(body, j, physicsClientId=client)[0] for j in range(-1, len(index)))
+
+        def control() -> None:
+            states = p.getJointStates(body, joints, physicsClientId=client)
+            q, v = np.array([s[0] for s in states]), np.array([s[1] for s in states])
+            tau = KP * (q_ref[7:] - q) - KD * v
+            p.setJointMotorControlArray(body, joints, p.TORQUE_CONTROL, forces=tau, physicsClientId=client)
+
+        def feet() -> np.ndarray:
+            result = []
+            for link in legs:
+                state = p.getLinkState(body, link, physicsClientId=client)
+                rotation = np.array(p.getMatrixFromQuaternion(state[5])).reshape(3, 3)
+                result.append(np.array(state[4]) + rotation @ center)
+            return np.array(result)
+
+        def contacts() -> tuple[float, float]:
+            points = p.getContactPoints(bodyA=plane, bodyB=body, physicsClientId=client)
+            depth = max((-c[8] for c in points), default=0.0)
+            return max(0.0, depth), sum(c[9] for c in points)
+
+        return standing(
+            control,
+            lambda: p.stepSimulation(physicsClientId=client),
+            feet,
+            contacts,
+            dt,
+            quick,
+            mass * G,
+        )
+    finally:
+        p.disconnect(physicsClientId=client)
+
+
+def _mujoco_settings() -> dict[str, Setting]:
+    settings: dict[str, Setting] = {f"dt={dt:g}": {"dt": dt} for dt in (2e-3, 5e-3)}
+    for dt in (5e-3, 2e-3, 1e-3, 5e-4, 2e-4):
+        settings[f"dt={dt:g} stiff"] = {"dt": dt, "stiff": 1}
+    for dt in (5e-3, 2e-3, 1e-3):
+        settings[f"dt={dt:g} stiff noslip=10"] = {"dt": dt, "stiff": 1, "noslip": 10}
+    return settings
+
+
 PEERS: dict[str, Peer] = {
-    f"mujoco-{solver}-{cone}": Peer(("solo12",), mujoco_standing(solver, cone))
-    for solver in ("newton", "pgs")
-    for cone in ("pyramidal", "elliptic")
+    **{
+        f"mujoco-{solver}-{cone}": Peer(("solo12",), mujoco_standing(solver, cone), _mujoco_settings())
+        for solver in ("newton", "pgs")
+        for cone in ("pyramidal", "elliptic")
+    },
+    "pybullet": Peer(
+        ("solo12",),
+        pybullet_standing,
+        {
+            **{f"dt={dt:g}": {"dt": dt} for dt in (5e-3, 2e-3, 5e-4, 2e-4)},
+            "iterations=200": {"iterations": 200},
+        },
+    ),
 }
 
 
 def available() -> list[str]:
     """The peers installed on this machine."""
-    try:
-        import mujoco  # noqa: F401
-    except ImportError:
-        return []
-    return list(PEERS)
+    names = []
+    for module, prefix in (("mujoco", "mujoco-"), ("pybullet", "pybullet")):
+        try:
+            __import__(module)
+        except ImportError:
+            continue
+        names += [name for name in PEERS if name.startswith(prefix)]
+    return names

@@ -22,7 +22,7 @@ from .cases import CASES, options_with
 
 # Each knob and the values swept (the default options' value is the reference row).
 KNOBS: dict[str, list[object]] = {
-    "dt": [1e-4, 5e-4, 2e-3, 5e-3, 1e-2, 2e-2],
+    "dt": [1e-4, 5e-4, 2e-3, 5e-3, 1e-2, 2e-2, 5e-2],
     "scheme": ["acceleration"],
     "friction_facets": [8, 16],
     "friction_mode": ["pyramid", "exact"],
@@ -37,7 +37,7 @@ DEFAULT = ("default", None)
 @dataclass(frozen=True)
 class Point:
     """One run: ``engine`` ("gaussim" or a peer's name) on ``case`` with ``knob`` set to ``value``
-    (``"default"``: the default options)."""
+    (``"default"``: the default options; a peer's knob is ``"setting"``, its value a setting's label)."""
 
     case: str
     knob: str
@@ -61,10 +61,11 @@ def points(cases: Iterable[str], quick: bool, peers: Iterable[str] = ()) -> list
         ]
     from .peers import PEERS
 
-    for engine in peers:
-        result += [
-            Point(case, *DEFAULT, engine=engine, quick=quick) for case in PEERS[engine].cases if case in cases
-        ]
+    for engine in peers:  # a peer's settings are its knobs (the quick sweep runs its default only)
+        settings = [] if quick else list(PEERS[engine].settings)
+        for case in (c for c in cases if c in PEERS[engine].cases):
+            result.append(Point(case, *DEFAULT, engine=engine, quick=quick))
+            result += [Point(case, "setting", label, engine=engine, quick=quick) for label in settings]
     return result
 
 
@@ -78,7 +79,9 @@ def run_point(point: Point) -> dict:
         else:
             from .peers import PEERS
 
-            metrics = PEERS[point.engine].run(point.case, point.quick)
+            peer = PEERS[point.engine]
+            setting = {} if point.knob == "default" else peer.settings[str(point.value)]
+            metrics = peer.run(point.case, point.quick, setting)
         record["metrics"] = {k: float(v) for k, v in metrics.items()}
         record["status"] = "ok"
     except Exception as err:  # a failing point is a result: it is recorded and the sweep goes on
@@ -167,16 +170,62 @@ METRICS = (
 )
 
 
+# The accuracy at which engines are compared on a standing robot (the deepest penetration while
+# standing [m], a foot's slip [m/s]): their cheapest setting that meets it is the matched-accuracy cost.
+MATCHED = {"standing_penetration": 1e-5, "slip_per_s": 1e-4}
+
+
 def table(records: list[dict], case: str) -> str:
     """A markdown table of one case's records: a row per engine and knob setting."""
     rows = [r for r in records if r["case"] == case]
     header = "| engine | setting | " + " | ".join(METRICS) + " | status |"
     lines = [header, "|" + "---|" * 2 + "---:|" * len(METRICS) + "---|"]
     for r in rows:
-        setting = "default" if r["knob"] == "default" else f"{r['knob']} = {r['value']}"
         values = [_number(r["metrics"].get(m)) for m in METRICS]
-        lines.append(f"| {r['engine']} | {setting} | " + " | ".join(values) + f" | {r['status']} |")
+        lines.append(f"| {r['engine']} | {_setting(r)} | " + " | ".join(values) + f" | {r['status']} |")
     return "\n".join(lines)
+
+
+def matched_table(records: list[dict], case: str) -> str | None:
+    """A markdown table of each engine's cheapest run of ``case`` (least wall time per simulated
+    second) that meets MATCHED, with that time's ratio to gaussim's; an engine none of whose runs meets
+    it shows its closest (the least max_k metric_k / MATCHED_k). None when the case does not measure
+    MATCHED's metrics."""
+    rows = [r for r in records if r["case"] == case and r["status"] == "ok"]
+    if not any(set(MATCHED) <= set(r["metrics"]) for r in rows):
+        return None
+
+    def excess(r: dict) -> float:
+        return max(r["metrics"].get(k, math.inf) / bound for k, bound in MATCHED.items())
+
+    best = {}
+    for engine in dict.fromkeys(r["engine"] for r in rows):
+        mine = [r for r in rows if r["engine"] == engine]
+        meeting = [r for r in mine if excess(r) <= 1.0]
+        chosen = (
+            min(meeting, key=lambda r: r["metrics"]["wall_per_sim_s"]) if meeting else min(mine, key=excess)
+        )
+        best[engine] = (chosen, len(meeting), len(mine))
+    reference = best.get("gaussim")
+    columns = (*MATCHED, "us_per_step", "wall_per_sim_s")
+    lines = [
+        "| engine | cheapest setting that meets it | "
+        + " | ".join(columns)
+        + " | time ratio to gaussim | runs meeting it |",
+        "|---|---|" + "---:|" * (len(columns) + 2),
+    ]
+    for engine, (r, count, runs) in best.items():
+        setting = _setting(r) if count else f"none (closest: {_setting(r)})"
+        values = [_number(r["metrics"].get(m)) for m in columns]
+        ratio = ""
+        if count and reference is not None and reference[1]:
+            ratio = f"{r['metrics']['wall_per_sim_s'] / reference[0]['metrics']['wall_per_sim_s']:.2f}"
+        lines.append(f"| {engine} | {setting} | " + " | ".join(values) + f" | {ratio} | {count} of {runs} |")
+    return "\n".join(lines)
+
+
+def _setting(record: dict) -> str:
+    return "default" if record["knob"] == "default" else f"{record['knob']} = {record['value']}"
 
 
 def _number(value: float | None) -> str:
