@@ -63,6 +63,8 @@ def free_flight_cost(steps: int) -> tuple[float, float]:
     model, data = robot.model, robot.model.createData()
     full = np.zeros(model.nv)
 
+    for _ in range(200):  # warm-up (the first steps load the compiled kernels)
+        sim.step(sim.reset(q0), tau)
     state = sim.reset(q0)
     start = time.perf_counter()
     for _ in range(steps):

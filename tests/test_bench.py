@@ -135,7 +135,9 @@ def test_the_self_consistency_reference_converges_at_first_order():
     assert error[1e-3] < 2e-3
 
 
-@pytest.mark.parametrize("name", ["mujoco-newton-pyramidal", "mujoco-pgs-elliptic", "pybullet"])
+@pytest.mark.parametrize(
+    "name", ["mujoco-newton-pyramidal", "mujoco-pgs-elliptic", "pybullet", "pinocchio-admm", "pinocchio-pgs"]
+)
 def test_a_peer_stands_solo12_and_reports_the_cases_metrics(name):
     from gaussim.bench.peers import PEERS
 

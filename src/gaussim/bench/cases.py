@@ -277,10 +277,18 @@ def _fourbar(spec, sim, rec, quick) -> dict[str, float]:  # type: ignore[no-unty
 def _standing(spec, sim, rec, quick) -> dict[str, float]:  # type: ignore[no-untyped-def]
     """A legged robot standing under its PD hold: LANDING seconds, then a window of 1 s (0.2 s with
     ``quick``): the contact forces' vertical sum against m g at the end, the largest horizontal
-    displacement of a contact point over the window per second, the deepest penetration in it."""
+    displacement over the window of a material point that touched at its start, per second, the
+    deepest penetration in it."""
     state = sim.reset(spec.initial.q, spec.initial.v)
     state = rec.run(state, LANDING, spec.controller)
-    feet = [c.point for c in sim.last_step.contacts]
+    # the contact points, and where they are on their bodies: a foot that rocks or rolls does not slip
+    robot, data = spec.robot, spec.robot.model.createData()
+    pin.forwardKinematics(robot.model, data, state.q)
+    touching = [
+        (c.point, robot.collision_model.geometryObjects[robot.geometry_id(c.geometry)].parentJoint)
+        for c in sim.last_step.contacts
+    ]
+    local = [(joint, data.oMi[joint].actInv(point)) for point, joint in touching]
     seconds = standing_window(quick)
     standing = 0.0  # the deepest penetration in the window
     for _ in range(max(1, round(seconds / sim.options.dt))):
@@ -288,8 +296,9 @@ def _standing(spec, sim, rec, quick) -> dict[str, float]:  # type: ignore[no-unt
         standing = max(standing, max((-c.gap for c in sim.last_step.contacts), default=0.0))
     weight = spec.robot.mass * G
     total = sim.last_step.total_contact_force()
-    now = [c.point for c in sim.last_step.contacts]
-    slip = max((float(np.linalg.norm(a[:2] - b[:2])) for a, b in zip(feet, now)), default=0.0) / seconds
+    pin.forwardKinematics(robot.model, data, state.q)
+    moved = [data.oMi[joint].act(point) - start for (joint, point), (start, _) in zip(local, touching)]
+    slip = max((float(np.linalg.norm(d[:2])) for d in moved), default=0.0) / seconds
     return {
         **rec.summary(),
         "error": abs(total[2] - weight) / weight,

@@ -35,6 +35,7 @@ from .cases import LANDING, G, standing_window
 FEET = ("FL", "FR", "HL", "HR")
 KP, KD = 5.0, 0.2  # robots/scenes/solo12_standing.toml's PD hold
 CLEARANCE = 0.01  # the scene's drop [m]
+MARGIN = 5e-3  # [m] a foot this close to the ground is a contact of the Pinocchio peers' step
 
 Setting = dict[str, float]
 
@@ -52,7 +53,8 @@ class Peer:
 def standing(
     control: Callable[[], None],
     advance: Callable[[], None],
-    feet: Callable[[], np.ndarray],
+    feet: Callable[[], tuple[np.ndarray, np.ndarray]],
+    radius: float,
     contacts: Callable[[], tuple[float, float]],
     dt: float,
     quick: bool,
@@ -60,21 +62,25 @@ def standing(
 ) -> dict[str, float]:
     """The solo12 case's protocol for a peer: LANDING seconds, then the standing window;
     ``control()`` applies the PD torques (untimed), ``advance()`` steps the
-    engine (timed), ``feet()`` gives the feet's world positions (4, 3), ``contacts()`` the deepest
-    penetration [m] and the sum of the normal forces [N] now.
+    engine (timed), ``feet()`` gives the feet's orientations (4, 3, 3) and their spheres' centres
+    (4, 3) (``radius`` [m]) in the world, ``contacts()`` the deepest penetration [m] and the sum of
+    the normal forces [N] now.
 
     Returns the metrics gaussim's solo12 case reports where the peer has them: error (force balance at
     the end, |sum f_n - m g| / m g), penetration (the whole run) and standing_penetration (the window)
-    [m], slip_per_s [m/s] (the largest horizontal displacement of a foot over the window), the step's
+    [m], slip_per_s [m/s] (the largest horizontal displacement over the window of a foot's material
+    point that touched the ground at its start: a sphere that rolls does not slip), the step's
     wall time (median and p90 [us], per simulated second [s])."""
     seconds: list[float] = []
     penetration = window_penetration = 0.0
     window = standing_window(quick)
     landing_steps = round(LANDING / dt)
-    start = np.zeros((len(FEET), 3))
+    start, local = np.zeros((len(FEET), 3)), np.zeros((len(FEET), 3))
     for k in range(landing_steps + round(window / dt)):
-        if k == landing_steps:
-            start = feet()
+        if k == landing_steps:  # the feet's lowest points, and where they are on the feet
+            rotations, centers = feet()
+            start = centers - [0.0, 0.0, radius]
+            local = np.einsum("kji,j->ki", rotations, [0.0, 0.0, -radius])
         control()
         tic = time.perf_counter()
         advance()
@@ -83,7 +89,9 @@ def standing(
         penetration = max(penetration, depth)
         if k >= landing_steps:
             window_penetration = max(window_penetration, depth)
-    slip = float(np.max(np.linalg.norm((feet() - start)[:, :2], axis=1))) / window
+    rotations, centers = feet()
+    end = centers + np.einsum("kij,kj->ki", rotations, local)
+    slip = float(np.max(np.linalg.norm((end - start)[:, :2], axis=1))) / window
     times = np.array(seconds)
     return {
         "error": abs(contacts()[1] - weight) / weight,
@@ -162,6 +170,7 @@ def mujoco_standing(solver: str, cone: str) -> Callable[[str, bool, Setting], di
         data.qpos[3:7] = [q_ref[6], *q_ref[3:6]]  # Pinocchio xyzw -> MuJoCo wxyz
         data.qpos[7:] = q_ref[7:]
         feet = [g for g in range(model.ngeom) if model.geom_type[g] == mujoco.mjtGeom.mjGEOM_SPHERE]
+        radius = float(model.geom_size[feet[0], 0])
         wrench = np.zeros(6)
 
         def control() -> None:
@@ -179,7 +188,8 @@ def mujoco_standing(solver: str, cone: str) -> Callable[[str, bool, Setting], di
         return standing(
             control,
             lambda: mujoco.mj_step(model, data),
-            lambda: data.geom_xpos[feet].copy(),
+            lambda: (data.geom_xmat[feet].reshape(-1, 3, 3).copy(), data.geom_xpos[feet].copy()),
+            radius,
             contacts,
             dt,
             quick,
@@ -241,13 +251,13 @@ def pybullet_standing(case: str, quick: bool, setting: Setting) -> dict[str, flo
             tau = KP * (q_ref[7:] - q) - KD * v
             p.setJointMotorControlArray(body, joints, p.TORQUE_CONTROL, forces=tau, physicsClientId=client)
 
-        def feet() -> np.ndarray:
-            result = []
+        def feet() -> tuple[np.ndarray, np.ndarray]:
+            rotations, centers = [], []
             for link in legs:
                 state = p.getLinkState(body, link, physicsClientId=client)
-                rotation = np.array(p.getMatrixFromQuaternion(state[5])).reshape(3, 3)
-                result.append(np.array(state[4]) + rotation @ center)
-            return np.array(result)
+                rotations.append(np.array(p.getMatrixFromQuaternion(state[5])).reshape(3, 3))
+                centers.append(np.array(state[4]) + rotations[-1] @ center)
+            return np.array(rotations), np.array(centers)
 
         def contacts() -> tuple[float, float]:
             points = p.getContactPoints(bodyA=plane, bodyB=body, physicsClientId=client)
@@ -258,6 +268,7 @@ def pybullet_standing(case: str, quick: bool, setting: Setting) -> dict[str, flo
             control,
             lambda: p.stepSimulation(physicsClientId=client),
             feet,
+            radius,
             contacts,
             dt,
             quick,
@@ -265,6 +276,110 @@ def pybullet_standing(case: str, quick: bool, setting: Setting) -> dict[str, flo
         )
     finally:
         p.disconnect(physicsClientId=client)
+
+
+def pinocchio_standing(solver: str) -> Callable[[str, bool, Setting], dict[str, float]]:
+    """Pinocchio 4's own constraint solver (``"admm"`` or ``"pgs"``) on Solo-12 standing, driven from
+    Python by the velocity-level time stepping gaussim uses: ABA gives v_free; each foot (a sphere of
+    gaussim's foot size) within MARGIN of the ground becomes a PointContactConstraintModel (friction
+    0.8) whose two placements coincide at the sphere's lowest point, its frame's z into the ground (the
+    constraint's velocity is joint 2's minus joint 1's, evaluated where the placements are); the
+    Delassus operator comes from Pinocchio's ContactCholeskyDecomposition; the solver finds the
+    impulses of the frictional contact problem with g = J v_free + gap term (gap / dt when open,
+    gaussim's stabilisation / dt on a penetration); v+ = v_free + M^-1 J^T lambda; q+ = q (+) dt v+.
+    A setting may change ``dt`` and the solver's tolerance ``tol`` (default 1e-6, Pinocchio's). The
+    whole step is timed: Pinocchio's solvers have no step of their own."""
+
+    def run(case: str, quick: bool, setting: Setting) -> dict[str, float]:
+        import pinocchio as pin
+
+        from ..options import Options
+
+        robot = load_robot("solo12")
+        model, data = robot.model, robot.model.createData()
+        dt, tolerance = setting.get("dt", 1e-3), setting.get("tol", 1e-6)
+        _, radius, center = primitive_urdf(robot)
+        legs = [
+            robot.collision_model.geometryObjects[robot.geometry_id(f"{leg}_FOOT_0")].parentJoint
+            for leg in FEET
+        ]
+        stabilisation = Options().stabilisation
+        if solver == "admm":
+            engine, settings, make_result = (
+                pin.ADMMConstraintSolver(),
+                pin.ADMMSolverSettings(),
+                pin.ADMMSolverResult,
+            )
+        else:
+            engine, settings, make_result = (
+                pin.PGSConstraintSolver(),
+                pin.PGSSolverSettings(),
+                pin.PGSSolverResult,
+            )
+        for name in ("absolute_feasibility_tol", "absolute_complementarity_tol"):
+            setattr(settings, name, tolerance)
+        down = np.diag([1.0, -1.0, -1.0])  # the contact frame: z into the ground
+        q = robot.configuration("standing")
+        q_ref = q.copy()
+        q[2] += CLEARANCE
+        v = np.zeros(model.nv)
+        tau = np.zeros(model.nv)
+        state = {"gaps": np.zeros(0), "normal": 0.0}
+
+        def control() -> None:
+            tau[6:] = KP * (q_ref[7:] - q[7:]) - KD * v[6:]
+
+        def advance() -> None:
+            nonlocal q, v
+            v_free = v + dt * pin.aba(model, data, q, v, tau, pin.Convention.WORLD)
+            models, gaps = pin.StdVec_ConstraintModel(), []
+            for joint in legs:
+                placement = data.oMi[joint]
+                lowest = placement.act(center) - [0.0, 0.0, radius]
+                if lowest[2] < MARGIN:
+                    where = pin.SE3(placement.rotation.T @ down, placement.actInv(lowest))
+                    contact = pin.PointContactConstraintModel(model, joint, where, 0, pin.SE3(down, lowest))
+                    contact.setFriction(0.8)
+                    models.append(pin.ConstraintModel(contact))
+                    gaps.append(lowest[2])
+            state["gaps"] = np.array(gaps)
+            if not gaps:
+                v = v_free
+            else:
+                datas = pin.StdVec_ConstraintData()
+                for constraint in models:
+                    datas.append(constraint.createData())
+                pin.crba(model, data, q, pin.Convention.WORLD)
+                pin.cholesky.decompose(model, data)  # for M^-1 J^T lambda
+                for constraint, constraint_data in zip(models, datas):
+                    constraint.calc(model, data, constraint_data)
+                cholesky = pin.ContactCholeskyDecomposition(model, data, models, datas)
+                cholesky.compute(model, data, models, datas, 1e-10)
+                J = pin.getConstraintsJacobian(model, data, models, datas)
+                g = J @ v_free
+                gap = state["gaps"]
+                g[2::3] += np.where(gap > 0, gap, stabilisation * gap) / dt
+                result = make_result()
+                engine.solve(
+                    cholesky.getDelassusOperatorCholeskyExpression(), g, models, datas, settings, result
+                )
+                impulses = np.asarray(result.retrieveConstraintImpulses()).ravel()
+                state["normal"] = float(impulses[2::3].sum()) / dt
+                v = v_free + pin.cholesky.solve(model, data, J.T @ impulses)
+            q = pin.integrate(model, q, dt * v)
+
+        def feet() -> tuple[np.ndarray, np.ndarray]:
+            pin.forwardKinematics(model, data, q)
+            placements = [data.oMi[joint] for joint in legs]
+            return np.array([m.rotation for m in placements]), np.array([m.act(center) for m in placements])
+
+        def contacts() -> tuple[float, float]:
+            gaps = state["gaps"]
+            return max(0.0, -float(gaps.min(initial=0.0))), state["normal"] if len(gaps) else 0.0
+
+        return standing(control, advance, feet, radius, contacts, dt, quick, robot.mass * G)
+
+    return run
 
 
 def _mujoco_settings() -> dict[str, Setting]:
@@ -282,6 +397,17 @@ PEERS: dict[str, Peer] = {
         for solver in ("newton", "pgs")
         for cone in ("pyramidal", "elliptic")
     },
+    **{
+        f"pinocchio-{solver}": Peer(
+            ("solo12",),
+            pinocchio_standing(solver),
+            {
+                **{f"dt={dt:g}": {"dt": dt} for dt in (5e-3, 2e-3)},
+                "tol=1e-9": {"tol": 1e-9},
+            },
+        )
+        for solver in ("admm", "pgs")
+    },
     "pybullet": Peer(
         ("solo12",),
         pybullet_standing,
@@ -296,7 +422,7 @@ PEERS: dict[str, Peer] = {
 def available() -> list[str]:
     """The peers installed on this machine."""
     names = []
-    for module, prefix in (("mujoco", "mujoco-"), ("pybullet", "pybullet")):
+    for module, prefix in (("pinocchio", "pinocchio-"), ("mujoco", "mujoco-"), ("pybullet", "pybullet")):
         try:
             __import__(module)
         except ImportError:
