@@ -158,3 +158,17 @@ def test_mujoco_stiff_contacts_cut_its_resting_penetration():
     peer = PEERS["mujoco-newton-pyramidal"]
     soft, stiff = (peer.run("solo12", True, s)["standing_penetration"] for s in ({}, {"stiff": 1}))
     assert soft > 5e-4 and stiff < soft / 100
+
+
+def test_a_run_with_non_finite_metrics_is_recorded_as_diverged(monkeypatch):
+    """A peer that blows up (the explicit PD hold at too large a step) must not enter the tables as ok."""
+    from gaussim.bench import peers
+    from gaussim.bench.sweep import run_point
+
+    def blown(case: str, quick: bool, setting: dict) -> dict[str, float]:
+        return {"error": 1.0, "slip_per_s": math.nan, "penetration": 6e8}
+
+    monkeypatch.setitem(peers.PEERS, "blown", peers.Peer(("solo12",), blown, {"dt=1": {"dt": 1.0}}))
+    record = run_point(Point("solo12", "setting", "dt=1", engine="blown"))
+    assert record["status"] == "diverged: non-finite slip_per_s"
+    assert record["metrics"]["penetration"] == 6e8

@@ -83,7 +83,8 @@ def run_point(point: Point) -> dict:
             setting = {} if point.knob == "default" else peer.settings[str(point.value)]
             metrics = peer.run(point.case, point.quick, setting)
         record["metrics"] = {k: float(v) for k, v in metrics.items()}
-        record["status"] = "ok"
+        diverged = [k for k, v in record["metrics"].items() if not math.isfinite(v)]
+        record["status"] = f"diverged: non-finite {', '.join(diverged)}" if diverged else "ok"
     except Exception as err:  # a failing point is a result: it is recorded and the sweep goes on
         record["metrics"] = {}
         record["status"] = f"{type(err).__name__}: {err}"
