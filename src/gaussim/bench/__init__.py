@@ -48,20 +48,25 @@ HEADER = """# Benchmark results
 Made by `{command}`. Each case runs gaussim at the default options and with one knob changed at a
 time (dt, scheme, friction facets and mode, ProxQP tolerance and iteration cap, stabilisation), and
 the peers installed on the same scene (Solo-12 standing: MuJoCo Newton and PGS with pyramidal and
-elliptic cones, and PyBullet, each at its defaults and at the settings a user turns to for accuracy:
-smaller steps, MuJoCo's stiff contacts and no-slip pass; see `gaussim.bench.peers`). `error` is the
-case's own error against its reference (named above each table); `penetration` [m], `signorini` [W],
-`cone` [N] and `dissipation` [W] are the largest ContactBench residuals of the run (see
-`gaussim.bench.metrics`); `iterations` are ProxQP's per step; `us_per_step` (median) and its p90
-time the step alone, `wall_per_sim_s` is the wall time per simulated second. Where a case has no
-analytic trajectory (the pendulum, the four-bar), `trajectory_error` is |q - q_ref| at 1 s against
-gaussim at dt / 16 with eps_abs 1e-12 (self-consistency), `energy_gain` the largest rise of the
-mechanical energy relative to the largest kinetic energy. A standing robot also reports its
-`standing_penetration` [m] and `slip_per_s` [m/s], and a matched-accuracy table: each engine's
-cheapest setting that meets a given penetration and slip. Runs share the machine's cores
-(`--workers`): compare times within a table, and use `benchmarks/step_cost.py` for the step cost
-itself. The plots put error against wall time per simulated second, one curve per knob (through the
-default point) and one per peer (its settings).
+elliptic cones, Pinocchio 4's ADMM and PGS constraint solvers driven from Python, and PyBullet), each
+at its defaults and at the settings a user turns to for accuracy (smaller steps, MuJoCo's stiff
+contacts and no-slip pass, tighter tolerances; see `gaussim.bench.peers`).
+
+Columns: `error` is the case's own error against its reference (named above each table);
+`penetration` [m], `signorini` [W], `cone` [N] and `dissipation` [W] are the largest ContactBench
+residuals of the run (see `gaussim.bench.metrics`); `iterations` are ProxQP's per step,
+`kkt_residual` the largest KKT residual of a QP, `unconverged_steps` the steps whose solver did not
+converge; `us_per_step` (median) and its p90 time the step alone, `wall_per_sim_s` is the wall time
+per simulated second. Then each case's own measurements: where it has no analytic trajectory (the
+pendulum, the four-bar), `trajectory_error` is |q - q_ref| at 1 s against gaussim at dt / 16 with
+eps_abs 1e-12 (self-consistency) and `energy_gain` the largest rise of the mechanical energy relative
+to the largest kinetic energy; a sliding block's `heading_drift` [rad] and `lift` [m]; a standing
+robot's `standing_penetration` [m] and `slip_per_s` [m/s], with a matched-accuracy table: each
+engine's cheapest setting that meets a given penetration and slip.
+
+Runs share the machine's cores (`--workers`): compare times within a table, and use
+`benchmarks/step_cost.py` for the step cost itself. The plots put error against wall time per
+simulated second, one curve per knob (through the default point) and one per peer (its settings).
 """
 
 MATCHED_HEADER = (

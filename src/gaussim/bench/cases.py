@@ -230,7 +230,7 @@ def self_reference(scene: str) -> np.ndarray:
 
 
 def _trajectory(spec, sim, rec, quick, measure) -> dict[str, float]:  # type: ignore[no-untyped-def]
-    """Run a scene file for 1 s (``quick``) or 5 s, calling ``measure(state)`` after each step; the
+    """Run a scene file for 1 s (``quick``) or 10 s, calling ``measure(state)`` after each step; the
     summary plus ``trajectory_error``, |q (-) q_reference| at REFERENCE_TIME against
     :func:`self_reference`, and ``energy_gain``, the largest rise of the mechanical energy above its
     initial value, relative to the largest kinetic energy of the run."""
@@ -239,7 +239,7 @@ def _trajectory(spec, sim, rec, quick, measure) -> dict[str, float]:  # type: ig
     state = sim.reset(spec.initial.q, spec.initial.v)
     energy = pin.computeMechanicalEnergy(model, data, state.q, state.v)
     gain, error, kinetic = 0.0, np.nan, 0.0
-    for _ in range(round((1.0 if quick else 5.0) / sim.options.dt)):
+    for _ in range(round((1.0 if quick else 10.0) / sim.options.dt)):
         state = rec.step(state)
         measure(state)
         gain = max(gain, pin.computeMechanicalEnergy(model, data, state.q, state.v) - energy)

@@ -38,8 +38,8 @@ class Recorder:
         self.friction = {o.name: o.friction for o in scene.obstacles}
         self.self_friction = scene.self_contact[0]
         self.seconds: list[float] = []
-        self.penetration = self.signorini = self.cone = self.dissipation = 0.0
-        self.iterations = 0
+        self.penetration = self.signorini = self.cone = self.dissipation = self.kkt_residual = 0.0
+        self.iterations = self.unconverged = 0
 
     def run(self, state: State, duration: float, controller: Controller | None = None) -> State:
         """Step from ``state`` for ``duration`` simulated seconds; return the last state."""
@@ -59,6 +59,8 @@ class Recorder:
         report = self.sim.last_step
         assert report is not None
         self.iterations += report.iterations
+        self.kkt_residual = max(self.kkt_residual, report.max_residual)
+        self.unconverged += not report.converged
         contacts = report.contacts
         if not contacts:
             return
@@ -76,8 +78,10 @@ class Recorder:
             self.dissipation = max(self.dissipation, float(f_t @ u_t) + mu * f_n * float(np.linalg.norm(u_t)))
 
     def summary(self) -> dict[str, float]:
-        """The per-run metrics: the contact metrics' maxima, ProxQP iterations per step, and the wall
-        time per step (median, p90) [us] and per simulated second [s]."""
+        """The per-run metrics: the contact metrics' maxima, ProxQP iterations per step, the largest KKT
+        residual of a step's QPs, the steps whose QPs did not converge (reported, with
+        ``Options.on_failure = "report"``), and the wall time per step (median, p90) [us] and per
+        simulated second [s]."""
         seconds = np.array(self.seconds)
         return {
             "penetration": self.penetration,
@@ -85,6 +89,8 @@ class Recorder:
             "cone": max(self.cone, 0.0),
             "dissipation": self.dissipation,
             "iterations": self.iterations / len(seconds),
+            "kkt_residual": self.kkt_residual,
+            "unconverged_steps": float(self.unconverged),
             "us_per_step": float(np.median(seconds)) * 1e6,
             "us_per_step_p90": float(np.percentile(seconds, 90)) * 1e6,
             "wall_per_sim_s": float(seconds.sum()) / (len(seconds) * self.sim.options.dt),

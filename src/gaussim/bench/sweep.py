@@ -165,6 +165,8 @@ METRICS = (
     "cone",
     "dissipation",
     "iterations",
+    "kkt_residual",
+    "unconverged_steps",
     "us_per_step",
     "us_per_step_p90",
     "wall_per_sim_s",
@@ -177,12 +179,15 @@ MATCHED = {"standing_penetration": 1e-5, "slip_per_s": 1e-4}
 
 
 def table(records: list[dict], case: str) -> str:
-    """A markdown table of one case's records: a row per engine and knob setting."""
+    """A markdown table of one case's records: a row per engine and knob setting, a column per
+    metric (METRICS, then the case's own)."""
     rows = [r for r in records if r["case"] == case]
-    header = "| engine | setting | " + " | ".join(METRICS) + " | status |"
-    lines = [header, "|" + "---|" * 2 + "---:|" * len(METRICS) + "---|"]
+    own = dict.fromkeys(k for r in rows for k in r["metrics"] if k not in METRICS)  # the case's own
+    columns = [*METRICS, *own]
+    header = "| engine | setting | " + " | ".join(columns) + " | status |"
+    lines = [header, "|" + "---|" * 2 + "---:|" * len(columns) + "---|"]
     for r in rows:
-        values = [_number(r["metrics"].get(m)) for m in METRICS]
+        values = [_number(r["metrics"].get(m)) for m in columns]
         lines.append(f"| {r['engine']} | {_setting(r)} | " + " | ".join(values) + f" | {r['status']} |")
     return "\n".join(lines)
 
