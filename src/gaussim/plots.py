@@ -113,13 +113,16 @@ def pareto_figure(records: list[dict], title: str) -> Any:
     for r in ok:
         name = r["engine"] if r["engine"] != "gaussim" else f"gaussim {r['knob']}"
         series.setdefault(name, []).append(r)
-    for name, rows in sorted(series.items()):
-        if name.startswith("gaussim ") and name != "gaussim default":
+    colors = plt.get_cmap("tab20").colors  # one colour each for up to 20 curves
+    for i, (name, rows) in enumerate(sorted(series.items())):
+        ours = name.startswith("gaussim ")
+        if ours and name != "gaussim default":
             rows = rows + default
         rows.sort(key=lambda r: r["metrics"]["wall_per_sim_s"])
         x = [r["metrics"]["wall_per_sim_s"] for r in rows]
         y = [max(r["metrics"]["error"], 1e-16) for r in rows]
-        axis.plot(x, y, "o-" if len(rows) > 1 else "s", label=name)
+        style = ("o-" if ours else "^--") if len(rows) > 1 else "s"  # the peers dashed
+        axis.plot(x, y, style, color=colors[i % len(colors)], label=name)
     axis.set(
         xscale="log", yscale="log", xlabel="wall time per simulated second [s]", ylabel="error", title=title
     )

@@ -84,6 +84,7 @@ def report(
 
     from ..plots import pareto_figure
 
+    out.mkdir(parents=True, exist_ok=True)
     lines = [HEADER.format(command=command)]
     for case in cases:
         mine = [r for r in records if r["case"] == case]
