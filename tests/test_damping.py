@@ -46,6 +46,20 @@ def test_dropping_the_damping_restores_the_robot(solo12):
     assert np.array_equal(damped.step(state).v, plain.step(state).v)
 
 
+@pytest.mark.parametrize("tau", [None, np.zeros(12), np.zeros(18)])
+def test_torque_and_damping_are_padded_each_by_its_own_size(solo12, tau):
+    """tau and D are each padded on the floating base whatever the other's size (a kernel that padded D
+    at tau's offset read past its end when tau was None: garbage, a spurious 'damping must be >= 0')."""
+    q = at_height(solo12, 5.0)
+    v = np.random.default_rng(2).normal(size=solo12.model.nv)
+    steps = []
+    for damping in (np.full(12, 3.0), np.r_[np.zeros(6), np.full(12, 3.0)], None):
+        sim = gaussim.Simulator(gaussim.Scene(solo12))
+        steps.append(sim.step(sim.reset(q, v), tau, damping).v)
+    assert np.array_equal(steps[0], steps[1])
+    assert np.abs(steps[0][6:] - steps[2][6:]).max() > 1e-3  # and the damping acts
+
+
 @pytest.mark.parametrize(
     ("damping", "message"),
     [

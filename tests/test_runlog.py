@@ -1,6 +1,7 @@
 """Run logs: complete round trips, and nothing lost when a run stops early."""
 
 import csv
+import dataclasses
 import os
 import signal
 import subprocess
@@ -239,3 +240,25 @@ def test_cli_ctrl_c_keeps_the_log(tmp_path):
     assert process.returncode == 1 and "interrupted" in stderr
     log = gaussim.RunLog.load(out)
     assert not log.complete and "interrupted" in log.reason and log.steps > 0
+
+
+def test_ctrl_c_stops_the_run_at_the_end_of_its_step_and_keeps_the_log(tmp_path):
+    """The SIGINT sets a flag that the loop reads between steps: a KeyboardInterrupt raised inside a
+    compiled call could be lost there (a CLI run went on 35 s after its SIGINT)."""
+    spec = gaussim.load_scene(SCENES / "fourbar.toml")
+    calls = []
+
+    def controller(state):  # Ctrl-C during the 6th step
+        calls.append(state.t)
+        if len(calls) == 6:
+            os.kill(os.getpid(), signal.SIGINT)
+        return None
+
+    spec = dataclasses.replace(spec, controller=controller)
+    out = tmp_path / "r.npz"
+    with pytest.raises(KeyboardInterrupt):
+        gaussim.run(spec, out)
+    log = gaussim.RunLog.load(out)
+    assert log.steps == 6 and len(calls) == 6, "the 6th step ends, no 7th begins"
+    assert not log.complete and "interrupted (Ctrl-C) at step 6" in log.reason
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler, "the handler is restored"

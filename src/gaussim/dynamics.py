@@ -155,21 +155,25 @@ def padded_torque(tau, nv):  # type: ignore[no-untyped-def]
 
 @njit(cache=True)
 def damped_torque(tau, damping, v, previous):  # type: ignore[no-untyped-def]
-    """(code, tau - D v, D, D == previous) for an implicit damping D at velocity v, tau and D padded as
-    :func:`padded_torque` pads them, shape (nv,); code 1 when tau is not finite, 2 when D is not finite
-    or negative (one kernel: this runs every damped step)."""
+    """(code, tau - D v, D, D == previous) for an implicit damping D at velocity v, tau and D each
+    padded as :func:`padded_torque` pads them (their sizes may differ), shape (nv,); code 1 when tau
+    is not finite, 2 when D is not finite or negative (one kernel: this runs every damped step)."""
     nv = len(v)
-    full, D, head = np.zeros(nv), np.zeros(nv), nv - len(tau)
+    full, D = np.zeros(nv), np.zeros(nv)
     code = 0
+    head = nv - len(tau)
     for i in range(len(tau)):
         if not np.isfinite(tau[i]):
             code = 1
+        full[head + i] = tau[i]
+    head = nv - len(damping)
+    for i in range(len(damping)):
         if not (damping[i] >= 0 and np.isfinite(damping[i])):
-            code = max(code, 2)
+            code = 2
         D[head + i] = damping[i]
-        full[head + i] = tau[i] - damping[i] * v[head + i]
     same = len(previous) == nv
     for i in range(nv):
+        full[i] -= D[i] * v[i]
         same = same and D[i] == previous[i]
     return code, full, D, same
 
