@@ -229,6 +229,9 @@ def test_cli_ctrl_c_keeps_the_log(tmp_path):
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        # Ctrl-C's default disposition, even when this test runs where SIGINT is ignored (a script's
+        # background job: the child would inherit that and never stop)
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     deadline = time.time() + 60
     while time.time() < deadline:  # wait for the first progress line: the run is under way
@@ -242,23 +245,37 @@ def test_cli_ctrl_c_keeps_the_log(tmp_path):
     assert not log.complete and "interrupted" in log.reason and log.steps > 0
 
 
-def test_ctrl_c_stops_the_run_at_the_end_of_its_step_and_keeps_the_log(tmp_path):
-    """The SIGINT sets a flag that the loop reads between steps: a KeyboardInterrupt raised inside a
-    compiled call could be lost there (a CLI run went on 35 s after its SIGINT)."""
-    spec = gaussim.load_scene(SCENES / "fourbar.toml")
-    calls = []
+def _ctrl_c_at_step(count: int) -> tuple[gaussim.SceneSpec, list[float]]:
+    """The four-bar scene, 2 s, with a controller that sends this process a SIGINT during step ``count``."""
+    calls: list[float] = []
 
-    def controller(state):  # Ctrl-C during the 6th step
+    def controller(state):
         calls.append(state.t)
-        if len(calls) == 6:
+        if len(calls) == count:
             os.kill(os.getpid(), signal.SIGINT)
         return None
 
-    spec = dataclasses.replace(spec, controller=controller)
-    out = tmp_path / "r.npz"
-    with pytest.raises(KeyboardInterrupt):
-        gaussim.run(spec, out)
-    log = gaussim.RunLog.load(out)
-    assert log.steps == 6 and len(calls) == 6, "the 6th step ends, no 7th begins"
-    assert not log.complete and "interrupted (Ctrl-C) at step 6" in log.reason
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler, "the handler is restored"
+    spec = gaussim.load_scene(SCENES / "fourbar.toml")
+    return dataclasses.replace(spec, controller=controller, duration=2e-2), calls
+
+
+@pytest.mark.parametrize("disposition", [signal.default_int_handler, signal.SIG_IGN])
+def test_ctrl_c_stops_the_run_at_the_end_of_its_step_unless_ignored(tmp_path, disposition):
+    """A SIGINT sets a flag that the loop reads between steps, so the interrupt never surfaces from
+    inside a compiled call; the log keeps the steps made. A process that ignores SIGINT (nohup, a
+    script's background job) runs on."""
+    previous = signal.signal(signal.SIGINT, disposition)
+    try:
+        spec, calls = _ctrl_c_at_step(6)
+        out = tmp_path / "r.npz"
+        if disposition is signal.SIG_IGN:
+            assert gaussim.run(spec, out).complete and len(calls) == 20
+        else:
+            with pytest.raises(KeyboardInterrupt):
+                gaussim.run(spec, out)
+            log = gaussim.RunLog.load(out)
+            assert log.steps == 6 and len(calls) == 6, "the 6th step ends, no 7th begins"
+            assert not log.complete and "interrupted (Ctrl-C) at step 6" in log.reason
+        assert signal.getsignal(signal.SIGINT) is disposition, "the disposition is restored"
+    finally:
+        signal.signal(signal.SIGINT, previous)
