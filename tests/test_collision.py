@@ -57,6 +57,28 @@ def test_polyhedra_on_ground_match_coal(solo12, normal):
     assert compared >= 200, compared  # most random poses touch at one vertex
 
 
+@pytest.mark.parametrize("normal", [(0.0, 0.0, 1.0), (0.3, -0.2, 1.0)])
+def test_a_sphere_on_ground_matches_coal(normal):
+    """A sphere is the ball of its radius around a one-vertex hull: random poses above a (tilted)
+    ground give coal's gap and nearest point, in the compiled pass (no narrow-phase call)."""
+    ball = gaussim.load_robot("ball", floating_base=True)
+    ground = gaussim.Ground(normal=normal, height=-2.0)
+    detector = ContactDetector(gaussim.Scene(ball, ground=ground), 10.0)
+    assert detector.others == [] and len(detector.hulls.pairs) == 1
+    model, data = ball.model, ball.model.createData()
+    pair = detector.pairs[0]
+    pin.seed(1)
+    for _ in range(50):
+        q = pin.randomConfiguration(model, -np.ones(model.nq), np.ones(model.nq))
+        q[3:7] /= np.linalg.norm(q[3:7])
+        pin.forwardKinematics(model, data, q)
+        contacts = detector.detect(data)
+        gap, point = _coal_deepest(pair, data.oMi[pair.joint] * pair.local, 10.0)
+        assert contacts.gap[0] == pytest.approx(gap, abs=AGREEMENT)
+        np.testing.assert_allclose(contacts.point[0], point, atol=AGREEMENT)
+        np.testing.assert_allclose(contacts.normal[0], ground.normal, atol=1e-15)
+
+
 def test_box_flat_on_ground_touches_at_its_corners(box):
     """A box resting flat: four corner contacts, each with its own gap; tilted slightly, the same
     four with gaps that differ by the tilt; far above: nothing."""
