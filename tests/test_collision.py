@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+
 import coal
 import numpy as np
 import pinocchio as pin
@@ -26,6 +28,17 @@ def _coal_deepest(pair, placement: pin.SE3, margin: float) -> tuple[float, np.nd
     return contact.penetration_depth, contact.getNearestPoint1().copy()
 
 
+def _random_poses(robot: gaussim.Robot, count: int, seed: int) -> Iterator[pin.Data]:
+    """Data after forward kinematics at ``count`` random configurations of a floating robot."""
+    model, data = robot.model, robot.model.createData()
+    pin.seed(seed)
+    for _ in range(count):
+        q = pin.randomConfiguration(model, -np.ones(model.nq), np.ones(model.nq))
+        q[3:7] /= np.linalg.norm(q[3:7])
+        pin.forwardKinematics(model, data, q)
+        yield data
+
+
 @pytest.mark.parametrize("normal", [(0.0, 0.0, 1.0), (0.3, -0.2, 1.0)])
 def test_polyhedra_on_ground_match_coal(solo12, normal):
     """Random poses of Solo-12 above a (tilted) ground: a foot touching at one point touches at coal's
@@ -35,13 +48,8 @@ def test_polyhedra_on_ground_match_coal(solo12, normal):
     scene = gaussim.Scene(solo12, ground=ground, contacts=[(f"{leg}_FOOT_0", "ground") for leg in FEET])
     margin = 10.0  # every foot is "in contact": all of them are compared
     detector = ContactDetector(scene, margin)
-    model, data = solo12.model, solo12.model.createData()
     compared = 0
-    pin.seed(0)
-    for _ in range(100):
-        q = pin.randomConfiguration(model, -np.ones(model.nq), np.ones(model.nq))
-        q[3:7] /= np.linalg.norm(q[3:7])
-        pin.forwardKinematics(model, data, q)
+    for data in _random_poses(solo12, 100, seed=0):
         contacts = detector.detect(data)
         for pair in detector.pairs:
             placement = data.oMi[pair.joint] * pair.local
@@ -65,13 +73,8 @@ def test_a_sphere_on_ground_matches_coal(normal):
     ground = gaussim.Ground(normal=normal, height=-2.0)
     detector = ContactDetector(gaussim.Scene(ball, ground=ground), 10.0)
     assert detector.others == [] and len(detector.hulls.pairs) == 1
-    model, data = ball.model, ball.model.createData()
     pair = detector.pairs[0]
-    pin.seed(1)
-    for _ in range(50):
-        q = pin.randomConfiguration(model, -np.ones(model.nq), np.ones(model.nq))
-        q[3:7] /= np.linalg.norm(q[3:7])
-        pin.forwardKinematics(model, data, q)
+    for data in _random_poses(ball, 50, seed=1):
         contacts = detector.detect(data)
         gap, point = _coal_deepest(pair, data.oMi[pair.joint] * pair.local, 10.0)
         assert contacts.gap[0] == pytest.approx(gap, abs=AGREEMENT)
