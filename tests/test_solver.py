@@ -31,6 +31,23 @@ def test_warm_start_is_not_stale_when_only_bounds_change():
     assert freed.certificate.kkt_residual < 1e-12
 
 
+def test_the_previous_solution_is_kept_only_when_it_still_solves_the_problem():
+    """A problem the last solution still solves to eps_abs (gaussim's KKT check) gets it back without
+    a ProxQP call; one it does not solve (the load moved by 1e-6) is solved by ProxQP."""
+    solver = GaussSolver(gaussim.Options())
+    first = solver.solve(_problem(0.0))
+    again = solver.solve(_problem(0.0))
+    assert again.certificate.status == "GAUSSIM_PREVIOUS_SOLUTION_CERTIFIED" and again.certificate.converged
+    assert again.certificate.iterations == 0 and again.certificate.relative_kkt_residual <= 1e-9
+    np.testing.assert_array_equal(again.x, first.x)
+    np.testing.assert_array_equal(again.multipliers, first.multipliers)
+    heavier = _problem(0.0)
+    heavier.g[2] += 1e-6
+    moved = solver.solve(heavier)
+    assert moved.certificate.status == "PROXQP_SOLVED"
+    assert moved.lambda_in[0] == pytest.approx(9.81e-3 + 1e-6, abs=1e-9)  # eps_abs
+
+
 def test_kkt_residual_measures_complementarity():
     problem = _problem(-0.5)
     x = np.array([0.0, 0.0, 0.0])
