@@ -119,9 +119,9 @@ def test_matched_table_takes_each_engines_cheapest_run_that_meets_the_accuracy()
     lines = matched_table(records, "solo12").splitlines()
     rows = {line.split(" | ")[0].strip("| "): line.split(" | ") for line in lines[2:]}
     assert rows["gaussim"][1] == "dt = 0.02" and rows["gaussim"][-2] == "1.00"
-    assert rows["peer"][1] == "setting = stiff" and rows["peer"][-2] == "5.00"  # 0.05 / 0.01
+    assert rows["peer"][1] == "stiff" and rows["peer"][-2] == "5.00"  # 0.05 / 0.01
     assert rows["peer"][-1] == "1 of 2 |"
-    assert rows["other"][1] == "none (closest: setting = small dt)" and rows["other"][-2] == ""
+    assert rows["other"][1] == "none (closest: small dt)" and rows["other"][-2] == ""
     assert matched_table([{**records[0], "metrics": {"error": 0.0}}], "solo12") is None
 
 

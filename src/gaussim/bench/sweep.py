@@ -231,7 +231,15 @@ def matched_table(records: list[dict], case: str) -> str | None:
 
 
 def _setting(record: dict) -> str:
-    return "default" if record["knob"] == "default" else f"{record['knob']} = {record['value']}"
+    """ "default", a gaussim knob's "knob = value", or a peer setting's own label."""
+    knob = record["knob"]
+    return (
+        "default"
+        if knob == "default"
+        else str(record["value"])
+        if knob == "setting"
+        else f"{knob} = {record['value']}"
+    )
 
 
 def _number(value: float | None) -> str:
