@@ -1,11 +1,13 @@
 """Peer engines for the benchmark, run on the same robot in the same sweep when installed
-(``pip install -e '.[bench]'``): MuJoCo (Newton and PGS, pyramidal and elliptic cones) and PyBullet,
+(``pip install -e '.[bench]'``): MuJoCo (Newton and PGS, pyramidal and elliptic cones), Pinocchio 4's
+own ADMM and PGS constraint solvers (driven from Python: :func:`pinocchio_standing`) and PyBullet,
 on Solo-12 standing.
 
 Each peer follows the protocol of gaussim's solo12 case (see :func:`standing`) under the same PD hold,
 at its default settings and at the settings a user turns to for accuracy (smaller steps, stiffer
-contacts, MuJoCo's no-slip pass), so that the matched-accuracy table can pick each engine's cheapest
-setting that meets a given penetration and slip. Only each engine's own step is timed.
+contacts, MuJoCo's no-slip pass, tighter tolerances), so that the matched-accuracy table can pick
+each engine's cheapest setting that meets a given penetration and slip. Only each engine's own step
+is timed (Pinocchio's solvers have no step of their own: the whole Python step is).
 
 Facts this relies on (measured here):
 - MuJoCo's URDF import welds the root link to the world (the model is saved as MJCF and given a free
