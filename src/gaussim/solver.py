@@ -206,8 +206,8 @@ class GaussSolver:
     def _previous(self, problem: GaussProblem) -> Solution | None:
         """The last solution when it solves ``problem`` to eps_abs by gaussim's relative KKT residual
         (None otherwise). ProxQP, warm-started, would return it unchanged after 0 iterations, at the
-        cost of an update and a solve (measured on Solo-12 standing: 0 iterations at 99% of the steps,
-        the previous x to the bit, 25 us a step); this check costs 3 us."""
+        cost of an update and a solve (measured on Solo-12 standing: the previous x to the bit, 25 us a
+        step; this check certifies 76% of the steps at eps_abs 1e-9); the check costs 3 us."""
         x, y, z, _ = self._results
         p = problem
         x, multipliers, residual, relative, primal, dual, gap = _read(p.H, p.g, p.A, p.b, p.C, p.l, x, y, z)

@@ -233,13 +233,11 @@ def matched_table(records: list[dict], case: str) -> str | None:
 def _setting(record: dict) -> str:
     """ "default", a gaussim knob's "knob = value", or a peer setting's own label."""
     knob = record["knob"]
-    return (
-        "default"
-        if knob == "default"
-        else str(record["value"])
-        if knob == "setting"
-        else f"{knob} = {record['value']}"
-    )
+    if knob == "default":
+        return "default"
+    if knob == "setting":
+        return str(record["value"])
+    return f"{knob} = {record['value']}"
 
 
 def _number(value: float | None) -> str:
