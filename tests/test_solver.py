@@ -33,7 +33,8 @@ def test_warm_start_is_not_stale_when_only_bounds_change():
 
 def test_the_previous_solution_is_kept_only_when_it_still_solves_the_problem():
     """A problem the last solution still solves to eps_abs (gaussim's KKT check) gets it back without
-    a ProxQP call; one it does not solve (the load moved by 1e-6) is solved by ProxQP."""
+    a ProxQP call; one it does not solve (the load moved by 1e-6) is solved on its active set, also
+    without ProxQP; one whose active set changed is solved by ProxQP."""
     solver = GaussSolver(gaussim.Options())
     first = solver.solve(_problem(0.0))
     again = solver.solve(_problem(0.0))
@@ -44,8 +45,50 @@ def test_the_previous_solution_is_kept_only_when_it_still_solves_the_problem():
     heavier = _problem(0.0)
     heavier.g[2] += 1e-6
     moved = solver.solve(heavier)
-    assert moved.certificate.status == "PROXQP_SOLVED"
-    assert moved.lambda_in[0] == pytest.approx(9.81e-3 + 1e-6, abs=1e-9)  # eps_abs
+    assert moved.certificate.status == "GAUSSIM_ACTIVE_SET_CERTIFIED" and moved.certificate.converged
+    assert moved.lambda_in[0] == pytest.approx(9.81e-3 + 1e-6, abs=1e-15)
+    assert moved.x[2] == pytest.approx(0.0, abs=1e-15)
+    lifted = solver.solve(_problem(-0.5))  # the row is no longer active: its multiplier would pull
+    assert lifted.certificate.status == "PROXQP_SOLVED"
+    assert lifted.x[2] == pytest.approx(-9.81e-3, rel=1e-9) and abs(lifted.lambda_in[0]) < 1e-12
+    landed = solver.solve(_problem(0.0))  # a row that becomes active: the free x violates it
+    assert landed.certificate.status == "PROXQP_SOLVED"
+    assert landed.lambda_in[0] == pytest.approx(9.81e-3, abs=1e-9)
+
+
+def _sticking_point(push: float) -> GaussProblem:
+    """A unit point mass on the ground (friction 0.5, a 4-facet pyramid), weight 9.81e-3 and a
+    tangential push ``push`` along x (velocity level, dt = 1e-3): its four rows span three directions."""
+    mu, normal = 0.5, np.array([0.0, 0.0, 1.0])
+    tangents = [np.array([np.cos(a), np.sin(a), 0.0]) for a in np.arange(4) * np.pi / 2]
+    C = np.array([normal + mu * t for t in tangents])
+    return GaussProblem(
+        np.eye(3), np.array([-push, 0.0, 9.81e-3]), np.zeros((0, 3)), np.zeros(0), C, np.zeros(4), []
+    )
+
+
+def test_the_active_set_solve_handles_dependent_rows_and_matches_proxqp():
+    """A sticking contact's pyramid rows are dependent; with the push changed, the solve on the last
+    active set is certified and gives ProxQP's x and contact force, without a ProxQP call."""
+    solver = GaussSolver(gaussim.Options())
+    solver.solve(_sticking_point(1e-3))
+    warm = solver.solve(_sticking_point(2e-3))
+    assert warm.certificate.status == "GAUSSIM_ACTIVE_SET_CERTIFIED"
+    assert np.all(warm.lambda_in >= 0.0)
+    cold = GaussSolver(gaussim.Options()).solve(_sticking_point(2e-3))
+    assert cold.certificate.status == "PROXQP_SOLVED"
+    C = _sticking_point(2e-3).C
+    # the exact answer: the point sticks, the ground pushing back with (-push, 0, weight); ProxQP's is within
+    # KKT_RTOL eps_abs of it, the active-set solve's within round-off
+    np.testing.assert_allclose(warm.x, 0.0, atol=1e-15)
+    np.testing.assert_allclose(C.T @ warm.lambda_in, [-2e-3, 0.0, 9.81e-3], atol=1e-15)
+    np.testing.assert_allclose(cold.x, 0.0, atol=1e-7)
+    np.testing.assert_allclose(C.T @ cold.lambda_in, [-2e-3, 0.0, 9.81e-3], atol=1e-7)
+    sliding = solver.solve(_sticking_point(1.0))  # beyond mu m g: the contact slides, rows drop out
+    assert sliding.certificate.status in ("PROXQP_SOLVED", "GAUSSIM_CERTIFIED_AT_MAX_ITER")
+    assert sliding.x[0] > 0.5
+    fresh = GaussSolver(gaussim.Options()).solve(_sticking_point(1.0))
+    np.testing.assert_allclose(sliding.x, fresh.x, atol=1e-7)
 
 
 def test_kkt_residual_measures_complementarity():

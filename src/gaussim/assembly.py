@@ -43,26 +43,25 @@ class GaussProblem:
 def assemble(H: np.ndarray, g: np.ndarray, parts: list[tuple[ConstraintModule, Rows]]) -> GaussProblem:
     """Stack rows: equalities into (A, b), inequalities into (C, l), remembering where each block's
     multipliers go; a force a module applies outside the QP enters the linear term g."""
-    blocks = []
-    n_eq = sum(len(rows.bound) for _, rows in parts if rows.equality)
-    start = {True: 0, False: n_eq}  # where each kind's next multipliers go in [lambda_eq; lambda_in]
-    for module, rows in parts:
-        first = start[rows.equality]
-        start[rows.equality] = end = first + len(rows.bound)
+    equalities = [part for part in parts if part[1].equality]
+    inequalities = [part for part in parts if not part[1].equality]
+    blocks, end = [], 0
+    for module, rows in equalities + inequalities:  # the order of [lambda_eq; lambda_in]
+        first, end = end, end + len(rows.bound)
         blocks.append((module, rows, slice(first, end)))
         if rows.force is not None:
             g = g - rows.force
-    A, b = _stack([rows for _, rows in parts if rows.equality], len(g))
-    C, l = _stack([rows for _, rows in parts if not rows.equality], len(g))
+    A, b = _stack(equalities, len(g))
+    C, l = _stack(inequalities, len(g))
     return GaussProblem(H, g, A, b, C, l, blocks)
 
 
-def _stack(chosen: list[Rows], nv: int) -> tuple[np.ndarray, np.ndarray]:
+def _stack(chosen: list[tuple[ConstraintModule, Rows]], nv: int) -> tuple[np.ndarray, np.ndarray]:
     if len(chosen) == 1:
-        return chosen[0].J, chosen[0].bound
+        return chosen[0][1].J, chosen[0][1].bound
     if not chosen:
         return _none(nv)
-    return np.vstack([r.J for r in chosen]), np.concatenate([r.bound for r in chosen])
+    return np.vstack([rows.J for _, rows in chosen]), np.concatenate([rows.bound for _, rows in chosen])
 
 
 @cache

@@ -32,3 +32,48 @@ def finite(x):  # type: ignore[no-untyped-def]
         if not np.isfinite(value):
             return False
     return True
+
+
+@njit(cache=True, fastmath={"reassoc", "contract"})
+def cholesky(A, shift):  # type: ignore[no-untyped-def]
+    """The lower Cholesky factor L of A + shift I (A symmetric, (n, n)), L L^T = A + shift I; None
+    when that is not positive definite."""
+    n = A.shape[0]
+    L = np.zeros((n, n))
+    for j in range(n):
+        pivot = A[j, j] + shift
+        for p in range(j):
+            pivot -= L[j, p] * L[j, p]
+        if not pivot > 0.0:  # NaN fails too
+            return None
+        L[j, j] = diagonal = np.sqrt(pivot)
+        for i in range(j + 1, n):
+            total = A[i, j]
+            for p in range(j):
+                total -= L[i, p] * L[j, p]
+            L[i, j] = total / diagonal
+    return L
+
+
+@njit(cache=True, fastmath={"reassoc", "contract"})
+def forward(L, B):  # type: ignore[no-untyped-def]
+    """L^-1 applied to each row of B (k, n) (B L^-T), for a lower-triangular L (n, n); in place."""
+    for r in range(B.shape[0]):
+        row = B[r]
+        for i in range(L.shape[0]):
+            total = row[i]
+            for j in range(i):
+                total -= L[i, j] * row[j]
+            row[i] = total / L[i, i]
+    return B
+
+
+@njit(cache=True, fastmath={"reassoc", "contract"})
+def backward(L, y):  # type: ignore[no-untyped-def]
+    """L^-T y for a lower-triangular L (n, n) and a vector y (n,), in place of y."""
+    for i in range(L.shape[0] - 1, -1, -1):
+        total = y[i]
+        for j in range(i + 1, L.shape[0]):
+            total -= L[j, i] * y[j]
+        y[i] = total / L[i, i]
+    return y
