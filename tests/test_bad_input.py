@@ -51,6 +51,21 @@ def test_non_finite_actuated_torque_names_its_entry(solo12):
     with pytest.raises(gaussim.InvalidState, match=r"tau has non-finite entries at \[7\]"):
         sim.step(state, tau)
     assert sim.last_step is None
+    state = sim.step(state)  # free flight from here on: the next step runs ABA, not CRBA + RNEA
+    with pytest.raises(gaussim.InvalidState, match=r"tau has non-finite entries at \[7\]"):
+        sim.step(state, tau)
+
+
+def test_a_non_finite_free_acceleration_at_a_valid_state_is_a_solver_error(solo12, monkeypatch):
+    """ABA's answer is checked where the free velocity is made: NaN there (forced: a broken ABA) with
+    a finite torque is the dynamics' failure, named as such, not the user's input."""
+    from gaussim import dynamics
+
+    sim = gaussim.Simulator(gaussim.Scene(solo12))
+    state = sim.step(sim.reset(solo12.configuration("standing")))
+    monkeypatch.setattr(dynamics.pin, "aba", lambda *args: np.full(solo12.model.nv, np.nan))
+    with pytest.raises(gaussim.SolverError, match="free motion .*ABA.* is not finite"):
+        sim.step(state, np.zeros(12))
 
 
 def test_non_finite_velocity_never_reaches_the_state(sim, ball, monkeypatch):

@@ -9,8 +9,8 @@ import numpy as np
 import pinocchio as pin
 from numba import njit
 
-from .exceptions import InvalidState
-from .linalg import matvec
+from .exceptions import InvalidState, SolverError
+from .linalg import dot, finite, matvec
 
 LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 _WORLD = pin.Convention.WORLD
@@ -51,6 +51,7 @@ class DynamicsStage:
         self._posed = True  # the last step posed a Gauss problem
         self._dynamics: Dynamics | None = None
         self._pending: tuple[np.ndarray, np.ndarray, np.ndarray, float] | None = None
+        self._padded = np.zeros(model.nv)  # the torque ABA reads; a floating base's entries stay zero
 
     def free_motion(self, q: np.ndarray, v: np.ndarray, tau: np.ndarray, dt: float | None) -> np.ndarray:
         """The unconstrained solution x_free of the velocity level (time step ``dt``) or, for None, the
@@ -59,9 +60,14 @@ class DynamicsStage:
             self._posed = False
             self._dynamics = compute_dynamics(self.model, self.data, q, v, tau, dt)
             return self._dynamics.x_free
-        a_free = free_acceleration(self.model, self.data, q, v, tau)
+        a_free = free_acceleration(self.model, self.data, q, v, tau, self._padded)
+        x_free = np.empty(len(v))  # filled by the kernel: cheaper than a kernel's new array
+        if not free_velocity(v, a_free, dt, x_free):  # tau is checked only here, where a NaN shows
+            if not np.all(np.isfinite(tau)):
+                raise InvalidState.non_finite("tau", tau)
+            raise SolverError("the free motion (Pinocchio's ABA) is not finite at a finite state and torque")
         self._dynamics, self._pending = None, (q, v, a_free, dt)
-        return free_velocity(v, a_free, dt)
+        return x_free
 
     def problem(self) -> Dynamics:
         """The Gauss problem of the last free motion (posed now when that skipped it)."""
@@ -88,40 +94,44 @@ def compute_dynamics(
     nle = pin.nonLinearEffects(model, data, q, v)
     if dt is None:
         pin.forwardKinematics(model, data, q, v, np.zeros(model.nv))
-    finite, f, g = _linear_term(M, v, tau, nle, 0.0 if dt is None else dt)
-    if not finite:
+    f, g = np.empty(len(v)), np.empty(len(v))  # filled by the kernel: cheaper than its new arrays
+    if not _linear_term(M, v, tau, nle, 0.0 if dt is None else dt, f, g):
         raise InvalidState.non_finite("tau", tau)
     pin.cholesky.decompose(model, data)
     return Dynamics(M, g, pin.cholesky.solve(model, data, f))
 
 
 @njit(cache=True)
-def _linear_term(M, v, tau, nle, dt):  # type: ignore[no-untyped-def]
-    """(True, f, -f): f = M v + dt F at the velocity level (dt > 0), F at the acceleration level
-    (dt = 0), with F = tau - b and tau's missing first entries zero; (False, ...) when tau is not
-    finite."""
-    F, head = -nle, len(nle) - len(tau)
+def _linear_term(M, v, tau, nle, dt, f, g):  # type: ignore[no-untyped-def]
+    """Fill f = M v + dt F at the velocity level (dt > 0), F at the acceleration level (dt = 0), with
+    F = tau - b and tau's missing first entries zero, and g = -f; False when tau is not finite."""
+    head = len(nle) - len(tau)
+    for i in range(len(nle)):
+        f[i] = -nle[i]
     for i in range(len(tau)):  # padded_torque fused with the subtraction (this runs every step)
         if not np.isfinite(tau[i]):
-            return False, F, F
-        F[head + i] += tau[i]
-    f = matvec(M, v) + dt * F if dt > 0 else F
-    return True, f, -f
+            return False
+        f[head + i] += tau[i]
+    if dt > 0:
+        for i in range(len(f)):
+            f[i] = dot(M[i], v) + dt * f[i]
+    for i in range(len(f)):
+        g[i] = -f[i]
+    return True
 
 
 def free_acceleration(
-    model: pin.Model, data: pin.Data, q: np.ndarray, v: np.ndarray, tau: np.ndarray
+    model: pin.Model, data: pin.Data, q: np.ndarray, v: np.ndarray, tau: np.ndarray, padded: np.ndarray
 ) -> np.ndarray:
-    """a_free = M^-1 (tau - b(q, v)) by Pinocchio's ABA (WORLD convention, which also fills data.oMi).
+    """a_free = M^-1 (tau - b(q, v)) by Pinocchio's ABA (WORLD convention, which also fills data.oMi);
+    not finite when tau is not.
 
     ``tau`` has shape (nv,), or fewer entries: the torques of the last joints (a floating base's
-    actuated joints), the first ones unactuated. Raises :class:`InvalidState` when it is not finite
-    (checked here, in the kernel that pads it).
+    actuated joints), the first ones unactuated; it is copied into the end of ``padded`` (nv,), whose
+    first entries must be zero.
     """
-    full = padded_torque(tau, len(v))
-    if full is None:
-        raise InvalidState.non_finite("tau", tau)
-    return pin.aba(model, data, q, v, full, _WORLD)
+    padded[len(padded) - len(tau) :] = tau
+    return pin.aba(model, data, q, v, padded, _WORLD)
 
 
 def gauss_problem(
@@ -136,9 +146,12 @@ def gauss_problem(
 
 
 @njit(cache=True)
-def free_velocity(v, a_free, dt):  # type: ignore[no-untyped-def]
-    """v + dt a_free: the next velocity when nothing restricts the motion."""
-    return v + dt * a_free
+def free_velocity(v, a_free, dt, out):  # type: ignore[no-untyped-def]
+    """out = v + dt a_free, the next velocity when nothing restricts the motion; False when it is not
+    finite."""
+    for i in range(len(v)):
+        out[i] = v[i] + dt * a_free[i]
+    return finite(out)
 
 
 @njit(cache=True)
@@ -181,7 +194,7 @@ def damped_torque(tau, damping, v, previous):  # type: ignore[no-untyped-def]
 @njit(cache=True)
 def _free_problem(M, v, a_free, dt):  # type: ignore[no-untyped-def]
     """(x_free, -M x_free) with x_free = v + dt a_free."""
-    x_free = free_velocity(v, a_free, dt)
+    x_free = v + dt * a_free
     return x_free, -matvec(M, x_free)
 
 

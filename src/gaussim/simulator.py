@@ -65,6 +65,7 @@ class Simulator:
         self._last_state: State | None = None  # the state the last step returned: already valid
         self._nv = self.model.nv  # read each step: a plain int, not a property of the Pinocchio model
         self._no_torque = np.zeros(self._nv)
+        self._scratch = np.zeros(self._nv)  # the step's displacement dt v+, read by Pinocchio's integrate
         self._no_torque.flags.writeable = False
         self._armature = self.model.armature.copy()  # the robot's own (rotor inertias)
         self._damping: np.ndarray | None = None  # the implicit damping D, (nv,), whose dt D is added to it
@@ -201,9 +202,9 @@ class Simulator:
         if self.detector:
             self.detector.cover(state.v, x_free, o.dt, o.dt if acceleration else 1.0)
             contacts = self.detector.detect(self.data)
+            mark(("collision", _clock()))
         else:
             contacts = NO_CONTACTS
-        mark(("collision", _clock()))
         if acceleration:
             dyn = self.dynamics.problem()
             v = self._impact(state, dyn.M, contacts, report)
@@ -218,8 +219,7 @@ class Simulator:
             )
         else:  # nothing can restrict the motion: no Gauss problem to pose
             v_next = x_free
-        mark(("", _clock()))
-        q_next = integrate(self.model, state.q, v_next, o.dt)
+        q_next = integrate(self.model, state.q, v_next, o.dt, self._scratch)
         mark(("integrate", _clock()))
         if q_next is None:
             raise SolverError(f"step at t={state.t:.6g} s produced a non-finite velocity", report)
@@ -301,4 +301,5 @@ class Simulator:
                 break
             parts = None
         report.blocks += [(module, rows, multipliers, scale) for module, rows, multipliers in blocks]
+        mark(("", _clock()))
         return solution.x

@@ -111,13 +111,14 @@ def _read(H, g, A, b, C, l, x, y, z):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True, fastmath={"reassoc", "contract"})
-def _warm(H, g, A, b, C, l, x, multipliers, tolerance):  # type: ignore[no-untyped-def]
-    """(how, x, multipliers, the residuals of :func:`_kkt_residuals` there) for the first of two
-    candidates built from the last solution (x, multipliers) that the relative KKT residual certifies
-    (<= ``tolerance``): that solution itself (how 1), then the solution of the problem with the rows
-    it held active (its equalities and the inequalities with a positive multiplier) as equalities
-    (how 2): one linear solve, an active-set method's step, exact when the active set did not change
-    (a contact that keeps sticking, a limit that keeps holding). how 0: neither is certified.
+def _warm(H, g, A, b, C, l, x, multipliers, tolerance, x_out, multipliers_out):  # type: ignore[no-untyped-def]
+    """(how, the residuals of :func:`_kkt_residuals`) for the first of two candidates built from the
+    last solution (x, multipliers) that the relative KKT residual certifies (<= ``tolerance``): that
+    solution itself (how 1), then the solution of the problem with the rows it held active (its
+    equalities and the inequalities with a positive multiplier) as equalities (how 2, written into
+    ``x_out`` and ``multipliers_out``): one linear solve, an active-set method's step, exact when the
+    active set did not change (a contact that keeps sticking, a limit that keeps holding). how 0:
+    neither is certified.
 
     The active-set solve: x = H^-1 (K^T lam - g) with K lam's rows and G lam = r + K H^-1 g,
     G = K H^-1 K^T the rows' Delassus matrix, shifted by ACTIVE_SET_SHIFT max diag G and refined
@@ -126,7 +127,7 @@ def _warm(H, g, A, b, C, l, x, multipliers, tolerance):  # type: ignore[no-untyp
     n_eq, nv = len(b), len(g)
     residuals = _kkt_residuals(H, g, A, b, C, l, x, multipliers[:n_eq], multipliers[n_eq:])
     if residuals[1] <= tolerance:
-        return 1, x, multipliers, residuals
+        return 1, residuals
     active = np.flatnonzero(multipliers[n_eq:] > 0.0)
     k = n_eq + len(active)
     K, r = np.empty((k, nv)), np.empty(k)
@@ -135,7 +136,7 @@ def _warm(H, g, A, b, C, l, x, multipliers, tolerance):  # type: ignore[no-untyp
         K[n_eq + i], r[n_eq + i] = C[active[i]], l[active[i]]
     L = cholesky(H, 0.0)
     if L is None:
-        return 0, x, multipliers, residuals
+        return 0, residuals
     W = forward(L, K)  # the rows of K L^-T, (k, nv)
     h = forward(L, g.copy().reshape((1, nv)))[0]  # L^-1 g
     G, rhs, largest = np.empty((k, k)), r, 0.0
@@ -146,7 +147,7 @@ def _warm(H, g, A, b, C, l, x, multipliers, tolerance):  # type: ignore[no-untyp
         largest = max(largest, G[i, i])
     LG = cholesky(G, ACTIVE_SET_SHIFT * largest)
     if LG is None:
-        return 0, x, multipliers, residuals
+        return 0, residuals
     lam = np.zeros(k)
     for _ in range(ACTIVE_SET_REFINEMENTS):
         step = rhs - matvec(G, lam)
@@ -155,13 +156,13 @@ def _warm(H, g, A, b, C, l, x, multipliers, tolerance):  # type: ignore[no-untyp
     for i in range(k):
         for j in range(nv):
             y[j] += lam[i] * W[i, j]
-    x = backward(L, y)
-    multipliers = np.zeros(len(multipliers))
-    multipliers[:n_eq] = lam[:n_eq]
+    x_out[:] = backward(L, y)
+    multipliers_out[:] = 0.0
+    multipliers_out[:n_eq] = lam[:n_eq]
     for i in range(len(active)):
-        multipliers[n_eq + active[i]] = lam[n_eq + i]
-    residuals = _kkt_residuals(H, g, A, b, C, l, x, multipliers[:n_eq], multipliers[n_eq:])
-    return 2 if residuals[1] <= tolerance else 0, x, multipliers, residuals
+        multipliers_out[n_eq + active[i]] = lam[n_eq + i]
+    residuals = _kkt_residuals(H, g, A, b, C, l, x_out, multipliers_out[:n_eq], multipliers_out[n_eq:])
+    return 2 if residuals[1] <= tolerance else 0, residuals
 
 
 @dataclass
@@ -233,6 +234,7 @@ class GaussSolver:
         self._results: tuple[Any, ...] = ()  # the QP object's x, y, z and info
         self._cap = 0  # the QP object's iteration cap
         self._last: tuple[np.ndarray, np.ndarray] = (np.zeros(0), np.zeros(0))  # x, multipliers
+        self._candidate = self._last  # the buffers of the active-set candidate (see _warm)
 
     def solve(self, problem: GaussProblem) -> Solution:
         """Solve the Gauss problem; raise :class:`SolverError` as ``Options.on_failure`` says."""
@@ -274,6 +276,7 @@ class GaussSolver:
         _initialise(self._qp, p, equalities, inequalities)
         self._dims = dims
         results = self._qp.results  # views that every solve of this QP object writes into
+        self._candidate = np.empty(dims[0]), np.empty(dims[1] + dims[2])  # what _warm writes into
         self._results = results.x, results.y, results.z, results.info
 
     def _warm(self, problem: GaussProblem) -> Solution | None:
@@ -283,11 +286,15 @@ class GaussSolver:
         problems, its active set the other 24%; the check costs 3 us, the active-set solve 5 us more,
         a warm-started ProxQP update and solve 25 us."""
         p = problem
-        how, x, multipliers, (residual, relative, primal, dual, gap) = _warm(
-            p.H, p.g, p.A, p.b, p.C, p.l, *self._last, self.options.eps_abs
+        x, multipliers = self._last
+        candidate = self._candidate
+        how, (residual, relative, primal, dual, gap) = _warm(
+            p.H, p.g, p.A, p.b, p.C, p.l, x, multipliers, self.options.eps_abs, *candidate
         )
         if not how:
             return None
+        if how == 2:  # the last solution stays as it is: it may be a step's velocity
+            x, multipliers = candidate[0].copy(), candidate[1].copy()
         certificate = Certificate(CONVERGED[1 + how], 0, primal, dual, gap, residual, relative)
         return Solution(x, multipliers, len(p.b), certificate)
 

@@ -35,9 +35,7 @@ class State:
         state = object.__new__(cls)
         q.setflags(write=False)
         v.setflags(write=False)
-        _set(state, "t", float(t))
-        _set(state, "q", q)
-        _set(state, "v", v)
+        state.__dict__.update(t=float(t), q=q, v=v)  # past the frozen __setattr__, in one call
         return state
 
     def copy(self) -> State:
@@ -53,6 +51,3 @@ class State:
         """Load a state written by :meth:`save`."""
         with np.load(path, allow_pickle=False) as f:
             return cls(float(f["t"]), f["q"], f["v"])
-
-
-_set = object.__setattr__  # how a frozen State is filled
