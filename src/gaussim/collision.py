@@ -190,7 +190,10 @@ class _GroundHulls:
         """The hulls within ``margin`` of the ground: of those that touch at their deepest vertex alone
         their pairs (k,), deepest vertices in the world (k, 3), normals (k, 3) and gaps (k,), then the
         hulls that touch more widely (w,)."""
-        return _ground_hulls(
+        count = len(self.pairs)  # at most one point each: the kernel fills these and says how many
+        pairs, points, normals = np.empty(count, np.int64), np.empty((count, 3)), np.empty((count, 3))
+        gaps, wide = np.empty(count), np.empty(count, np.int64)
+        k, w = _ground_hulls(
             *self._placements(data),
             self.plane,
             self.columns,
@@ -202,7 +205,15 @@ class _GroundHulls:
             self.rounding,
             margin,
             self.index,
+            pairs,
+            points,
+            normals,
+            gaps,
+            wide,
         )
+        if k < count:
+            pairs, points, normals, gaps = pairs[:k], points[:k], normals[:k], gaps[:k]
+        return pairs, points, normals, gaps, wide[:w]
 
     def _placements(self, data: pin.Data) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...]]:
         """(rotations, translations) of the hulls' joints: views of Pinocchio's arrays inside
@@ -231,8 +242,15 @@ def _ground_hulls(
     rounding,
     margin,
     pair,
+    pairs_out,
+    points_out,
+    normals_out,
+    gaps_out,
+    wide_out,
 ):  # type: ignore[no-untyped-def]
-    """The compiled pass of :class:`_GroundHulls` (updates ``deepest`` and ``narrow_at``).
+    """The compiled pass of :class:`_GroundHulls` (updates ``deepest`` and ``narrow_at``): fills the
+    first k entries of the ``*_out`` arrays with what :meth:`_GroundHulls.detect` returns and the
+    first w of ``wide_out``; returns (k, w).
 
     The deepest vertex is found by descent along the hull's edges from the last one: a vertex no
     neighbour of which is deeper is the deepest of a convex polyhedron (a linear function has no
@@ -280,8 +298,16 @@ def _ground_hulls(
         narrow[k] = (high - low).max() <= PATCH_MIN_EXTENT
         for j in range(3):
             narrow_at[k, j] = c[j] if narrow[k] else np.nan
-    one = np.flatnonzero(touching & narrow)
-    return pair[one], points[one], plane[one, :3], gaps[one], np.flatnonzero(touching & ~narrow)
+    one = w = 0
+    for k in range(count):
+        if touching[k] and narrow[k]:
+            pairs_out[one], gaps_out[one] = pair[k], gaps[k]
+            points_out[one], normals_out[one] = points[k], plane[k, :3]
+            one += 1
+        elif touching[k]:
+            wide_out[w] = k
+            w += 1
+    return one, w
 
 
 class ContactDetector:
