@@ -197,6 +197,10 @@ def _pyramids(  # type: ignore[no-untyped-def]
     sin,
     pyramid,
     bounds,
+    rows,
+    bound,
+    packed,
+    starts,
 ):
     """Every contact's rows, as the module docstring poses them; the per-contact work in one pass.
 
@@ -209,17 +213,20 @@ def _pyramids(  # type: ignore[no-untyped-def]
         level: 0 velocity, 1 impulse, 2 acceleration; pyramid: fixed basis and no De Saxce shift.
         bounds: (dt, stabilisation, restitution_threshold).
 
+    Fills the first R rows of ``rows`` (m facets, nv) and ``bound`` (m facets,), the first entries of
+    ``packed`` (the buffer :func:`_unpacked` reads: point Jacobians, generators, slip used, friction
+    force; room for m facets rows) and ``starts`` (m + 1,) (the first row of each contact, then R);
+    the caller allocates them, which costs less than a kernel's new arrays.
+
     Returns:
-        rows (R, nv), bound (R,), the buffer :func:`_unpacked` reads (point Jacobians, generators, slip
-        used, friction force), the first row of each contact then R (m + 1,), and, when a contact gets
-        an explicit friction force (acceleration-level sliding), which ones (m,) and that force's
-        generalized force (nv,), else None and None.
+        R, and, when a contact gets an explicit friction force (acceleration-level sliding), which ones
+        (m,) and that force's generalized force (nv,), else None and None.
     """
     dt, stabilisation, threshold = bounds
     m, nv, facets = len(joints), len(v), len(cos)
     acceleration = level == 2
     J3 = point_jacobians_from(joint_jacobians, masks, joints, other_joints, points)
-    starts, sliding = np.zeros(m + 1, np.int64), np.zeros(m, np.bool_)
+    starts[0], sliding = 0, np.zeros(m, np.bool_)
     contact_bound, slip_used = np.empty(m), slips.copy()
     for i in range(m):
         n = normal[i]
@@ -239,12 +246,10 @@ def _pyramids(  # type: ignore[no-untyped-def]
             if not pyramid:
                 contact_bound[i] -= mu[i] * speed
     total = starts[m]
-    packed = np.empty(3 * m * nv + 3 * total + 6 * m)
-    J, generators, slip, friction = _unpacked(packed, m, nv)
+    J, generators, slip, friction = _unpacked(packed[: 3 * m * nv + 3 * total + 6 * m], m, nv)
     J[:] = J3
     slip[:] = slip_used
     friction[:] = 0.0
-    rows, bound = np.empty((total, nv)), np.empty(total)
     force = np.zeros(nv)
     for i in range(m):
         n, r, count = normal[i], starts[i], starts[i + 1] - starts[i]
@@ -281,8 +286,8 @@ def _pyramids(  # type: ignore[no-untyped-def]
             else:
                 bound[r + k] = contact_bound[i]
     if sliding.any():
-        return rows, bound, packed, starts, sliding, force
-    return rows, bound, packed, starts, None, None
+        return total, sliding, force
+    return total, None, None
 
 
 class ContactModule:
@@ -315,7 +320,10 @@ class ContactModule:
         m = len(contacts)
         no_slip, no_stops, no_force, no_drift = self._blank(m)
         drift = _drifts(ctx, contacts) if level == "acceleration" else no_drift
-        rows, bound, packed, starts, sliding, force = _pyramids(
+        nv, most = len(ctx.v), m * self.facets  # at most m facets rows
+        rows, bound = np.empty((most, nv)), np.empty(most)
+        packed, starts = np.empty(3 * m * nv + 3 * most + 6 * m), np.empty(m + 1, np.int64)
+        total, sliding, force = _pyramids(
             self._jacobians(ctx.data),
             self.masks,
             contacts.joint,
@@ -336,7 +344,13 @@ class ContactModule:
             self.sin,
             self.mode == "pyramid",
             (options.dt, options.stabilisation, options.restitution_threshold),
+            rows,
+            bound,
+            packed,
+            starts,
         )
+        if total < most:  # frictionless or sliding contacts: fewer rows
+            rows, bound, packed = rows[:total], bound[:total], packed[: 3 * m * nv + 3 * total + 6 * m]
         # contacts with a full pyramid refine their De Saxce shift at the velocity and impulse levels
         shifts = level != "acceleration" and self.mode != "pyramid"
 
