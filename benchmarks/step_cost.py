@@ -138,9 +138,7 @@ def main(argv: list[str] | None = None) -> int:
         ("gaussim (acceleration scheme)", min(r[0] for r in acc), max(r[2] for r in acc)),
     ]
     for solver, peer in peer_runs.items():
-        rows.append(
-            (f"MuJoCo {solver} (pyramidal)", min(p[0] for p in peer), max(p[1] for p in peer))
-        )
+        rows.append((f"MuJoCo {solver} (pyramidal)", min(p[0] for p in peer), max(p[1] for p in peer)))
 
     print("Solo-12 standing, dt = 1 ms, 4 foot contacts, PD posture hold\n")
     print("| engine | us/step | ratio to MuJoCo Newton | max penetration [mm] |")
