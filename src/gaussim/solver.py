@@ -120,10 +120,10 @@ def _warm(H, g, A, b, C, l, x, multipliers, tolerance, x_out, multipliers_out): 
     active set did not change (a contact that keeps sticking, a limit that keeps holding). how 0:
     neither is certified.
 
-    The active-set solve: x = H^-1 (K^T lam - g) with K lam's rows and G lam = r + K H^-1 g,
-    G = K H^-1 K^T the rows' Delassus matrix, shifted by ACTIVE_SET_SHIFT max diag G and refined
-    ACTIVE_SET_REFINEMENTS times (dependent rows make G singular; their multipliers' split is then one
-    of many, which the check accepts when it is >= 0)."""
+    The active-set solve: x = H^-1 (K^T lam - g), K the active rows and r their right-hand sides,
+    with G lam = r + K H^-1 g, G = K H^-1 K^T the rows' Delassus matrix, shifted by ACTIVE_SET_SHIFT
+    max diag G and refined ACTIVE_SET_REFINEMENTS times (dependent rows make G singular; their
+    multipliers' split is then one of many, which the check accepts when it is >= 0)."""
     n_eq, nv = len(b), len(g)
     residuals = _kkt_residuals(H, g, A, b, C, l, x, multipliers[:n_eq], multipliers[n_eq:])
     if residuals[1] <= tolerance:
@@ -238,6 +238,11 @@ class GaussSolver:
 
     def solve(self, problem: GaussProblem) -> Solution:
         """Solve the Gauss problem; raise :class:`SolverError` as ``Options.on_failure`` says."""
+        solution = self._solve(problem)
+        self._last = solution.x, solution.multipliers  # where the next solve starts (see _warm)
+        return solution
+
+    def _solve(self, problem: GaussProblem) -> Solution:
         p = problem
         dims, equalities, inequalities = _sides(p)
         if dims != self._dims:
@@ -246,12 +251,10 @@ class GaussSolver:
         else:
             warm = self._warm(problem)
             if warm is not None:
-                self._last = warm.x, warm.multipliers
                 return warm
             self._qp.update(p.H, p.g, *equalities, *inequalities)  # the upper bounds stay +inf
             solution = self._run(problem, WARM_START_ITERATIONS)
         if self._certified(solution):  # converged, finite and certified: nothing more to check
-            self._last = solution.x, solution.multipliers
             return solution
         if solution.certificate.status not in INFEASIBLE:
             # ProxQP 0.8, warm-started, may return the previous solution after 0 iterations when only
@@ -265,7 +268,6 @@ class GaussSolver:
             if not self._certified(solution) and solution.certificate.converged:
                 solution.certificate.status = "GAUSSIM_KKT_CHECK_FAILED"
         self._check(problem, solution)
-        self._last = solution.x, solution.multipliers
         return solution
 
     def _fresh(
@@ -283,8 +285,9 @@ class GaussSolver:
         """A solution built from the last one (see :func:`_warm`) when gaussim's relative KKT residual
         certifies it to eps_abs (stricter than the KKT_RTOL eps_abs at which ProxQP's answers are
         accepted), else None. Measured on Solo-12 standing: the last solution solves 76% of the steps'
-        problems, its active set the other 24%; the check costs 3 us, the active-set solve 5 us more,
-        a warm-started ProxQP update and solve 25 us."""
+        problems, its active set the other 24% (3000 steps); a call costs 1.7 us when the last
+        solution holds, 7.7 us when the active set is solved, against 12.8 us for ProxQP's
+        warm-started update and solve of the same problem."""
         p = problem
         x, multipliers = self._last
         candidate = self._candidate
@@ -293,7 +296,7 @@ class GaussSolver:
         )
         if not how:
             return None
-        if how == 2:  # the last solution stays as it is: it may be a step's velocity
+        if how == 2:  # the next call writes into the same buffers: the solution gets copies
             x, multipliers = candidate[0].copy(), candidate[1].copy()
         certificate = Certificate(CONVERGED[1 + how], 0, primal, dual, gap, residual, relative)
         return Solution(x, multipliers, len(p.b), certificate)
