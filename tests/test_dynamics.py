@@ -113,3 +113,17 @@ def test_the_stage_takes_the_order_the_last_step_needed(solo12):
         problem = stage.problem()
         np.testing.assert_allclose(problem.g, expected.g, atol=1e-9)
         np.testing.assert_allclose(problem.M, expected.M, atol=1e-12)
+
+
+def test_aba_takes_either_torque_size_in_any_order(solo12):
+    """On the ABA path a full torque (nv,) then the actuated joints' (nv - 6,) gives the second's own
+    free motion: the full one's base entries do not linger in the padding buffer."""
+    model = solo12.model
+    stage, reference = DynamicsStage(model, model.createData()), model.createData()
+    rng = np.random.default_rng(7)
+    q, v, dt = solo12.configuration("standing"), rng.normal(size=model.nv), 1e-3
+    full, actuated = rng.normal(size=model.nv), rng.normal(size=12)
+    stage.free_motion(q, v, full, dt)  # the first call poses the problem; the next ones run ABA
+    for tau in (full, actuated, full, actuated):
+        expected = compute_dynamics(model, reference, q, v, tau, dt)
+        np.testing.assert_allclose(stage.free_motion(q, v, tau, dt), expected.x_free, atol=1e-12)

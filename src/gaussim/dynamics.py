@@ -127,11 +127,13 @@ def free_acceleration(
     not finite when tau is not.
 
     ``tau`` has shape (nv,), or fewer entries: the torques of the last joints (a floating base's
-    actuated joints), the first ones unactuated; it is copied into the end of ``padded`` (nv,), whose
-    first entries must be zero.
+    actuated joints), the first ones unactuated; those are copied into the end of ``padded`` (nv,),
+    whose first entries must be zero (only such copies ever write into it).
     """
-    padded[len(padded) - len(tau) :] = tau
-    return pin.aba(model, data, q, v, padded, _WORLD)
+    if len(tau) < len(padded):
+        padded[len(padded) - len(tau) :] = tau
+        tau = padded
+    return pin.aba(model, data, q, v, tau, _WORLD)
 
 
 def gauss_problem(
@@ -194,7 +196,8 @@ def damped_torque(tau, damping, v, previous):  # type: ignore[no-untyped-def]
 @njit(cache=True)
 def _free_problem(M, v, a_free, dt):  # type: ignore[no-untyped-def]
     """(x_free, -M x_free) with x_free = v + dt a_free."""
-    x_free = v + dt * a_free
+    x_free = np.empty(len(v))
+    free_velocity(v, a_free, dt, x_free)
     return x_free, -matvec(M, x_free)
 
 
