@@ -13,9 +13,12 @@ import gaussim
 from gaussim.bench.cases import two_boxes
 from gaussim.collision import PATCH_MIN_EXTENT, PATCH_TOLERANCE, ContactDetector
 
+from .conftest import at_height, run
+
 FEET = ("FL", "FR", "HL", "HR")
 # Both compute the same support point in floating point; they may round differently.
 AGREEMENT = 1e-9
+RADIUS = 0.1  # the ball robot's radius [m]
 
 
 def _coal_deepest(pair, placement: pin.SE3, margin: float) -> tuple[float, np.ndarray]:
@@ -128,3 +131,72 @@ def test_box_on_box_face_to_face_gives_a_finite_contact(tmp_path):
     assert np.isfinite(contacts.normal).all() and np.isfinite(contacts.gap).all()
     assert np.allclose(contacts.normal, [0.0, 0.0, 1.0], atol=1e-9)  # the bottom box's top face
     assert np.all(np.abs(contacts.gap) < 1e-9)
+
+
+def _checking_skips(detector: ContactDetector) -> list[bool]:
+    """Make ``detector`` check each detection it skips by a full one at the same placements (it must
+    find nothing, and leaves the skipping as it was); returns a list that gets True for each skipped
+    detection and False for each full one."""
+    looks: list[bool] = []
+    detect = detector.detect
+
+    def checked(data):
+        skipped = detector.clearance > detector.margin
+        looks.append(skipped)
+        if skipped:
+            clearance = detector.clearance
+            detector.forget()
+            assert len(detect(data)) == 0, "a skipped detection hid a contact"
+            detector.clearance = clearance
+        return detect(data)
+
+    detector.detect = checked  # type: ignore[method-assign]
+    return looks
+
+
+def _skipping_run(scene: gaussim.Scene, q0: np.ndarray, v0: np.ndarray, steps: int, tau=None) -> list[bool]:
+    """Run ``scene`` from (q0, v0), checking every skipped detection (see _checking_skips); the run must
+    land. Returns which detections were skipped."""
+    sim = gaussim.Simulator(scene)
+    looks = _checking_skips(sim.detector)
+    state, touched = sim.reset(q0, v0), 0
+    for _ in range(steps):
+        state = sim.step(state, tau)
+        touched += bool(sim.last_step.contacts)
+    assert touched > steps // 4, "the run must land and stay in contact"
+    return looks
+
+
+def test_skipped_detections_hide_no_contact(solo12):
+    """Solo-12 thrown spinning from 0.3 m onto the ground: the flight skips most detections, and a full
+    detection at each skipped one finds nothing."""
+    feet = [(f"{leg}_FOOT_0", "ground") for leg in FEET]
+    scene = gaussim.Scene(solo12, ground=gaussim.Ground(friction=0.8), contacts=feet)
+    q0 = solo12.configuration("standing")
+    q0[2] += 0.3
+    v0 = np.zeros(solo12.model.nv)
+    v0[[0, 2, 3, 5]] = 0.5, 1.0, 2.0, 3.0  # sideways and up, rolling and turning
+    looks = _skipping_run(scene, q0, v0, 700, tau=np.zeros(12))
+    assert sum(looks) > 250, sum(looks)  # about 0.4 s of flight
+
+
+def test_skipped_detections_see_an_obstacle_and_the_ground(ball):
+    """A ball thrown onto a table (coal's narrow phase, a bounding-sphere bound) rolls off onto the
+    ground (the compiled pass): the skipped detections hide no contact."""
+    table = gaussim.Box("table", size=(0.4, 0.4, 0.3), position=(0, 0, 0.15))
+    scene = gaussim.Scene(ball, ground=gaussim.Ground(), obstacles=[table])
+    q0, v0 = at_height(ball, 0.8), np.zeros(ball.model.nv)
+    q0[0], v0[0] = -0.3, 0.8
+    looks = _skipping_run(scene, q0, v0, 1200)
+    assert sum(looks) > 200, sum(looks)
+
+
+def test_a_state_from_elsewhere_is_detected_afresh(ball):
+    """After steps in flight (whose detections are skipped) a state given on the ground gets its
+    contact at once: the detector forgets what the flight let it skip."""
+    sim = gaussim.Simulator(gaussim.Scene(ball, ground=gaussim.Ground()))
+    state = run(sim, sim.reset(at_height(ball, 5.0)), 20)
+    assert not sim.last_step.contacts and sim.detector.clearance > 4.0
+    landed = gaussim.State(state.t, at_height(ball, RADIUS - 1e-4), np.zeros(ball.model.nv))
+    sim.step(landed)
+    assert len(sim.last_step.contacts) == 1 and sim.last_step.contacts[0].normal_force > 0

@@ -186,14 +186,14 @@ class _GroundHulls:
         self._data: pin.Data | None = None
         self._views: tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...]] = ((), ())
 
-    def detect(self, data: pin.Data, margin: float) -> tuple[np.ndarray, ...]:
+    def detect(self, data: pin.Data, margin: float) -> tuple[tuple[np.ndarray, ...], np.ndarray, float]:
         """The hulls within ``margin`` of the ground: of those that touch at their deepest vertex alone
-        their pairs (k,), deepest vertices in the world (k, 3), normals (k, 3) and gaps (k,), then the
-        hulls that touch more widely (w,)."""
+        (their pairs (k,), deepest vertices in the world (k, 3), normals (k, 3), gaps (k,)), the hulls
+        that touch more widely (w,), and the least gap of all the hulls [m]."""
         count = len(self.pairs)  # at most one point each: the kernel fills these and says how many
         pairs, points, normals = np.empty(count, np.int64), np.empty((count, 3)), np.empty((count, 3))
         gaps, wide = np.empty(count), np.empty(count, np.int64)
-        k, w = _ground_hulls(
+        k, w, least = _ground_hulls(
             *self._placements(data),
             self.plane,
             self.columns,
@@ -213,7 +213,7 @@ class _GroundHulls:
         )
         if k < count:
             pairs, points, normals, gaps = pairs[:k], points[:k], normals[:k], gaps[:k]
-        return pairs, points, normals, gaps, wide[:w]
+        return (pairs, points, normals, gaps), wide[:w], least
 
     def _placements(self, data: pin.Data) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...]]:
         """(rotations, translations) of the hulls' joints: views of Pinocchio's arrays inside
@@ -250,7 +250,7 @@ def _ground_hulls(
 ):  # type: ignore[no-untyped-def]
     """The compiled pass of :class:`_GroundHulls` (updates ``deepest`` and ``narrow_at``): fills the
     first k entries of the ``*_out`` arrays with what :meth:`_GroundHulls.detect` returns and the
-    first w of ``wide_out``; returns (k, w).
+    first w of ``wide_out``; returns (k, w, the least gap of all the hulls).
 
     The deepest vertex is found by descent along the hull's edges from the last one: a vertex no
     neighbour of which is deeper is the deepest of a convex polyhedron (a linear function has no
@@ -299,7 +299,9 @@ def _ground_hulls(
         for j in range(3):
             narrow_at[k, j] = c[j] if narrow[k] else np.nan
     one = w = 0
+    least = np.inf
     for k in range(count):
+        least = min(least, gaps[k])
         if touching[k] and narrow[k]:
             pairs_out[one], gaps_out[one] = pair[k], gaps[k]
             points_out[one], normals_out[one] = points[k], plane[k, :3]
@@ -307,7 +309,7 @@ def _ground_hulls(
         elif touching[k]:
             wide_out[w] = k
             w += 1
-    return one, w
+    return one, w, least
 
 
 class ContactDetector:
@@ -319,6 +321,10 @@ class ContactDetector:
     deepest point, the normal and the gap) and its contact patch (the points within PATCH_TOLERANCE
     of the support plane): a patch narrower than PATCH_MIN_EXTENT is one point, a wider one
     contributes its points.
+
+    Between steps the pairs can only close by what :meth:`cover` bounds, so a detection that finds
+    every pair farther than the margin by more than they may have closed since is skipped: a robot in
+    flight pays for one detection per many steps (see :meth:`forget` for a state from elsewhere).
     """
 
     def __init__(self, scene: Scene, margin: float) -> None:
@@ -356,32 +362,49 @@ class ContactDetector:
         self.joint = np.array([pair.joint for pair in self.pairs], dtype=int)
         self.other_joint = np.array([pair.other_joint for pair in self.pairs], dtype=int)
         self._layouts: dict[bytes, tuple] = {}  # what does not move, per set of touching pairs
+        # a lower bound on every pair's gap [m]: the least gap of the last detection less what the
+        # pairs may have closed since (-inf: unknown, so the next detection runs)
+        self.clearance = -np.inf
+
+    def forget(self) -> None:
+        """Detect afresh at the next step: the configuration did not come from the last one's motion."""
+        self.clearance = -np.inf
 
     def cover(self, v: np.ndarray, x: np.ndarray, dt: float, x_scale: float) -> None:
         """Widen the margin to what the pairs can close in one step, at velocity v and free velocity
         x (``x_scale`` 1) or free acceleration x (``x_scale`` dt): a contact is then found the step
         before it closes, at any speed. The margin changes by factors of 1.5 or more, so coal's
-        requests are rarely rewritten."""
-        needed = self.base_margin + _travel(self.levers, v, x, dt, x_scale)
+        requests are rarely rewritten.
+
+        The bound also covers the motion that led to this step's configuration (its velocity is v), so
+        it is taken off the clearance."""
+        travel = _travel(self.levers, v, x, dt, x_scale)
+        self.clearance -= travel
+        needed = self.base_margin + travel
         if needed > self.margin or (self.margin > self.base_margin and 3 * needed < self.margin):
             self.margin = max(self.base_margin, 1.5 * needed)
             self.request.security_margin = self.retry_request.security_margin = self.margin
 
     def detect(self, data: pin.Data) -> Contacts:
         """Contacts at the placements held in ``data`` (after forward kinematics), in the order of the
-        declared pairs."""
+        declared pairs; none, without a look, while the clearance exceeds the margin."""
+        if self.clearance > self.margin:  # False when NaN
+            return NO_CONTACTS
         pieces: list[tuple[np.ndarray, ...]] = []  # (pair of each point (k,), points, normals, gaps)
+        clearance = np.inf
         if len(self.hulls.pairs):
-            *one, wide = self.hulls.detect(data, self.margin)
+            one, wide, clearance = self.hulls.detect(data, self.margin)
             if len(one[0]):
-                pieces.append(tuple(one))
+                pieces.append(one)
             for h in wide.tolist():
                 outline = self._on_ground(h, data.oMi[self.hulls.joints[h]].homogeneous)
                 pieces.append(self._piece(int(self.hulls.index[h]), self.hulls.plane[h, :3], *outline))
         for k in self.others:
-            hit = self._collide(self.pairs[k], data)
+            hit, least = self._collide(self.pairs[k], data)
+            clearance = min(clearance, least)
             if hit is not None:
                 pieces.append(self._piece(k, *hit))
+        self.clearance = clearance
         if not pieces:
             return NO_CONTACTS
         if len(pieces) == 1:
@@ -426,22 +449,26 @@ class ContactDetector:
         count = len(points)
         return np.full(count, k), points, np.repeat(normal[None, :], count, axis=0), gaps
 
-    def _collide(self, pair: _Pair, data: pin.Data) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    def _collide(
+        self, pair: _Pair, data: pin.Data
+    ) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray] | None, float]:
         """coal's narrow phase and contact patch for one pair: (normal, points (k, 3), gaps (k,)), or
-        None when the pair is farther apart than the margin."""
+        None when the pair is farther apart than the margin; and a lower bound on its gap [m]."""
         placement = data.oMi[pair.joint] * pair.local
         if pair.other_local is not None:
             other = data.oMi[pair.other_joint] * pair.other_local
             pair.obstacle_tf = coal.Transform3s(other)
             pair.obstacle_center = other.act(pair.obstacle_local_center)
-        if pair.obstacle_radius < np.inf and not self._near(pair, placement):
-            return None  # coal's half-space test is as cheap as this bounding-sphere test
+        if pair.obstacle_radius < np.inf:  # coal's half-space test is as cheap as a bounding-sphere test
+            apart = self._sphere_gap(pair, placement)
+            if apart > self.margin:
+                return None, apart
         for request in (self.request, self.retry_request):
             self.result.clear()
             if not coal.collide(
                 pair.shape, placement, pair.obstacle_shape, pair.obstacle_tf, request, self.result
             ):
-                return None
+                return None, request.security_margin
             # copies: coal's arrays are views into its result, which the next pair overwrites
             contact = self.result.getContact(0)
             normal = -contact.normal.copy()  # coal's normal points from the robot to the obstacle
@@ -456,8 +483,8 @@ class ContactDetector:
             )
         patch = self._patch(pair, placement, normal, gap)
         if patch is None:
-            return normal, contact.getNearestPoint1().copy()[None, :], np.array([gap])
-        return normal, patch, np.full(len(patch), gap)
+            return (normal, contact.getNearestPoint1().copy()[None, :], np.array([gap])), gap
+        return (normal, patch, np.full(len(patch), gap)), gap
 
     def _patch(self, pair: _Pair, placement: pin.SE3, normal: np.ndarray, gap: float) -> np.ndarray | None:
         """The points (k, 3) of the pair's contact patch on the robot's surface when it spans more than
@@ -502,10 +529,11 @@ class ContactDetector:
         chosen = sorted(set(np.argmax(world @ pair.directions.T, axis=0).tolist()))
         return world[chosen], heights[chosen]
 
-    def _near(self, pair: _Pair, placement: pin.SE3) -> bool:
-        """Bounding-sphere test that skips the narrow phase for far pairs."""
-        gap = np.linalg.norm(placement.act(pair.center) - pair.obstacle_center) - pair.radius
-        return gap - pair.obstacle_radius <= self.margin
+    def _sphere_gap(self, pair: _Pair, placement: pin.SE3) -> float:
+        """The gap of the pair's bounding spheres, a lower bound on its own [m] (far pairs skip the
+        narrow phase)."""
+        distance = np.linalg.norm(placement.act(pair.center) - pair.obstacle_center)
+        return float(distance - pair.radius - pair.obstacle_radius)
 
 
 def _speed_levers(model: pin.Model, joint: int, center: np.ndarray, radius: float) -> np.ndarray:

@@ -191,6 +191,8 @@ class Simulator:
         """
         if state is not self._last_state:
             self._check_state(state)
+            if self.detector:
+                self.detector.forget()
         tau = self._damped_torque(tau, damping, state.v)
         o = self.options
         report = StepReport(state.t)
