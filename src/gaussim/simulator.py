@@ -64,6 +64,8 @@ class Simulator:
         self._floating = scene.robot.floating
         self._last_state: State | None = None  # the state the last step returned: already valid
         self._nv = self.model.nv  # read each step: a plain int, not a property of the Pinocchio model
+        # the torque shapes a step takes: (nv,), and a floating robot's actuated joints' (nv - 6,)
+        self._torque_shapes = {(self._nv,), (self._nv - 6,)} if self._floating else {(self._nv,)}
         self._no_torque = np.zeros(self._nv)
         self._scratch = np.zeros(self._nv)  # the step's displacement dt v+, read by Pinocchio's integrate
         self._no_torque.flags.writeable = False
@@ -154,8 +156,8 @@ class Simulator:
         if tau is None:
             return self._no_torque
         tau = np.asarray(tau, dtype=float)
-        nv = self._nv
-        if tau.shape != (nv,) and not (self._floating and tau.shape == (nv - 6,)):
+        if tau.shape not in self._torque_shapes:
+            nv = self._nv
             hint = f" or ({nv - 6},) for the actuated joints" if self._floating else ""
             raise InvalidState(f"{name} must have shape ({nv},){hint}, got {tau.shape}")
         return tau
@@ -195,10 +197,9 @@ class Simulator:
                 self.detector.forget()
         tau = self._damped_torque(tau, damping, state.v)
         o = self.options
-        report = StepReport(state.t)
+        report = StepReport(state.t, _clock())
         mark = report.marks.append
-        mark(("", _clock()))
-        acceleration = o.scheme == "acceleration"
+        acceleration, moved = o.scheme == "acceleration", None
         x_free = self.dynamics.free_motion(state.q, state.v, tau, None if acceleration else o.dt)
         mark(("dynamics", _clock()))
         if self.detector:
@@ -221,7 +222,8 @@ class Simulator:
             )
         else:  # nothing can restrict the motion: no Gauss problem to pose
             v_next = x_free
-        q_next = integrate(self.model, state.q, v_next, o.dt, self._scratch)
+            moved = self.dynamics.moved  # its displacement, when the free motion's kernel gave it
+        q_next = integrate(self.model, state.q, v_next, o.dt, self._scratch, moved)
         mark(("integrate", _clock()))
         if q_next is None:
             raise SolverError(f"step at t={state.t:.6g} s produced a non-finite velocity", report)
