@@ -213,3 +213,48 @@ def test_velocity_scheme_closes_a_fast_approach_at_any_step(ball, dt):
     assert min(lowest) - RADIUS > -1e-9
     assert abs(lowest[-1] - RADIUS) < 1e-6
     assert sim.detector.margin <= 3 * (sim.options.contact_margin + G * dt**2)
+
+
+def _slips_reference(J, slip, starts, x, normal, mu, tolerance):
+    """The slip update of contact.py's _slips, written plainly with numpy."""
+    from gaussim.constraints.contact import SLIP_SPEED
+
+    result, moved = slip.copy(), False
+    for i in range(len(slip)):
+        if starts[i + 1] - starts[i] == 1:
+            continue
+        u = J[i] @ x
+        u -= (u @ normal[i]) * normal[i]
+        if np.linalg.norm(slip[i]) > SLIP_SPEED or np.linalg.norm(u) > SLIP_SPEED:
+            moved |= max(1.0, mu[i]) * np.abs(u - slip[i]).max() > tolerance
+            result[i] = u
+    return result if moved else None
+
+
+@pytest.mark.parametrize("tolerance", [1e-9, 4.0, 1e9])  # 4: contact 0 moves by less (3.0)
+def test_slip_update_matches_its_plain_statement(tolerance):
+    """The compiled slip update (scalars, two passes) gives the plain one's answer: every moving
+    contact's new slip once any moved by more than the tolerance, else None; sticking contacts (one
+    row), resting ones (slow) and the moving ones below the tolerance included."""
+    from gaussim.constraints.contact import SLIP_SPEED, _slips
+
+    rng = np.random.default_rng(7)
+    m, nv, facets = 6, 9, 4
+    starts = np.array([0, 4, 5, 9, 13, 17, 21])  # contact 1 sticks: one row
+    J, x = rng.normal(size=(m, 3, nv)), rng.normal(size=nv)
+    J[3] *= 1e-9  # contact 3 barely moves ...
+    normal = rng.normal(size=(m, 3))
+    normal /= np.linalg.norm(normal, axis=1)[:, None]
+    slip = rng.normal(size=(m, 3))
+    slip[3] = 0.1 * SLIP_SPEED  # ... and has not moved: it keeps its slip
+    mu = np.array([0.5, 0.8, 1.0, 0.3, 2.0, 0.9])
+    rows = starts[-1]
+    packed = np.concatenate([J.ravel(), rng.normal(size=3 * rows), slip.ravel(), rng.normal(size=3 * m)])
+    assert facets * m - 3 == rows
+    expected = _slips_reference(J, slip, starts, x, normal, mu, tolerance)
+    got = _slips(packed, starts, x, normal, mu, tolerance)
+    if expected is None:
+        assert got is None
+    else:
+        np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-15)
+        np.testing.assert_array_equal(got[[1, 3]], slip[[1, 3]])  # the sticking and the resting

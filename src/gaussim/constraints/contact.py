@@ -166,12 +166,14 @@ def _unpacked(packed, m, nv):  # type: ignore[no-untyped-def]
     """Views of the buffer :func:`_pyramids` fills: J (m, 3, nv), generators (R, 3), slip (m, 3),
     friction (m, 3)."""
     rows = (len(packed) - 3 * m * nv - 6 * m) // 3
-    ends = np.cumsum(np.array([3 * m * nv, 3 * rows, 3 * m, 3 * m]))
+    a = 3 * m * nv  # where each part ends
+    b = a + 3 * rows
+    c = b + 3 * m
     return (
-        packed[: ends[0]].reshape((m, 3, nv)),
-        packed[ends[0] : ends[1]].reshape((rows, 3)),
-        packed[ends[1] : ends[2]].reshape((m, 3)),
-        packed[ends[2] : ends[3]].reshape((m, 3)),
+        packed[:a].reshape((m, 3, nv)),
+        packed[a:b].reshape((rows, 3)),
+        packed[b:c].reshape((m, 3)),
+        packed[c : c + 3 * m].reshape((m, 3)),
     )
 
 
@@ -424,19 +426,36 @@ def _slips(packed, starts, x, normal, mu, tolerance):  # type: ignore[no-untyped
     """When the slip of a contact that refines its shift (one with a full pyramid) and is moving (a
     sticking contact has no shift to refine) moved by more than ``tolerance`` / max(1, mu) (the
     normal velocity error it causes is mu times that): the slips (m, 3) of solution x for those
-    contacts, the others' unchanged; else None. ``packed`` and ``starts`` are :func:`_pyramids`'."""
+    contacts, the others' unchanged; else None. ``packed`` and ``starts`` are :func:`_pyramids`'.
+    (In scalars, no array per contact: this runs after every QP with friction.)"""
     J, _, slip, _ = _unpacked(packed, len(normal), len(x))
-    result, moved = slip.copy(), False
+    moved = False
     for i in range(len(slip)):
-        if starts[i + 1] - starts[i] == 1:
-            continue
-        u = np.array([dot(J[i, 0], x), dot(J[i, 1], x), dot(J[i, 2], x)])
-        u -= (u[0] * normal[i, 0] + u[1] * normal[i, 1] + u[2] * normal[i, 2]) * normal[i]
-        speed = np.sqrt(slip[i, 0] ** 2 + slip[i, 1] ** 2 + slip[i, 2] ** 2)
-        if speed > SLIP_SPEED or np.sqrt(u[0] ** 2 + u[1] ** 2 + u[2] ** 2) > SLIP_SPEED:
-            moved |= max(1.0, mu[i]) * np.abs(u - slip[i]).max() > tolerance
-            result[i] = u
-    return result if moved else None
+        moving, u0, u1, u2 = _moving_slip(J, slip, starts, x, normal, i)
+        if moving:
+            change = max(abs(u0 - slip[i, 0]), abs(u1 - slip[i, 1]), abs(u2 - slip[i, 2]))
+            moved |= max(1.0, mu[i]) * change > tolerance
+    if not moved:
+        return None
+    result = slip.copy()
+    for i in range(len(slip)):
+        moving, u0, u1, u2 = _moving_slip(J, slip, starts, x, normal, i)
+        if moving:
+            result[i, 0], result[i, 1], result[i, 2] = u0, u1, u2
+    return result
+
+
+@njit(cache=True, inline="always")
+def _moving_slip(J, slip, starts, x, normal, i):  # type: ignore[no-untyped-def]
+    """(whether contact i refines its shift and its tangential velocity in solution x or its last
+    slip is moving, that velocity's 3 components)."""
+    if starts[i + 1] - starts[i] == 1:
+        return False, 0.0, 0.0, 0.0
+    u0, u1, u2 = dot(J[i, 0], x), dot(J[i, 1], x), dot(J[i, 2], x)
+    along = u0 * normal[i, 0] + u1 * normal[i, 1] + u2 * normal[i, 2]
+    u0, u1, u2 = u0 - along * normal[i, 0], u1 - along * normal[i, 1], u2 - along * normal[i, 2]
+    speed = np.sqrt(slip[i, 0] ** 2 + slip[i, 1] ** 2 + slip[i, 2] ** 2)
+    return speed > SLIP_SPEED or np.sqrt(u0**2 + u1**2 + u2**2) > SLIP_SPEED, u0, u1, u2
 
 
 def _drifts(ctx: Context, contacts: Contacts) -> np.ndarray:
