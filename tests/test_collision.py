@@ -133,24 +133,23 @@ def test_box_on_box_face_to_face_gives_a_finite_contact(tmp_path):
     assert np.all(np.abs(contacts.gap) < 1e-9)
 
 
-def _checking_skips(detector: ContactDetector) -> list[bool]:
-    """Make ``detector`` check each detection it skips by a full one at the same placements (it must
-    find nothing, and leaves the skipping as it was); returns a list that gets True for each skipped
-    detection and False for each full one."""
+def _checking_skips(detector: ContactDetector, data: pin.Data) -> list[bool]:
+    """Make ``detector`` check each detection the step skips by one at the same placements (``data``,
+    the step's: it must find nothing); returns a list that gets True for each skipped detection and
+    False for each other."""
     looks: list[bool] = []
-    detect = detector.detect
+    cover = detector.cover
 
-    def checked(data):
-        skipped = detector.clearance > detector.margin
-        looks.append(skipped)
-        if skipped:
+    def checked(*args):
+        needed = cover(*args)
+        looks.append(not needed)
+        if not needed:
             clearance = detector.clearance
-            detector.forget()
-            assert len(detect(data)) == 0, "a skipped detection hid a contact"
-            detector.clearance = clearance
-        return detect(data)
+            assert len(detector.detect(data)) == 0, "a skipped detection hid a contact"
+            detector.clearance = clearance  # the skipping goes on as it would have
+        return needed
 
-    detector.detect = checked  # type: ignore[method-assign]
+    detector.cover = checked  # type: ignore[method-assign]
     return looks
 
 
@@ -158,7 +157,7 @@ def _skipping_run(scene: gaussim.Scene, q0: np.ndarray, v0: np.ndarray, steps: i
     """Run ``scene`` from (q0, v0), checking every skipped detection (see _checking_skips); the run must
     land. Returns which detections were skipped."""
     sim = gaussim.Simulator(scene)
-    looks = _checking_skips(sim.detector)
+    looks = _checking_skips(sim.detector, sim.data)
     state, touched = sim.reset(q0, v0), 0
     for _ in range(steps):
         state = sim.step(state, tau)
@@ -200,3 +199,17 @@ def test_a_state_from_elsewhere_is_detected_afresh(ball):
     landed = gaussim.State(state.t, at_height(ball, RADIUS - 1e-4), np.zeros(ball.model.nv))
     sim.step(landed)
     assert len(sim.last_step.contacts) == 1 and sim.last_step.contacts[0].normal_force > 0
+
+
+def test_detect_always_looks(box):
+    """Only the step skips detections (through cover): detect itself, after a pose far above the
+    ground, finds the contacts of a pose on it."""
+    detector = ContactDetector(gaussim.Scene(box, ground=gaussim.Ground()), 1e-3)
+    model, data = box.model, box.model.createData()
+    q = box.neutral()
+    q[2] = 5.0
+    pin.forwardKinematics(model, data, q)
+    assert len(detector.detect(data)) == 0 and detector.clearance > 4.0
+    q[2] = float(np.asarray(box.collision_model.geometryObjects[0].geometry.halfSide)[2])
+    pin.forwardKinematics(model, data, q)
+    assert len(detector.detect(data)) == 4

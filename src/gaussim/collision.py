@@ -322,9 +322,10 @@ class ContactDetector:
     of the support plane): a patch narrower than PATCH_MIN_EXTENT is one point, a wider one
     contributes its points.
 
-    Between steps the pairs can only close by what :meth:`cover` bounds, so a detection that finds
-    every pair farther than the margin by more than they may have closed since is skipped: a robot in
-    flight pays for one detection per many steps (see :meth:`forget` for a state from elsewhere).
+    Between steps the pairs can only close by what :meth:`cover` bounds, so after a detection that
+    finds every pair farther than the margin, by more than they may have closed since, the step need
+    not look: :meth:`cover` says so, and a robot in flight pays for one detection per many steps
+    (see :meth:`forget` for a state from elsewhere). :meth:`detect` itself always looks.
     """
 
     def __init__(self, scene: Scene, margin: float) -> None:
@@ -370,26 +371,27 @@ class ContactDetector:
         """Detect afresh at the next step: the configuration did not come from the last one's motion."""
         self.clearance = -np.inf
 
-    def cover(self, v: np.ndarray, x: np.ndarray, dt: float, x_scale: float) -> None:
+    def cover(self, v: np.ndarray, x: np.ndarray, dt: float, x_scale: float) -> bool:
         """Widen the margin to what the pairs can close in one step, at velocity v and free velocity
         x (``x_scale`` 1) or free acceleration x (``x_scale`` dt): a contact is then found the step
         before it closes, at any speed. The margin changes by factors of 1.5 or more, so coal's
         requests are rarely rewritten.
 
         The bound also covers the motion that led to this step's configuration (its velocity is v), so
-        it is taken off the clearance."""
+        it is taken off the clearance. Returns whether a pair may now be within the margin (False
+        while the clearance exceeds it: no detection is needed; NaN: True)."""
         travel = _travel(self.levers, v, x, dt, x_scale)
         self.clearance -= travel
         needed = self.base_margin + travel
         if needed > self.margin or (self.margin > self.base_margin and 3 * needed < self.margin):
             self.margin = max(self.base_margin, 1.5 * needed)
             self.request.security_margin = self.retry_request.security_margin = self.margin
+        return not self.clearance > self.margin
 
     def detect(self, data: pin.Data) -> Contacts:
         """Contacts at the placements held in ``data`` (after forward kinematics), in the order of the
-        declared pairs; none, without a look, while the clearance exceeds the margin."""
-        if self.clearance > self.margin:  # False when NaN
-            return NO_CONTACTS
+        declared pairs; the least gap of all, a lower bound for the pairs coal answers, becomes the
+        clearance."""
         pieces: list[tuple[np.ndarray, ...]] = []  # (pair of each point (k,), points, normals, gaps)
         clearance = np.inf
         if len(self.hulls.pairs):

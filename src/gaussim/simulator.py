@@ -202,12 +202,11 @@ class Simulator:
         acceleration, moved = o.scheme == "acceleration", None
         x_free = self.dynamics.free_motion(state.q, state.v, tau, None if acceleration else o.dt)
         mark(("dynamics", _clock()))
-        if self.detector:
-            self.detector.cover(state.v, x_free, o.dt, o.dt if acceleration else 1.0)
-            contacts = self.detector.detect(self.data)
+        contacts = NO_CONTACTS
+        if self.detector:  # it looks when the step's motion may have brought a pair within its margin
+            if self.detector.cover(state.v, x_free, o.dt, o.dt if acceleration else 1.0):
+                contacts = self.detector.detect(self.data)
             mark(("collision", _clock()))
-        else:
-            contacts = NO_CONTACTS
         if acceleration:
             dyn = self.dynamics.problem()
             v = self._impact(state, dyn.M, contacts, report)
