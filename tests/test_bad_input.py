@@ -245,14 +245,16 @@ def test_bad_materials_name_the_field(field, kwargs):
 
 
 def test_non_convergence_is_reported_or_raised(box):
-    scene = gaussim.Scene(box, ground=gaussim.Ground())
+    """One ProxQP iteration for a box landing while it slides and spins: neither ProxQP nor the
+    active set of its iterate solves the step (a box landing straight down, the active set does)."""
+    scene = gaussim.Scene(box, ground=gaussim.Ground(friction=0.8))
     strict = gaussim.Simulator(scene, gaussim.Options(max_iter=1))
-    q = at_height(box, 0.05)
+    q, v = at_height(box, 0.05), np.array([1.0, 0.0, -1.0, 2.0, 0.0, 0.0])
     with pytest.raises(gaussim.SolverError, match="did not converge: PROXQP_MAX_ITER_REACHED"):
         for _ in range(5):
-            strict.step(strict.reset(q))
+            strict.step(strict.reset(q, v))
     lenient = gaussim.Simulator(scene, gaussim.Options(max_iter=1, on_failure="report"))
-    state = lenient.step(lenient.reset(q))
+    state = lenient.step(lenient.reset(q, v))
     assert not lenient.last_step.converged
     assert lenient.last_step.certificates[-1].status == "PROXQP_MAX_ITER_REACHED"
     assert np.all(np.isfinite(state.q))

@@ -7,7 +7,7 @@ import pytest
 
 import gaussim
 from gaussim.assembly import GaussProblem
-from gaussim.solver import GaussSolver, kkt_residual
+from gaussim.solver import KKT_RTOL, GaussSolver, _kkt_residuals, kkt_residual
 
 DATA = Path(__file__).parent / "data"
 
@@ -166,3 +166,27 @@ def test_a_stalling_warm_start_is_cut_short():
     c = solution.certificate
     assert c.converged and c.relative_kkt_residual < 1e-8, c
     assert c.iterations < 10_000, f"{c.iterations} ProxQP iterations"  # capped: about 100
+
+
+def test_an_uncertified_proxqp_answer_is_solved_on_its_active_set():
+    """A QP saved from Talos standing at dt = 0.02 (18 unknowns, 40 contact rows): ProxQP stops at a
+    relative KKT residual of about 1e-6, which the check refuses (it once failed that benchmark run).
+    Its answer names the active rows (ten multipliers of 0.01 to 0.6; the inactive rows' are 1e-172
+    or 0, below ACTIVE_SET_FLOOR of the largest); solved on them the problem is exact."""
+    data = np.load(DATA / "talos_dt002_unconverged.npz")
+    no_rows = np.zeros((0, len(data["g"])))
+    problem = GaussProblem(data["H"], data["g"], no_rows, np.zeros(0), data["C"], data["l"], [])
+    options = gaussim.Options(dt=0.02)
+    solver = GaussSolver(options)
+    qp = solver._new(len(data["g"]), 0, len(data["l"]))  # ProxQP alone, as the solver sets it up
+    qp.init(data["H"], data["g"], None, None, data["C"], data["l"], np.full(len(data["l"]), np.inf))
+    qp.solve()
+    p, x = problem, qp.results.x
+    relative = _kkt_residuals(p.H, p.g, p.A, p.b, p.C, p.l, x, np.zeros(0), -qp.results.z)[1]
+    assert relative > KKT_RTOL * options.eps_abs, "ProxQP now certifies it: the test rescues nothing"
+    solution = solver.solve(problem)
+    c = solution.certificate
+    assert c.status == "GAUSSIM_ACTIVE_SET_CERTIFIED" and c.restarted and c.converged, c
+    assert c.relative_kkt_residual < 1e-14, c
+    np.testing.assert_allclose(solution.x, qp.results.x, atol=1e-5)
+    assert np.all(data["C"] @ solution.x >= data["l"] - 1e-12)
