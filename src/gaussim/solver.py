@@ -39,9 +39,11 @@ ACTIVE_SET_REFINEMENTS = 2
 # The relative shift that makes the active rows' Delassus matrix G positive definite when those rows
 # are dependent (a sticking contact's four pyramid rows span three directions).
 ACTIVE_SET_SHIFT = 1e-12
-# An inequality row is active when its multiplier exceeds this fraction of the largest one: ProxQP
-# leaves multipliers of 1e-172 on inactive rows (measured: Talos at dt = 0.02), which would make them
-# equalities.
+# In ProxQP's answer, an inequality row is active when its multiplier exceeds this fraction of the
+# largest one: ProxQP leaves multipliers of 1e-172 on inactive rows (measured: Talos at dt = 0.02),
+# which would make them equalities. (The last solution keeps every positive multiplier's row: with
+# this floor there, Talos with 16 friction facets met a QP that neither ProxQP nor its active set
+# solves.)
 ACTIVE_SET_FLOOR = 1e-12
 # ProxQP's outer-iteration cap for a warm-started solve. A warm start needs 0 to 30 iterations
 # (measured over the shipped scenes and the stress stacks); one that needs more is better solved
@@ -115,15 +117,14 @@ def _read(H, g, A, b, C, l, x, y, z):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True, fastmath={"reassoc", "contract"})
-def _warm(H, g, A, b, C, l, x, multipliers, tolerance, x_out, multipliers_out):  # type: ignore[no-untyped-def]
+def _warm(H, g, A, b, C, l, x, multipliers, tolerance, floor, x_out, multipliers_out):  # type: ignore[no-untyped-def]
     """(how, the residuals of :func:`_kkt_residuals`) for the first of two candidates built from the
     last solution (x, multipliers) that the relative KKT residual certifies (<= ``tolerance``): that
     solution itself (how 1), then the solution of the problem with the rows it held active (its
-    equalities and the inequalities with a multiplier above ACTIVE_SET_FLOOR of the largest) as
-    equalities (how 2, written into
-    ``x_out`` and ``multipliers_out``): one linear solve, an active-set method's step, exact when the
-    active set did not change (a contact that keeps sticking, a limit that keeps holding). how 0:
-    neither is certified.
+    equalities and the inequalities with a multiplier above ``floor`` times the largest, and > 0) as
+    equalities (how 2, written into ``x_out`` and ``multipliers_out``): one linear solve, an
+    active-set method's step, exact when the active set did not change (a contact that keeps
+    sticking, a limit that keeps holding). how 0: neither is certified.
 
     The active-set solve: x = H^-1 (K^T lam - g), K the active rows and r their right-hand sides,
     with G lam = r + K H^-1 g, G = K H^-1 K^T the rows' Delassus matrix, shifted by ACTIVE_SET_SHIFT
@@ -134,7 +135,7 @@ def _warm(H, g, A, b, C, l, x, multipliers, tolerance, x_out, multipliers_out): 
     if residuals[1] <= tolerance:
         return 1, residuals
     inequality = multipliers[n_eq:]
-    floor = ACTIVE_SET_FLOOR * inequality.max() if len(inequality) else 0.0
+    floor = floor * inequality.max() if len(inequality) else 0.0
     active = np.flatnonzero(inequality > max(floor, 0.0))
     k = n_eq + len(active)
     K, r = np.empty((k, nv)), np.empty(k)
@@ -256,7 +257,7 @@ class GaussSolver:
             self._fresh(p, dims, equalities, inequalities)
             solution = self._run(problem)
         else:
-            warm = self._warm(problem, *self._last)
+            warm = self._warm(problem, *self._last, 0.0)
             if warm is not None:
                 return warm
             self._qp.update(p.H, p.g, *equalities, *inequalities)  # the upper bounds stay +inf
@@ -277,7 +278,7 @@ class GaussSolver:
             # ProxQP's answer, not certified, may still name the active rows: solved on them, it
             # is exact (measured: Talos at dt = 0.02, where ProxQP stops at 1.5e-6 and the active
             # set gives 8e-17)
-            rescued = self._warm(problem, solution.x, solution.multipliers)
+            rescued = self._warm(problem, solution.x, solution.multipliers, ACTIVE_SET_FLOOR)
             if rescued is not None:
                 rescued.certificate.iterations = solution.certificate.iterations
                 rescued.certificate.restarted = True
@@ -298,7 +299,9 @@ class GaussSolver:
         self._candidate = np.empty(dims[0]), np.empty(dims[1] + dims[2])  # what _warm writes into
         self._results = results.x, results.y, results.z, results.info
 
-    def _warm(self, problem: GaussProblem, x: np.ndarray, multipliers: np.ndarray) -> Solution | None:
+    def _warm(
+        self, problem: GaussProblem, x: np.ndarray, multipliers: np.ndarray, floor: float
+    ) -> Solution | None:
         """A solution built from (x, multipliers), the last solution or ProxQP's answer that failed
         the check (see :func:`_warm`), when gaussim's relative KKT residual certifies it to eps_abs
         (stricter than the KKT_RTOL eps_abs at which ProxQP's answers are accepted), else None.
@@ -309,7 +312,7 @@ class GaussSolver:
         p = problem
         candidate = self._candidate
         how, (residual, relative, primal, dual, gap) = _warm(
-            p.H, p.g, p.A, p.b, p.C, p.l, x, multipliers, self.options.eps_abs, *candidate
+            p.H, p.g, p.A, p.b, p.C, p.l, x, multipliers, self.options.eps_abs, floor, *candidate
         )
         if not how:
             return None
