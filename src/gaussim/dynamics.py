@@ -77,9 +77,8 @@ class DynamicsStage:
         # the WORLD convention fills data.oMi, and costs less: 4.8 against 5.3 us on Solo-12
         a_free = pin.aba(self.model, self.data, q, v, full, _WORLD)
         x_free = np.empty(len(v))  # filled by the kernel: cheaper than a kernel's new array
-        if not free_velocity(
-            v, a_free, dt, x_free, self._moved
-        ):  # tau is checked only here, where a NaN shows
+        # tau is checked only here, where a NaN in it shows
+        if not free_velocity(v, a_free, dt, x_free, self._moved):
             if not np.all(np.isfinite(tau)):
                 raise InvalidState.non_finite("tau", tau)
             raise SolverError("the free motion (Pinocchio's ABA) is not finite at a finite state and torque")

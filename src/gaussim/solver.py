@@ -135,8 +135,8 @@ def _warm(H, g, A, b, C, l, x, multipliers, tolerance, floor, x_out, multipliers
     if residuals[1] <= tolerance:
         return 1, residuals
     inequality = multipliers[n_eq:]
-    floor = floor * inequality.max() if len(inequality) else 0.0
-    active = np.flatnonzero(inequality > max(floor, 0.0))
+    least = floor * inequality.max() if len(inequality) else 0.0  # what an active row's exceeds
+    active = np.flatnonzero(inequality > max(least, 0.0))
     k = n_eq + len(active)
     K, r = np.empty((k, nv)), np.empty(k)
     K[:n_eq], r[:n_eq] = A, b
@@ -303,7 +303,8 @@ class GaussSolver:
         self, problem: GaussProblem, x: np.ndarray, multipliers: np.ndarray, floor: float
     ) -> Solution | None:
         """A solution built from (x, multipliers), the last solution or ProxQP's answer that failed
-        the check (see :func:`_warm`), when gaussim's relative KKT residual certifies it to eps_abs
+        the check, with its rows active whose multipliers exceed ``floor`` times the largest (see
+        :func:`_warm`), when gaussim's relative KKT residual certifies it to eps_abs
         (stricter than the KKT_RTOL eps_abs at which ProxQP's answers are accepted), else None.
         Measured on Solo-12 standing: the last solution solves 76% of the steps' problems, its active
         set the other 24% (3000 steps); a call costs 1.7 us when the last solution holds, 7.7 us when
