@@ -1,5 +1,7 @@
 """The ProxQP wrapper: warm starts that cannot go stale, certificates that are checked."""
 
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -190,3 +192,48 @@ def test_an_uncertified_proxqp_answer_is_solved_on_its_active_set():
     assert c.relative_kkt_residual < 1e-14, c
     np.testing.assert_allclose(solution.x, qp.results.x, atol=1e-5)
     assert np.all(data["C"] @ solution.x >= data["l"] - 1e-12)
+
+
+def _thrown_solo12_run(solo12: gaussim.Robot, steps: int) -> np.ndarray:
+    """Velocities of Solo-12 thrown spinning onto the ground (a chaotic landing: ten contact sets
+    come and go, ProxQP makes new QP objects), one row per step."""
+    feet = [(f"{leg}_FOOT_0", "ground") for leg in ("FL", "FR", "HL", "HR")]
+    sim = gaussim.Simulator(gaussim.Scene(solo12, ground=gaussim.Ground(friction=0.8), contacts=feet))
+    q = solo12.configuration("standing")
+    q[2] += 0.3
+    v = np.zeros(solo12.model.nv)
+    v[[0, 2, 3, 5]] = 0.5, 1.0, 2.0, 3.0
+    state, rows = sim.reset(q, v), []
+    for _ in range(steps):
+        state = sim.step(state, np.zeros(12))
+        rows.append(state.v)
+    return np.array(rows)
+
+
+def test_runs_repeat_bit_for_bit(solo12):
+    """The same run twice gives the same numbers to the last bit: ProxQP's AVX builds answer one
+    problem differently from one QP object to the next (this landing drifted apart from step 312),
+    its portable build, which gaussim loads, does not."""
+    first, second = _thrown_solo12_run(solo12, 450), _thrown_solo12_run(solo12, 450)
+    np.testing.assert_array_equal(first, second)
+
+
+@pytest.mark.parametrize("proxsuite_first", [True, False])
+def test_proxsuite_keeps_the_build_already_loaded(proxsuite_first):
+    """gaussim loads proxsuite's portable build unless the process loaded proxsuite before it; then
+    it uses that build (loading a second one would abort the process)."""
+    imports = ["import proxsuite", "import gaussim"]
+    code = "; ".join([*(imports if proxsuite_first else imports[::-1]), "print(proxsuite.proxqp.__name__)"])
+    chosen = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert chosen.returncode == 0, chosen.stderr
+    build = chosen.stdout.split(".")[1]
+    if proxsuite_first:
+        own = subprocess.run(
+            [sys.executable, "-c", "import proxsuite; print(proxsuite.proxqp.__name__)"],
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+        assert build == own.stdout.split(".")[1]
+    else:
+        assert build == "proxsuite_pywrap"

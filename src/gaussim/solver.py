@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import math
+import sys
+import types
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import proxsuite
 from numba import njit
 
 from .assembly import GaussProblem
@@ -15,6 +16,32 @@ from .exceptions import InfeasibleConstraints, SolverError
 from .linalg import backward, cholesky, dot, forward, matvec
 from .options import Options
 
+
+def _portable_proxsuite() -> types.ModuleType:
+    """proxsuite, with its build without AVX2 or AVX-512 kernels when this process has not loaded
+    it yet. Measured (ProxQP 0.8, the QPs of a Solo-12 landing, 20 fresh QP objects each): its AVX-512
+    build answers 16 of 60 problems differently from one object to the next in the last bits, its
+    AVX2 build 56, its portable build none, at the same cost (45 to 50 us an init and solve), so runs
+    repeat bit for bit. proxsuite picks its build at import by asking its ``instructionset`` module;
+    this answers "neither" for that one import. Loaded already, or when proxsuite asks its module
+    something else, the build proxsuite chose is used: two builds in one process abort it."""
+    if "proxsuite" in sys.modules:
+        return sys.modules["proxsuite"]
+    plain = types.ModuleType("proxsuite.instructionset")
+    plain.has_AVX512F = plain.has_AVX2 = lambda: False  # type: ignore[attr-defined]
+    sys.modules["proxsuite.instructionset"] = plain
+    try:
+        import proxsuite
+    except AttributeError:  # it asked before loading any build
+        proxsuite = None
+    finally:
+        del sys.modules["proxsuite.instructionset"]
+    if proxsuite is None:
+        import proxsuite
+    return proxsuite
+
+
+proxsuite = _portable_proxsuite()
 _proxqp = proxsuite.proxqp
 _STATUS = {status: status.name for status in _proxqp.QPSolverOutput.__members__.values()}
 _SOLVED = _proxqp.QPSolverOutput.PROXQP_SOLVED  # compared by identity: hashing the enum costs more
