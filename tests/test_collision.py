@@ -153,17 +153,20 @@ def _checking_skips(detector: ContactDetector, data: pin.Data) -> list[bool]:
     return looks
 
 
-def _skipping_run(scene: gaussim.Scene, q0: np.ndarray, v0: np.ndarray, steps: int, tau=None) -> list[bool]:
+def _skipping_run(
+    scene: gaussim.Scene, q0: np.ndarray, v0: np.ndarray, steps: int, tau=None
+) -> tuple[list[bool], set[str]]:
     """Run ``scene`` from (q0, v0), checking every skipped detection (see _checking_skips); the run must
-    land. Returns which detections were skipped."""
+    land. Returns which detections were skipped, and the obstacles touched."""
     sim = gaussim.Simulator(scene)
     looks = _checking_skips(sim.detector, sim.data)
-    state, touched = sim.reset(q0, v0), 0
+    state, touched, obstacles = sim.reset(q0, v0), 0, set()
     for _ in range(steps):
         state = sim.step(state, tau)
         touched += bool(sim.last_step.contacts)
+        obstacles |= {c.obstacle for c in sim.last_step.contacts}
     assert touched > steps // 4, "the run must land and stay in contact"
-    return looks
+    return looks, obstacles
 
 
 def test_skipped_detections_hide_no_contact(solo12):
@@ -175,7 +178,7 @@ def test_skipped_detections_hide_no_contact(solo12):
     q0[2] += 0.3
     v0 = np.zeros(solo12.model.nv)
     v0[[0, 2, 3, 5]] = 0.5, 1.0, 2.0, 3.0  # sideways and up, rolling and turning
-    looks = _skipping_run(scene, q0, v0, 700, tau=np.zeros(12))
+    looks, _ = _skipping_run(scene, q0, v0, 700, tau=np.zeros(12))
     assert sum(looks) > 250, sum(looks)  # about 0.4 s of flight
 
 
@@ -186,8 +189,9 @@ def test_skipped_detections_see_an_obstacle_and_the_ground(ball):
     scene = gaussim.Scene(ball, ground=gaussim.Ground(), obstacles=[table])
     q0, v0 = at_height(ball, 0.8), np.zeros(ball.model.nv)
     q0[0], v0[0] = -0.3, 0.8
-    looks = _skipping_run(scene, q0, v0, 1200)
+    looks, obstacles = _skipping_run(scene, q0, v0, 1200)
     assert sum(looks) > 200, sum(looks)
+    assert obstacles == {"table", "ground"}
 
 
 def test_a_state_from_elsewhere_is_detected_afresh(ball):
