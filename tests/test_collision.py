@@ -154,11 +154,11 @@ def _checking_skips(detector: ContactDetector, data: pin.Data) -> list[bool]:
 
 
 def _skipping_run(
-    scene: gaussim.Scene, q0: np.ndarray, v0: np.ndarray, steps: int, tau=None
+    scene: gaussim.Scene, q0: np.ndarray, v0: np.ndarray, steps: int, tau=None, scheme: str = "velocity"
 ) -> tuple[list[bool], set[str]]:
     """Run ``scene`` from (q0, v0), checking every skipped detection (see _checking_skips); the run must
     land. Returns which detections were skipped, and the obstacles touched."""
-    sim = gaussim.Simulator(scene)
+    sim = gaussim.Simulator(scene, gaussim.Options(scheme=scheme))
     looks = _checking_skips(sim.detector, sim.data)
     state, touched, obstacles = sim.reset(q0, v0), 0, set()
     for _ in range(steps):
@@ -169,7 +169,8 @@ def _skipping_run(
     return looks, obstacles
 
 
-def test_skipped_detections_hide_no_contact(solo12):
+@pytest.mark.parametrize("scheme", ["velocity", "acceleration"])
+def test_skipped_detections_hide_no_contact(solo12, scheme):
     """Solo-12 thrown spinning from 0.3 m onto the ground: the flight skips most detections, and a full
     detection at each skipped one finds nothing."""
     feet = [(f"{leg}_FOOT_0", "ground") for leg in FEET]
@@ -178,7 +179,7 @@ def test_skipped_detections_hide_no_contact(solo12):
     q0[2] += 0.3
     v0 = np.zeros(solo12.model.nv)
     v0[[0, 2, 3, 5]] = 0.5, 1.0, 2.0, 3.0  # sideways and up, rolling and turning
-    looks, _ = _skipping_run(scene, q0, v0, 700, tau=np.zeros(12))
+    looks, _ = _skipping_run(scene, q0, v0, 700, np.zeros(12), scheme)
     assert sum(looks) > 250, sum(looks)  # about 0.4 s of flight
 
 
