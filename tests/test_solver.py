@@ -9,7 +9,16 @@ import pytest
 
 import gaussim
 from gaussim.assembly import GaussProblem
-from gaussim.solver import ACTIVE_SET_FLOOR, KKT_RTOL, GaussSolver, _kkt_residuals, _warm, kkt_residual
+from gaussim.solver import (
+    ACTIVE_SET_FLOOR,
+    KKT_RTOL,
+    GaussSolver,
+    _initialise,
+    _kkt_residuals,
+    _sides,
+    _warm,
+    kkt_residual,
+)
 
 DATA = Path(__file__).parent / "data"
 
@@ -170,28 +179,40 @@ def test_a_stalling_warm_start_is_cut_short():
     assert c.iterations < 10_000, f"{c.iterations} ProxQP iterations"  # capped: about 100
 
 
+def _saved_problem(name: str) -> GaussProblem:
+    """A QP saved from a run (H, g, C, l: inequality rows only)."""
+    data = np.load(DATA / name)
+    no_rows = np.zeros((0, len(data["g"])))
+    return GaussProblem(data["H"], data["g"], no_rows, np.zeros(0), data["C"], data["l"], [])
+
+
+def _proxqp_alone(solver: GaussSolver, problem: GaussProblem) -> tuple[np.ndarray, np.ndarray]:
+    """ProxQP's answer (x, the inequality multipliers -z) from a cold start, set up as the solver
+    sets it up, without gaussim's check or recovery."""
+    dims, equalities, inequalities = _sides(problem)
+    qp = solver._new(*dims)
+    _initialise(qp, problem, equalities, inequalities)
+    qp.solve()
+    return qp.results.x.copy(), -qp.results.z
+
+
 def test_an_uncertified_proxqp_answer_is_solved_on_its_active_set():
     """A QP saved from Talos standing at dt = 0.02 (18 unknowns, 40 contact rows): ProxQP stops at a
     relative KKT residual of about 1e-6, which the check refuses (it once failed that benchmark run).
     Its answer names the active rows (ten multipliers of 0.01 to 0.6; the inactive rows' are 1e-172
     or 0, below ACTIVE_SET_FLOOR of the largest); solved on them the problem is exact."""
-    data = np.load(DATA / "talos_dt002_unconverged.npz")
-    no_rows = np.zeros((0, len(data["g"])))
-    problem = GaussProblem(data["H"], data["g"], no_rows, np.zeros(0), data["C"], data["l"], [])
+    problem = _saved_problem("talos_dt002_unconverged.npz")
     options = gaussim.Options(dt=0.02)
     solver = GaussSolver(options)
-    qp = solver._new(len(data["g"]), 0, len(data["l"]))  # ProxQP alone, as the solver sets it up
-    qp.init(data["H"], data["g"], None, None, data["C"], data["l"], np.full(len(data["l"]), np.inf))
-    qp.solve()
-    p, x = problem, qp.results.x
-    relative = _kkt_residuals(p.H, p.g, p.A, p.b, p.C, p.l, x, np.zeros(0), -qp.results.z)[1]
+    p, (x, z) = problem, _proxqp_alone(solver, problem)
+    relative = _kkt_residuals(p.H, p.g, p.A, p.b, p.C, p.l, x, np.zeros(0), z)[1]
     assert relative > KKT_RTOL * options.eps_abs, "ProxQP now certifies it: the test rescues nothing"
     solution = solver.solve(problem)
     c = solution.certificate
     assert c.status == "GAUSSIM_ACTIVE_SET_CERTIFIED" and c.restarted and c.converged, c
     assert c.relative_kkt_residual < 1e-14, c
-    np.testing.assert_allclose(solution.x, qp.results.x, atol=1e-5)
-    assert np.all(data["C"] @ solution.x >= data["l"] - 1e-12)
+    np.testing.assert_allclose(solution.x, x, atol=1e-5)
+    assert np.all(p.C @ solution.x >= p.l - 1e-12)
 
 
 def _thrown_solo12_run(solo12: gaussim.Robot, steps: int) -> np.ndarray:
@@ -244,19 +265,14 @@ def test_a_refused_answer_is_solved_again_to_a_tighter_tolerance():
     pyramid rows): ProxQP's own test passes at a relative KKT residual of 1.4e-7, above the 1e-7 the
     check accepts, and the rows it holds active are too dependent for the active-set solve. Solved
     again at eps_abs / KKT_RTOL, it is certified (this step once failed that benchmark run)."""
-    data = np.load(DATA / "incline_16_facets_refused.npz")
-    no_rows = np.zeros((0, len(data["g"])))
-    problem = GaussProblem(data["H"], data["g"], no_rows, np.zeros(0), data["C"], data["l"], [])
+    problem = _saved_problem("incline_16_facets_refused.npz")
     options = gaussim.Options(friction_facets=16)
     solver = GaussSolver(options)
-    qp = solver._new(len(data["g"]), 0, len(data["l"]))  # ProxQP alone, as the solver sets it up
-    qp.init(data["H"], data["g"], None, None, data["C"], data["l"], np.full(len(data["l"]), np.inf))
-    qp.solve()
-    p, x, z = problem, qp.results.x, -qp.results.z
+    p, (x, z) = problem, _proxqp_alone(solver, problem)
     assert _kkt_residuals(p.H, p.g, p.A, p.b, p.C, p.l, x, np.zeros(0), z)[1] > KKT_RTOL * options.eps_abs
     candidate = np.empty(len(x)), np.empty(len(z))
     assert _warm(p.H, p.g, p.A, p.b, p.C, p.l, x, z, options.eps_abs, ACTIVE_SET_FLOOR, *candidate)[0] == 0
     solution = solver.solve(problem)
     c = solution.certificate
     assert c.converged and c.restarted and c.relative_kkt_residual <= KKT_RTOL * options.eps_abs, c
-    assert np.all(data["C"] @ solution.x >= data["l"] - 1e-9)
+    assert np.all(p.C @ solution.x >= p.l - 1e-9)

@@ -50,7 +50,7 @@ class DynamicsStage:
         self.model, self.data = model, data
         self._posed = True  # the last step posed a Gauss problem
         self._dynamics: Dynamics | None = None
-        self._pending: tuple[np.ndarray, np.ndarray, np.ndarray, float] | None = None
+        self._pending: tuple[np.ndarray, np.ndarray] | None = None  # (q, x_free) of the ABA order
         # the torque ABA reads; only actuated joints' torques are ever copied in, so a floating base's
         # entries stay zero
         self._padded = np.zeros(model.nv)
@@ -82,7 +82,7 @@ class DynamicsStage:
             if not np.all(np.isfinite(tau)):
                 raise InvalidState.non_finite("tau", tau)
             raise SolverError("the free motion (Pinocchio's ABA) is not finite at a finite state and torque")
-        self._dynamics, self._pending, self.moved = None, (q, v, a_free, dt), self._moved
+        self._dynamics, self._pending, self.moved = None, (q, x_free), self._moved
         return x_free
 
     def problem(self) -> Dynamics:
@@ -136,15 +136,12 @@ def _linear_term(M, v, tau, nle, dt, f, g):  # type: ignore[no-untyped-def]
     return True
 
 
-def gauss_problem(
-    model: pin.Model, data: pin.Data, q: np.ndarray, v: np.ndarray, a_free: np.ndarray, dt: float
-) -> Dynamics:
-    """The free Gauss problem of the velocity level from a free acceleration (ABA's, see :meth:`free_motion`):
-    M and the joint Jacobians data.J (one CRBA pass, WORLD convention), x_free = v + dt a_free and
-    g = -M x_free."""
+def gauss_problem(model: pin.Model, data: pin.Data, q: np.ndarray, x_free: np.ndarray) -> Dynamics:
+    """The free Gauss problem of the velocity level from its free motion x_free (ABA's, see
+    :meth:`DynamicsStage.free_motion`): M and the joint Jacobians data.J (one CRBA pass, WORLD
+    convention) and g = -M x_free."""
     M = pin.crba(model, data, q, _WORLD)  # a copy of data.M
-    x_free, g = _free_problem(M, v, a_free, dt)
-    return Dynamics(M, g, x_free)
+    return Dynamics(M, _negated_product(M, x_free), x_free)
 
 
 @njit(cache=True)
@@ -196,11 +193,9 @@ def damped_torque(tau, damping, v, previous):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def _free_problem(M, v, a_free, dt):  # type: ignore[no-untyped-def]
-    """(x_free, -M x_free) with x_free = v + dt a_free."""
-    x_free = np.empty(len(v))
-    free_velocity(v, a_free, dt, x_free, np.empty(len(v)))
-    return x_free, -matvec(M, x_free)
+def _negated_product(M, x):  # type: ignore[no-untyped-def]
+    """-M x."""
+    return -matvec(M, x)
 
 
 def point_placements(
