@@ -1,5 +1,7 @@
 """Unilateral contacts, restitution and Coulomb friction against analytic solutions."""
 
+import time
+
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -258,3 +260,34 @@ def test_slip_update_matches_its_plain_statement(tolerance):
     else:
         np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-15)
         np.testing.assert_array_equal(got[[1, 3]], slip[[1, 3]])  # the sticking and the resting
+
+
+@pytest.mark.parametrize("scheme", SCHEMES)
+def test_stage_timings_only_when_asked_and_the_motion_unchanged(ball, scheme):
+    """Options(timings=True): each stage of a step has its wall time, their sum within the step's, and
+    an impact's QP its own; by default nothing is recorded. The motion is the same bit for bit."""
+    scene = gaussim.Scene(ball, ground=gaussim.Ground(friction=0.8))
+    trajectories = {}
+    for timed in (False, True):
+        sim = gaussim.Simulator(scene, gaussim.Options(scheme=scheme, timings=timed))
+        state = sim.reset(at_height(ball, RADIUS + 0.01), np.array([0, 0, -1.0, 0, 0, 0]))
+        trajectories[timed], stages, impacts = [], set(), 0
+        for _ in range(40):  # the ball lands at the 10th step and stays
+            start = time.perf_counter()
+            state = sim.step(state)
+            wall = time.perf_counter() - start
+            report = sim.last_step
+            trajectories[timed].append(np.concatenate([state.q, state.v]))
+            if not timed:
+                assert report.timings == {} and (report.impact is None or report.impact.timings == {})
+                continue
+            assert all(seconds > 0 for seconds in report.timings.values())
+            assert sum(report.timings.values()) <= wall
+            stages |= set(report.timings)
+            if report.impact is not None:
+                impacts += 1
+                assert set(report.impact.timings) == {"assembly", "solve"}
+        if timed:
+            assert stages == {"dynamics", "collision", "assembly", "solve", "integrate"}
+            assert (impacts > 0) == (scheme == "acceleration")  # the velocity scheme has no impact phase
+    np.testing.assert_array_equal(trajectories[False], trajectories[True])

@@ -23,7 +23,7 @@ ANY_NUMBER = st.one_of(
     st.none(),
     st.text(max_size=3),
 )
-NUMERIC_FIELDS = [
+SCALAR_FIELDS = [
     f.name for f in dataclasses.fields(Options) if f.name not in ("scheme", "friction_mode", "on_failure")
 ]
 
@@ -39,11 +39,13 @@ def _valid(field: str, value: object) -> bool:
         return real and value >= 0  # type: ignore[operator]
     if field == "stabilisation":
         return real and 0 < value <= 1  # type: ignore[operator]
+    if field == "timings":
+        return isinstance(value, bool)
     return real and value > 0  # type: ignore[operator]
 
 
 @settings(max_examples=300, deadline=None)
-@given(field=st.sampled_from(NUMERIC_FIELDS), value=ANY_NUMBER)
+@given(field=st.sampled_from(SCALAR_FIELDS), value=ANY_NUMBER)
 def test_every_option_value_is_accepted_or_named(field, value):
     if _valid(field, value):
         assert getattr(Options(**{field: value}), field) == value

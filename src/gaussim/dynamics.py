@@ -53,6 +53,7 @@ class DynamicsStage:
         self._pending: tuple[np.ndarray, np.ndarray] | None = None  # (q, x_free) of the ABA order
         # the torque ABA reads; only actuated joints' torques are ever copied in, so a floating base's
         # entries stay zero
+        self._nv = model.nv  # a plain int: the model's is a property
         self._padded = np.zeros(model.nv)
         # dt x_free of the last free motion when its kernel wrote it (ABA at the velocity level), else
         # None: the step's displacement when nothing restricts the motion
@@ -70,13 +71,13 @@ class DynamicsStage:
             self._posed, self.moved = False, None
             self._dynamics = compute_dynamics(self.model, self.data, q, v, tau, dt)
             return self._dynamics.x_free
-        full, padded = tau, self._padded  # ABA takes (nv,): the actuated joints' torques go to its end
-        if len(tau) < len(padded):
-            padded[len(padded) - len(tau) :] = tau
-            full = padded
+        full, nv = tau, self._nv
+        if len(tau) < nv:  # ABA takes (nv,): the actuated joints' torques go to its end
+            full = self._padded
+            full[nv - len(tau) :] = tau
         # the WORLD convention fills data.oMi, and costs less: 4.8 against 5.3 us on Solo-12
         a_free = pin.aba(self.model, self.data, q, v, full, _WORLD)
-        x_free = np.empty(len(v))  # filled by the kernel: cheaper than a kernel's new array
+        x_free = np.empty(nv)  # filled by the kernel: cheaper than a kernel's new array
         # tau is checked only here, where a NaN in it shows
         if not free_velocity(v, a_free, dt, x_free, self._moved):
             if not np.all(np.isfinite(tau)):

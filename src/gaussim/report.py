@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from functools import cached_property
+from functools import cached_property, partial
+from time import perf_counter as _clock
 
 import numpy as np
 
@@ -12,6 +14,15 @@ from .solver import Certificate
 
 # Relative singular-value threshold under which stacked contact Jacobians count as rank deficient.
 RANK_TOLERANCE = 1e-9
+
+
+def _untimed(stage: str) -> None:
+    """The stage mark of an untimed step: nothing (0.2 us a step less than three marks)."""
+
+
+def _timed(marks: list[tuple[str, float]], stage: str) -> None:
+    """The stage mark of a timed step: (stage, now) into its ``marks``."""
+    marks.append((stage, _clock()))
 
 
 @dataclass(init=False)
@@ -29,24 +40,37 @@ class StepReport:
         impact: the reactions of an impact resolved at the start of the step, as impulses
             ([N s], [N m s]) (acceleration scheme only), or None.
         certificates: one per QP solved this step (fixed-point iterations and impacts add QPs).
-        timings: wall time per stage [s]: dynamics, collision, assembly, solve, integrate (from
-            ``marks``: (stage, time.perf_counter() at its end), the stage "" untimed).
+        timings: wall time per stage [s]: dynamics, collision, assembly, solve, integrate, when the
+            step was timed (``Options.timings``), else empty (from ``marks``: (stage,
+            time.perf_counter() at its end), the stage "" untimed).
+        mark: ``mark(stage)`` records the end of a stage (of its untimed gap for ""): into ``marks``
+            when timed, else nothing.
         contact_jacobian: stacked 3-row point Jacobians of the contacts, shape (3 m, nv).
     """
 
     t: float
+    mark: Callable[[str], None] = field(repr=False, compare=False)
     impact: StepReport | None = None
     certificates: list[Certificate] = field(default_factory=list)
     marks: list[tuple[str, float]] = field(default_factory=list, repr=False)
     # (module, rows, multipliers, scale) of each block of the last QP: the reactions' source
     blocks: list[tuple[ConstraintModule, Rows, np.ndarray, float]] = field(default_factory=list, repr=False)
 
-    def __init__(self, t: float, start: float | None = None) -> None:
-        """The report of the step from time ``t``; ``start``: the time.perf_counter() at which the
-        step's first stage starts, when known. (Written out: the generated __init__'s default
-        factories cost 0.1 us more, and every step makes a report.)"""
+    def __init__(self, t: float, timed: bool = False) -> None:
+        """The report of the step from time ``t``, whose stages start now; ``timed``: record their
+        wall times. (Written out: the generated __init__'s default factories cost 0.1 us more, and
+        every step makes a report.)"""
         self.t, self.impact, self.certificates, self.blocks = t, None, [], []
-        self.marks = [] if start is None else [("", start)]
+        if timed:  # a partial of the list, not a bound method: no reference cycle to collect
+            self.marks = [("", _clock())]
+            self.mark = partial(_timed, self.marks)
+        else:
+            self.marks, self.mark = [], _untimed
+
+    @property
+    def timed(self) -> bool:
+        """True when the step recorded its stages' wall times (``Options.timings``)."""
+        return self.mark is not _untimed
 
     def _reactions(self, family: str) -> list:
         return [

@@ -19,8 +19,6 @@ acceleration scheme, the paper's:
 
 from __future__ import annotations
 
-from time import perf_counter as _clock
-
 import numpy as np
 import pinocchio as pin
 
@@ -197,16 +195,16 @@ class Simulator:
                 self.detector.forget()
         tau = self._damped_torque(tau, damping, state.v)
         o = self.options
-        report = StepReport(state.t, _clock())
-        mark = report.marks.append
+        report = StepReport(state.t, o.timings)
+        mark = report.mark
         acceleration, moved = o.scheme == "acceleration", None
         x_free = self.dynamics.free_motion(state.q, state.v, tau, None if acceleration else o.dt)
-        mark(("dynamics", _clock()))
+        mark("dynamics")
         contacts = NO_CONTACTS
         if self.detector:  # it looks when the step's motion may have brought a pair within its margin
             if self.detector.cover(state.v, x_free, o.dt, o.dt if acceleration else 1.0):
                 contacts = self.detector.detect(self.data)
-            mark(("collision", _clock()))
+            mark("collision")
         if acceleration:
             dyn = self.dynamics.problem()
             v = self._impact(state, dyn.M, contacts, report)
@@ -223,7 +221,7 @@ class Simulator:
             v_next = x_free
             moved = self.dynamics.moved  # its displacement, when the free motion's kernel gave it
         q_next = integrate(self.model, state.q, v_next, o.dt, self._scratch, moved)
-        mark(("integrate", _clock()))
+        mark("integrate")
         if q_next is None:
             raise SolverError(f"step at t={state.t:.6g} s produced a non-finite velocity", report)
         self.last_step = report
@@ -232,9 +230,9 @@ class Simulator:
 
     def _problem(self, report: StepReport) -> Dynamics:
         """The step's free Gauss problem (its CRBA, when the free motion skipped it, timed as dynamics)."""
-        report.marks.append(("", _clock()))
+        report.mark("")
         dyn = self.dynamics.problem()
-        report.marks.append(("dynamics", _clock()))
+        report.mark("dynamics")
         return dyn
 
     def _impact(self, state: State, M: np.ndarray, contacts: Contacts, report: StepReport) -> np.ndarray:
@@ -245,7 +243,7 @@ class Simulator:
             np.any(rows.J @ state.v < rows.bound - IMPACT_TOLERANCE) for _, rows in parts if not rows.equality
         ):
             return state.v
-        report.impact = StepReport(state.t)
+        report.impact = StepReport(state.t, report.timed)
         v = self._solve(ctx, M, -(M @ state.v), parts, report.impact, 1.0)
         report.certificates += report.impact.certificates
         return v
@@ -284,17 +282,17 @@ class Simulator:
         scale: float,
     ) -> np.ndarray:
         """Solve, re-posing the rows while a module's fixed-point iteration asks for it."""
-        mark = report.marks.append
+        mark = report.mark
         for _ in range(self.options.friction_iterations):
-            mark(("", _clock()))
+            mark("")
             parts = self._rows(ctx) if parts is None else parts
             if not parts:
-                mark(("assembly", _clock()))
+                mark("assembly")
                 return ctx.x_free
             problem = assemble(M, g, parts)
-            mark(("assembly", _clock()))
+            mark("assembly")
             solution = self.solvers[ctx.level].solve(problem)
-            mark(("solve", _clock()))
+            mark("solve")
             report.certificates.append(solution.certificate)
             blocks = [(module, rows, solution.multipliers[part]) for module, rows, part in problem.blocks]
             refine = False
@@ -304,5 +302,5 @@ class Simulator:
                 break
             parts = None
         report.blocks += [(module, rows, multipliers, scale) for module, rows, multipliers in blocks]
-        mark(("", _clock()))
+        mark("")
         return solution.x
