@@ -27,7 +27,7 @@ def test_free_step_equals_aba(solo12, scheme):
     v_next = v + 1e-3 * a
     np.testing.assert_allclose(state.v, v_next, atol=ABA_TOLERANCE, rtol=0)
     np.testing.assert_allclose(state.q, pin.integrate(model, q, 1e-3 * v_next), atol=ABA_TOLERANCE, rtol=0)
-    assert sim.last_step.certificates == [], "no QP is needed when nothing restricts the motion"
+    assert sim.last_step.certificates == (), "no QP is needed when nothing restricts the motion"
     assert sim.last_step.contacts == []
 
 

@@ -193,7 +193,10 @@ class Simulator:
             self._check_state(state)
             if self.detector:
                 self.detector.forget()
-        tau = self._damped_torque(tau, damping, state.v)
+        if damping is None and self._damping is None:  # the common case, one call
+            tau = self._shaped_torque(tau)
+        else:
+            tau = self._damped_torque(tau, damping, state.v)
         o = self.options
         report = StepReport(state.t, o.timings)
         mark = report.mark
@@ -293,7 +296,7 @@ class Simulator:
             mark("assembly")
             solution = self.solvers[ctx.level].solve(problem)
             mark("solve")
-            report.certificates.append(solution.certificate)
+            report.certificates += (solution.certificate,)
             blocks = [(module, rows, solution.multipliers[part]) for module, rows, part in problem.blocks]
             refine = False
             for module, rows, multipliers in blocks:
@@ -301,6 +304,6 @@ class Simulator:
             if not refine:
                 break
             parts = None
-        report.blocks += [(module, rows, multipliers, scale) for module, rows, multipliers in blocks]
+        report.blocks += tuple((module, rows, multipliers, scale) for module, rows, multipliers in blocks)
         mark("")
         return solution.x
