@@ -218,3 +218,27 @@ def test_detect_always_looks(box):
     q[2] = float(np.asarray(box.collision_model.geometryObjects[0].geometry.halfSide)[2])
     pin.forwardKinematics(model, data, q)
     assert len(detector.detect(data)) == 4
+
+
+def test_the_reach_of_the_free_motion_bounds_the_travel(solo12):
+    """In flight the step takes off the clearance the coarse bound dt * reach * the longest lever, with
+    reach = sum |v| + |x_free| from the free motion's kernel: never less than the exact travel of any
+    pair; near the ground (clearance within twice that of the base margin) the exact one."""
+    feet = [(f"{leg}_FOOT_0", "ground") for leg in FEET]
+    sim = gaussim.Simulator(gaussim.Scene(solo12, ground=gaussim.Ground(), contacts=feet))
+    coarse, exact = (ContactDetector(sim.scene, sim.options.contact_margin) for _ in range(2))
+    rng, dt, q = np.random.default_rng(3), sim.options.dt, solo12.configuration("standing")
+    for _ in range(50):
+        v = rng.normal(size=solo12.model.nv)
+        sim.dynamics.free_motion(q, v, np.zeros(12), dt)  # the first call poses the problem; then ABA
+        x = sim.dynamics.free_motion(q, v, rng.normal(size=12), dt)
+        reach = sim.dynamics.reach
+        assert reach == pytest.approx(np.abs(v).sum() + np.abs(x).sum(), rel=1e-12)
+        for clearance, same in ((100.0, False), (coarse.base_margin + 1e-3, True)):
+            coarse.clearance = exact.clearance = clearance
+            assert coarse.cover(v, x, dt, 1.0, reach) == exact.cover(v, x, dt, 1.0)
+            travel = clearance - exact.clearance
+            assert clearance - coarse.clearance == (
+                travel if same else pytest.approx(dt * coarse.longest * reach)
+            )
+            assert clearance - coarse.clearance >= travel > 0

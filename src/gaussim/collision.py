@@ -347,6 +347,7 @@ class ContactDetector:
                 for p in self.pairs
             ]
         )
+        self.longest = float(self.levers.max(initial=0.0))  # the longest lever: see cover's reach
         self.hulls = _GroundHulls(self.pairs)
         self.others = [k for k, pair in enumerate(self.pairs) if pair.vertices is None]
         self.request = self._request(margin, coal.GJKVariant.DefaultGJK)
@@ -371,7 +372,9 @@ class ContactDetector:
         """Detect afresh at the next step: the configuration did not come from the last one's motion."""
         self.clearance = -np.inf
 
-    def cover(self, v: np.ndarray, x: np.ndarray, dt: float, x_scale: float) -> bool:
+    def cover(
+        self, v: np.ndarray, x: np.ndarray, dt: float, x_scale: float, reach: float | None = None
+    ) -> bool:
         """Widen the margin to what the pairs can close in one step, at velocity v and free velocity
         x (``x_scale`` 1) or free acceleration x (``x_scale`` dt): a contact is then found the step
         before it closes, at any speed. The margin changes by factors of 1.5 or more, so coal's
@@ -379,7 +382,17 @@ class ContactDetector:
 
         The bound also covers the motion that led to this step's configuration (its velocity is v), so
         it is taken off the clearance. Returns whether a pair may now be within the margin (False
-        while the clearance exceeds it: no detection is needed; NaN: True)."""
+        while the clearance exceeds it: no detection is needed; NaN: True).
+
+        ``reach``, sum_i |v_i| + |x_i| when known (velocity level), gives a coarser bound at no cost,
+        dt reach times the longest lever: while the clearance exceeds twice it plus the base margin,
+        that bound alone is taken off and the step need not look (a robot in flight: 0.4 us a step
+        less)."""
+        if reach is not None:
+            coarse = dt * self.longest * reach
+            if self.clearance - 2 * coarse > self.base_margin:
+                self.clearance -= coarse
+                return False
         travel = _travel(self.levers, v, x, dt, x_scale)
         self.clearance -= travel
         needed = self.base_margin + travel

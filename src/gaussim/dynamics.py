@@ -59,6 +59,9 @@ class DynamicsStage:
         # None: the step's displacement when nothing restricts the motion
         self.moved: np.ndarray | None = None
         self._moved = np.zeros(model.nv)
+        # sum_i |v_i| + |x_free_i| with it (else None): the collision stage's coarse bound on how far the
+        # step can move any point, per unit of lever (see ContactDetector.cover)
+        self.reach: float | None = None
 
     def free_motion(self, q: np.ndarray, v: np.ndarray, tau: np.ndarray, dt: float | None) -> np.ndarray:
         """The unconstrained solution x_free of the velocity level (time step ``dt``) or, for None, the
@@ -68,7 +71,7 @@ class DynamicsStage:
         actuated joints), the first ones unactuated. Raises :class:`InvalidState` when it is not
         finite, :class:`SolverError` when ABA's answer is not at a finite tau."""
         if dt is None or self._posed:
-            self._posed, self.moved = False, None
+            self._posed, self.moved, self.reach = False, None, None
             self._dynamics = compute_dynamics(self.model, self.data, q, v, tau, dt)
             return self._dynamics.x_free
         full, nv = tau, self._nv
@@ -79,11 +82,12 @@ class DynamicsStage:
         a_free = pin.aba(self.model, self.data, q, v, full, _WORLD)
         x_free = np.empty(nv)  # filled by the kernel: cheaper than a kernel's new array
         # tau is checked only here, where a NaN in it shows
-        if not free_velocity(v, a_free, dt, x_free, self._moved):
+        reach = free_velocity(v, a_free, dt, x_free, self._moved)
+        if not reach < np.inf:  # NaN: x_free is not finite
             if not np.all(np.isfinite(tau)):
                 raise InvalidState.non_finite("tau", tau)
             raise SolverError("the free motion (Pinocchio's ABA) is not finite at a finite state and torque")
-        self._dynamics, self._pending, self.moved = None, (q, x_free), self._moved
+        self._dynamics, self._pending, self.moved, self.reach = None, (q, x_free), self._moved, reach
         return x_free
 
     def problem(self) -> Dynamics:
@@ -148,12 +152,14 @@ def gauss_problem(model: pin.Model, data: pin.Data, q: np.ndarray, x_free: np.nd
 @njit(cache=True)
 def free_velocity(v, a_free, dt, out, moved):  # type: ignore[no-untyped-def]
     """out = v + dt a_free, the next velocity when nothing restricts the motion, and moved = dt out,
-    the displacement it gives in the step (one kernel call less when it is the step's); False when
-    they are not finite."""
+    the displacement it gives in the step (one kernel call less when it is the step's); returns the
+    reach sum_i |v_i| + |out_i| (see DynamicsStage.reach), NaN when out is not finite."""
+    reach = 0.0
     for i in range(len(v)):
         out[i] = v[i] + dt * a_free[i]
         moved[i] = dt * out[i]
-    return finite(out)
+        reach += abs(v[i]) + abs(out[i])
+    return reach if finite(out) else np.nan
 
 
 @njit(cache=True)

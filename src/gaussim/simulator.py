@@ -205,7 +205,7 @@ class Simulator:
         mark("dynamics")
         contacts = NO_CONTACTS
         if self.detector:  # it looks when the step's motion may have brought a pair within its margin
-            if self.detector.cover(state.v, x_free, o.dt, o.dt if acceleration else 1.0):
+            if self.detector.cover(state.v, x_free, o.dt, o.dt if acceleration else 1.0, self.dynamics.reach):
                 contacts = self.detector.detect(self.data)
             mark("collision")
         if acceleration:
