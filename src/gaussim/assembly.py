@@ -43,8 +43,10 @@ class GaussProblem:
 def assemble(H: np.ndarray, g: np.ndarray, parts: list[tuple[ConstraintModule, Rows]]) -> GaussProblem:
     """Stack rows: equalities into (A, b), inequalities into (C, l), remembering where each block's
     multipliers go; a force a module applies outside the QP enters the linear term g."""
-    equalities = [part for part in parts if part[1].equality]
-    inequalities = [part for part in parts if not part[1].equality]
+    equalities: list[tuple[ConstraintModule, Rows]] = []
+    inequalities: list[tuple[ConstraintModule, Rows]] = []
+    for part in parts:  # one pass: this runs every QP
+        (equalities if part[1].equality else inequalities).append(part)
     blocks, end = [], 0
     for module, rows in equalities + inequalities:  # the order of [lambda_eq; lambda_in]
         first, end = end, end + len(rows.bound)

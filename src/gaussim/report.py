@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property, partial
 from time import perf_counter as _clock
@@ -53,8 +53,10 @@ class StepReport:
     impact: StepReport | None = None
     certificates: tuple[Certificate, ...] = ()
     marks: list[tuple[str, float]] = field(default_factory=list, repr=False)
-    # (module, rows, multipliers, scale) of each block of the last QP: the reactions' source
-    blocks: tuple[tuple[ConstraintModule, Rows, np.ndarray, float], ...] = field(default=(), repr=False)
+    # (module, rows, multipliers) of each block of the last QP, the reactions' source, and the factor
+    # from multipliers to reactions (1 / dt at the velocity level: impulses to forces)
+    blocks: Sequence[tuple[ConstraintModule, Rows, np.ndarray]] = field(default=(), repr=False)
+    scale: float = field(default=1.0, repr=False)
 
     def __init__(self, t: float, timed: bool = False) -> None:
         """The report of the step from time ``t``, whose stages start now; ``timed``: record their
@@ -74,10 +76,7 @@ class StepReport:
 
     def _reactions(self, family: str) -> list:
         return [
-            r
-            for m, rows, lam, scale in self.blocks
-            if m.name == family
-            for r in m.reactions(rows, lam, scale)
+            r for m, rows, lam in self.blocks if m.name == family for r in m.reactions(rows, lam, self.scale)
         ]
 
     @cached_property
@@ -102,7 +101,7 @@ class StepReport:
 
     @property
     def contact_jacobian(self) -> np.ndarray | None:
-        for m, rows, _, _ in self.blocks:
+        for m, rows, _ in self.blocks:
             if m.name == "contact":
                 J = rows.data.J  # type: ignore[attr-defined]
                 return J.reshape(-1, J.shape[-1])
@@ -113,7 +112,7 @@ class StepReport:
         """True when the De Saxce shift's fixed point was not reached within
         ``Options.friction_iterations`` and the step kept the plain pyramid relaxation (see
         gaussim.constraints.contact)."""
-        return any(m.name == "contact" and rows.data.relaxed for m, rows, _, _ in self.blocks)  # type: ignore[attr-defined]
+        return any(m.name == "contact" and rows.data.relaxed for m, rows, _ in self.blocks)  # type: ignore[attr-defined]
 
     @property
     def converged(self) -> bool:

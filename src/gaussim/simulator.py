@@ -297,13 +297,14 @@ class Simulator:
             solution = self.solvers[ctx.level].solve(problem)
             mark("solve")
             report.certificates += (solution.certificate,)
-            blocks = [(module, rows, solution.multipliers[part]) for module, rows, part in problem.blocks]
+            x, lam = solution.x, solution.multipliers
+            blocks = [(module, rows, lam[part]) for module, rows, part in problem.blocks]
             refine = False
             for module, rows, multipliers in blocks:
-                refine |= module.refine(ctx, rows, solution.x, multipliers)
+                refine |= module.refine(ctx, rows, x, multipliers)
             if not refine:
                 break
             parts = None
-        report.blocks += tuple((module, rows, multipliers, scale) for module, rows, multipliers in blocks)
+        report.blocks, report.scale = blocks, scale
         mark("")
         return solution.x
