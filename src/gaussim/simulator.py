@@ -307,4 +307,4 @@ class Simulator:
             parts = None
         report.blocks, report.scale = blocks, scale
         mark("")
-        return solution.x
+        return x

@@ -36,7 +36,7 @@ class State:
         # write=False, positional: the keyword costs 0.14 us a call more (numpy's stubs want it)
         q.setflags(False)  # type: ignore[call-arg]
         v.setflags(False)  # type: ignore[call-arg]
-        _set_t(state, float(t))  # past the frozen __setattr__: the slots' own setters, 0.3 us a step less
+        _set_t(state, float(t))  # past the frozen __setattr__: the slots' own setters (0.52 -> 0.40 us)
         _set_q(state, q)
         _set_v(state, v)
         return state
