@@ -212,7 +212,8 @@ class Certificate:
             problem to eps_abs by the KKT check below: ProxQP was not called),
             ``GAUSSIM_ACTIVE_SET_CERTIFIED`` (so does the solution on the previous solution's active
             set, one linear solve: ProxQP was not called).
-        iterations: ProxQP iterations.
+        iterations: ProxQP's iterations in all: the inner ones of each of its outer iterations.
+        outer_iterations: ProxQP's outer iterations, the ones ``Options.max_iter`` caps.
         primal_residual: max constraint violation of the returned x.
         dual_residual: norm of the stationarity residual H x + g + A^T y + C^T z.
         duality_gap: ProxQP's duality gap.
@@ -233,6 +234,7 @@ class Certificate:
     duality_gap: float
     kkt_residual: float = 0.0
     relative_kkt_residual: float = 0.0
+    outer_iterations: int = 0
     restarted: bool = False
 
     @property
@@ -322,6 +324,7 @@ class GaussSolver:
         rescued = self._warm(problem, solution.x, solution.multipliers, ACTIVE_SET_FLOOR)
         if rescued is not None:
             rescued.certificate.iterations = solution.certificate.iterations
+            rescued.certificate.outer_iterations = solution.certificate.outer_iterations
             rescued.certificate.restarted = True
             return rescued
         self._fresh(p, dims, equalities, inequalities)
@@ -389,6 +392,7 @@ class GaussSolver:
             info.duality_gap,
             residual,
             relative,
+            info.iter_ext,
         )
         return Solution(x, multipliers, len(p.b), certificate)
 
@@ -434,8 +438,9 @@ class GaussSolver:
             raise SolverError(f"ProxQP returned a non-finite solution ({c.status})", c)
         if not c.converged and self.options.on_failure == "raise":
             raise SolverError(
-                f"ProxQP did not converge: {c.status} after {c.iterations} iterations "
-                f"(primal residual {c.primal_residual:.2e}, dual residual {c.dual_residual:.2e}, "
+                f"ProxQP did not converge: {c.status} after {c.outer_iterations} outer iterations, "
+                f"{c.iterations} in all (primal residual {c.primal_residual:.2e}, dual residual "
+                f"{c.dual_residual:.2e}, "
                 f"duality gap {c.duality_gap:.2e}); raise Options.max_iter or eps_abs, "
                 "or set on_failure='report'",
                 c,
