@@ -51,9 +51,9 @@ class DynamicsStage:
         self._posed = True  # the last step posed a Gauss problem
         self._dynamics: Dynamics | None = None
         self._pending: tuple[np.ndarray, np.ndarray] | None = None  # (q, x_free) of the ABA order
+        self._nv = model.nv  # a plain int: the model's is a property
         # the torque ABA reads; only actuated joints' torques are ever copied in, so a floating base's
         # entries stay zero
-        self._nv = model.nv  # a plain int: the model's is a property
         self._padded = np.zeros(model.nv)
         # dt x_free of the last free motion when its kernel wrote it (ABA at the velocity level), else
         # None: the step's displacement when nothing restricts the motion

@@ -440,9 +440,8 @@ class GaussSolver:
             raise SolverError(
                 f"ProxQP did not converge: {c.status} after {c.outer_iterations} outer iterations, "
                 f"{c.iterations} in all (primal residual {c.primal_residual:.2e}, dual residual "
-                f"{c.dual_residual:.2e}, "
-                f"duality gap {c.duality_gap:.2e}); raise Options.max_iter or eps_abs, "
-                "or set on_failure='report'",
+                f"{c.dual_residual:.2e}, duality gap {c.duality_gap:.2e}); raise Options.max_iter or "
+                "eps_abs, or set on_failure='report'",
                 c,
             )
 
