@@ -31,7 +31,7 @@ def test_point_jacobians_and_drifts_match_finite_differences(solo12):
         return np.array([scratch.oMi[j].act(p) for j, p in zip(joints, local)])
 
     scratch = model.createData()
-    compute_dynamics(model, data, q, v, np.zeros(model.nv), dt=None)
+    compute_dynamics(model, data, q, v, np.zeros(model.nv), dt=1e-3, acceleration=True)
     p = points(q)
     placements = point_placements(data, joints, p)
     J = point_jacobians(data, masks, np.array(joints), world, p)
@@ -40,10 +40,13 @@ def test_point_jacobians_and_drifts_match_finite_differences(solo12):
 
     q_next = pin.integrate(model, q, FD_STEP * v)
     np.testing.assert_allclose(J @ v, (points(q_next) - p) / FD_STEP, atol=FD_TOLERANCE)
-    # Jdot v: derivative of the body-point velocity J(q) v along the motion, at constant v
+    # Jdot v: derivative of the body-point velocity J(q) v along the motion at zero acceleration of the
+    # Gauss problem's coordinates, where the base's world velocity R v_l is fixed: v_l turns at -w x v_l
     compute_dynamics(model, data, q_next, v, np.zeros(model.nv), dt=1e-3)
     J_next = point_jacobians(data, masks, np.array(joints), world, points(q_next))
-    np.testing.assert_allclose(drift, (J_next @ v - J @ v) / FD_STEP, atol=FD_TOLERANCE * 10)
+    v_next = v.copy()
+    v_next[:3] -= FD_STEP * np.cross(v[3:6], v[:3])
+    np.testing.assert_allclose(drift, (J_next @ v_next - J @ v) / FD_STEP, atol=FD_TOLERANCE * 10)
 
 
 def test_relative_point_jacobians_are_differences_of_the_two_bodies(solo12):
@@ -69,8 +72,9 @@ def test_relative_point_jacobians_are_differences_of_the_two_bodies(solo12):
 
 def test_dynamics_match_pinocchio(solo12):
     """Both levels' free Gauss problems, by both orders of the dynamics stage: M is CRBA's, x_free is
-    ABA's acceleration (acceleration level) or v + dt times it (velocity level), g = -F or
-    -(M v + dt F) with F = tau - b; actuated-joint torques are padded."""
+    ABA's acceleration a less the base frame's turn c = (-w x v_l, 0) (acceleration level) or
+    v + dt (a - c) (velocity level), g = -M x_free, with F = tau - b; actuated-joint torques are
+    padded."""
     model = solo12.model
     data = model.createData()
     rng = np.random.default_rng(4)
@@ -79,9 +83,10 @@ def test_dynamics_match_pinocchio(solo12):
     ref = model.createData()
     for tau_given in (tau, tau[6:]):
         tau_ref = tau if len(tau_given) == model.nv else np.concatenate([np.zeros(6), tau[6:]])
-        a = pin.aba(model, ref, q, v, tau_ref)
-        F = tau_ref - pin.nonLinearEffects(model, ref, q, v)
-        acceleration = compute_dynamics(model, data, q, v, tau_given, dt=None)
+        c = np.concatenate([-np.cross(v[3:6], v[:3]), np.zeros(model.nv - 3)])
+        a = pin.aba(model, ref, q, v, tau_ref) - c
+        F = tau_ref - pin.nonLinearEffects(model, ref, q, v) - pin.crba(model, ref, q) @ c
+        acceleration = compute_dynamics(model, data, q, v, tau_given, dt=dt, acceleration=True)
         np.testing.assert_allclose(acceleration.M, pin.crba(model, ref, q), atol=1e-12)
         np.testing.assert_allclose(acceleration.x_free, a, atol=1e-9)
         np.testing.assert_allclose(acceleration.g, -F, atol=1e-9)

@@ -35,6 +35,75 @@ class Dynamics:
     x_free: np.ndarray
 
 
+@dataclass(frozen=True)
+class FloatingBases:
+    """The free-flyer joints hung from the world, integrated on R3 x SO(3) (see :mod:`.integrator`).
+
+    Pinocchio's free-flyer velocity is the body twist: its linear part v_l is the origin's velocity in
+    the body frame, whose rotation adds -w x v_l to ABA's acceleration; advanced explicitly, that term
+    turns and stretches v_l every step (a spinning body speeds up). gaussim's step instead takes v_l as
+    the origin's velocity in the frame of the step's start, R v_l fixed while the frame turns: the free
+    motion leaves that term out, the translation moves by dt R v_l+ and v_l+ is re-expressed in the new
+    frame. A base that is one rigid body with its centre of mass at the joint (a free object) also gets
+    its gyroscopic term w x I w at the step's midpoint, I (w+ - w) = dt (tau - w_m x I w_m) with
+    w_m = (w + w+) / 2, which conserves its energy and |I w| exactly in free flight.
+
+    Attributes:
+        velocity: first velocity index of each base, shape (k,).
+        configuration: first configuration index of each base, shape (k,).
+        inertias: rotational inertia about the joint of each rigid base, zeros for the others, (k, 3, 3)
+            [kg m^2].
+        rigid: which bases are one rigid body with its centre of mass at the joint, shape (k,).
+    """
+
+    velocity: np.ndarray
+    configuration: np.ndarray
+    inertias: np.ndarray
+    rigid: np.ndarray
+
+    @classmethod
+    def of(cls, model: pin.Model) -> FloatingBases:
+        joints = [
+            j
+            for j in range(1, model.njoints)
+            if model.parents[j] == 0 and model.joints[j].shortname() == "JointModelFreeFlyer"
+        ]
+        inertias = np.zeros((len(joints), 3, 3))
+        rigid = np.zeros(len(joints), dtype=np.bool_)
+        for k, j in enumerate(joints):
+            body = model.inertias[j]
+            # a lever below a nanometre: the centre of mass is at the joint
+            if len(model.subtrees[j]) == 1 and float(np.linalg.norm(body.lever)) < 1e-9:
+                inertias[k], rigid[k] = body.inertia, True
+        return cls(
+            np.array([model.joints[j].idx_v for j in joints], dtype=np.int64),
+            np.array([model.joints[j].idx_q for j in joints], dtype=np.int64),
+            inertias,
+            rigid,
+        )
+
+    def __len__(self) -> int:
+        return len(self.velocity)
+
+    def untouched(self, *reports: object) -> np.ndarray:
+        """Which bases are rigid and in no row of the blocks of these step reports (a report or None
+        each), shape (k,): free flight, where :mod:`.integrator` turns them by the midpoint rule."""
+        free = self.rigid.copy()
+        for report in reports:
+            for _, rows, _ in getattr(report, "blocks", ()):
+                for k, i in enumerate(self.velocity.tolist()):
+                    free[k] = free[k] and not np.any(rows.J[:, i : i + 6])
+        return free
+
+    def frame_acceleration(self, v: np.ndarray) -> np.ndarray:
+        """The body-frame acceleration -w x v_l of each base's origin at fixed world velocity, zeros
+        elsewhere, shape (nv,): ABA's acceleration less the gauss problem's (its drift terms add it)."""
+        c = np.zeros(len(v))
+        for i in self.velocity:
+            c[i : i + 3] = -np.cross(v[i + 3 : i + 6], v[i : i + 3])
+        return c
+
+
 class DynamicsStage:
     """Stage 1 for one Pinocchio model and data: each step's free motion and, when a constraint needs
     it, its Gauss problem.
@@ -48,6 +117,8 @@ class DynamicsStage:
 
     def __init__(self, model: pin.Model, data: pin.Data) -> None:
         self.model, self.data = model, data
+        self.bases = FloatingBases.of(model)
+        self._base_args = (self.bases.velocity, self.bases.inertias, self.bases.rigid)
         self._posed = True  # the last step posed a Gauss problem
         self._dynamics: Dynamics | None = None
         self._pending: tuple[np.ndarray, np.ndarray] | None = None  # (q, x_free) of the ABA order
@@ -55,24 +126,23 @@ class DynamicsStage:
         # the torque ABA reads; only actuated joints' torques are ever copied in, so a floating base's
         # entries stay zero
         self._padded = np.zeros(model.nv)
-        # dt x_free of the last free motion when its kernel wrote it (ABA at the velocity level), else
-        # None: the step's displacement when nothing restricts the motion
-        self.moved: np.ndarray | None = None
-        self._moved = np.zeros(model.nv)
         # sum_i |v_i| + |x_free_i| with it (else None): the collision stage's coarse bound on how far the
         # step can move any point, per unit of lever (see ContactDetector.cover)
         self.reach: float | None = None
 
-    def free_motion(self, q: np.ndarray, v: np.ndarray, tau: np.ndarray, dt: float | None) -> np.ndarray:
-        """The unconstrained solution x_free of the velocity level (time step ``dt``) or, for None, the
-        acceleration level; the joint placements data.oMi for detection on the way.
+    def free_motion(
+        self, q: np.ndarray, v: np.ndarray, tau: np.ndarray, dt: float, acceleration: bool = False
+    ) -> np.ndarray:
+        """The unconstrained solution x_free of the velocity level or, with ``acceleration``, of the
+        acceleration level, for a time step ``dt`` [s]; the joint placements data.oMi for detection on
+        the way.
 
         ``tau`` has shape (nv,), or fewer entries: the torques of the last joints (a floating base's
         actuated joints), the first ones unactuated. Raises :class:`InvalidState` when it is not
         finite, :class:`SolverError` when ABA's answer is not at a finite tau."""
-        if dt is None or self._posed:
-            self._posed, self.moved, self.reach = False, None, None
-            self._dynamics = compute_dynamics(self.model, self.data, q, v, tau, dt)
+        if acceleration or self._posed:
+            self._posed, self.reach = False, None
+            self._dynamics = compute_dynamics(self.model, self.data, q, v, tau, dt, acceleration, self.bases)
             return self._dynamics.x_free
         full, nv = tau, self._nv
         if len(tau) < nv:  # ABA takes (nv,): the actuated joints' torques go to its end
@@ -82,12 +152,12 @@ class DynamicsStage:
         a_free = pin.aba(self.model, self.data, q, v, full, _WORLD)
         x_free = np.empty(nv)  # filled by the kernel: cheaper than a kernel's new array
         # tau is checked only here, where a NaN in it shows
-        reach = free_velocity(v, a_free, dt, x_free, self._moved)
+        reach = free_velocity(v, a_free, dt, x_free, *self._base_args)
         if not reach < np.inf:  # NaN: x_free is not finite
             if not np.all(np.isfinite(tau)):
                 raise InvalidState.non_finite("tau", tau)
             raise SolverError("the free motion (Pinocchio's ABA) is not finite at a finite state and torque")
-        self._dynamics, self._pending, self.moved, self.reach = None, (q, x_free), self._moved, reach
+        self._dynamics, self._pending, self.reach = None, (q, x_free), reach
         return x_free
 
     def problem(self) -> Dynamics:
@@ -100,26 +170,40 @@ class DynamicsStage:
 
 
 def compute_dynamics(
-    model: pin.Model, data: pin.Data, q: np.ndarray, v: np.ndarray, tau: np.ndarray, dt: float | None
+    model: pin.Model,
+    data: pin.Data,
+    q: np.ndarray,
+    v: np.ndarray,
+    tau: np.ndarray,
+    dt: float,
+    acceleration: bool = False,
+    bases: FloatingBases | None = None,
 ) -> Dynamics:
     """M, joint placements and Jacobians (one CRBA pass), b (RNEA), and the free Gauss problem of the
-    velocity level (time step ``dt``) or, for ``dt=None``, of the acceleration level, with the spatial
-    accelerations at a = 0 that its constraint terms Jdot v read (see :func:`point_drifts`). Frame
-    placements are left to the modules that use frames.
+    velocity level or, with ``acceleration``, of the acceleration level, for a time step ``dt`` [s];
+    at the acceleration level, the spatial accelerations at zero acceleration of the problem's
+    coordinates that its constraint terms Jdot v read (see :func:`point_drifts`). Frame placements
+    are left to the modules that use frames.
 
     ``tau`` has shape (nv,), or fewer entries: the torques of the last joints (a floating base's
     actuated joints), the first ones unactuated. Raises :class:`InvalidState` when it is not finite
-    (checked here, in the kernel that reads it).
+    (checked here, in the kernel that reads it). The ``bases`` (default: the model's) are posed as
+    :class:`FloatingBases` says.
     """
+    bases = FloatingBases.of(model) if bases is None else bases
     M = pin.crba(model, data, q, _WORLD)  # a copy of data.M; the WORLD convention also fills data.oMi, data.J
     nle = pin.nonLinearEffects(model, data, q, v)
-    if dt is None:
-        pin.forwardKinematics(model, data, q, v, np.zeros(model.nv))
+    if acceleration:  # the drifts of the bases' velocity coordinates: the frame's turn is part of them
+        pin.forwardKinematics(model, data, q, v, bases.frame_acceleration(v))
     f, g = np.empty(len(v)), np.empty(len(v))  # filled by the kernel: cheaper than its new arrays
-    if not _linear_term(M, v, tau, nle, 0.0 if dt is None else dt, f, g):
+    if not _linear_term(M, v, tau, nle, 0.0 if acceleration else dt, f, g):
         raise InvalidState.non_finite("tau", tau)
     pin.cholesky.decompose(model, data)
-    return Dynamics(M, g, pin.cholesky.solve(model, data, f))
+    x_free = pin.cholesky.solve(model, data, f)
+    if len(bases):
+        floating_terms(v, x_free, dt, acceleration, bases.velocity, bases.inertias, bases.rigid)
+        g = _negated_product(M, x_free)
+    return Dynamics(M, g, x_free)
 
 
 @njit(cache=True)
@@ -150,16 +234,62 @@ def gauss_problem(model: pin.Model, data: pin.Data, q: np.ndarray, x_free: np.nd
 
 
 @njit(cache=True)
-def free_velocity(v, a_free, dt, out, moved):  # type: ignore[no-untyped-def]
-    """out = v + dt a_free, the next velocity when nothing restricts the motion, and moved = dt out,
-    the displacement it gives in the step (one kernel call less when it is the step's); returns the
-    reach sum_i |v_i| + |out_i| (see DynamicsStage.reach), NaN when out is not finite."""
-    reach = 0.0
+def free_velocity(v, a_free, dt, out, bases, inertias, rigid):  # type: ignore[no-untyped-def]
+    """out = v + dt a_free, the next velocity when nothing restricts the motion, with the floating bases
+    posed as :func:`floating_terms` poses them; returns the reach sum_i |v_i| + |out_i| (see
+    DynamicsStage.reach), NaN when out is not finite."""
     for i in range(len(v)):
         out[i] = v[i] + dt * a_free[i]
-        moved[i] = dt * out[i]
+    floating_terms(v, out, dt, False, bases, inertias, rigid)
+    reach = 0.0
+    for i in range(len(v)):
         reach += abs(v[i]) + abs(out[i])
     return reach if finite(out) else np.nan
+
+
+# Newton iterations of a rigid base's midpoint gyroscopic term stop below this relative change.
+_MIDPOINT_TOLERANCE = 1e-15
+
+
+@njit(cache=True)
+def floating_terms(v, x, dt, acceleration, bases, inertias, rigid):  # type: ignore[no-untyped-def]
+    """Pose the free solution x of the floating ``bases`` (first velocity indices) as
+    :class:`FloatingBases` says, in place: x = v + dt a (velocity level) or x = a (``acceleration``
+    level) from ABA's a, time step ``dt`` [s]. ``inertias`` (k, 3, 3) and ``rigid`` (k,) as there."""
+    h = 1.0 if acceleration else dt
+    for k in range(len(bases)):
+        i = bases[k]
+        vl, w = v[i : i + 3], v[i + 3 : i + 6]
+        x[i] += h * (w[1] * vl[2] - w[2] * vl[1])  # + w x v_l: the frame's turn leaves the acceleration
+        x[i + 1] += h * (w[2] * vl[0] - w[0] * vl[2])
+        x[i + 2] += h * (w[0] * vl[1] - w[1] * vl[0])
+        if rigid[k]:
+            turn = x[i + 3 : i + 6]
+            u = _midpoint_turn(inertias[k], w, dt * turn if acceleration else turn - w, dt)
+            turn[:] = u / dt if acceleration else w + u
+
+
+@njit(cache=True)
+def _midpoint_turn(I, w, u, dt):  # type: ignore[no-untyped-def]
+    """The change u of a rigid body's angular velocity w [rad/s] in a step dt [s] with the gyroscopic
+    term at the midpoint, I u = dt tau - dt w_m x I w_m, w_m = w + u / 2, from the explicit change u
+    (whose torque is dt tau = I u + dt w x I w); Newton's method on the 3 x 3 system."""
+    rhs = I @ u + dt * np.cross(w, I @ w)
+    for _ in range(20):
+        wm = w + 0.5 * u
+        Iwm = I @ wm
+        r = I @ u + dt * np.cross(wm, Iwm) - rhs
+        # d r / d u = I + dt / 2 ([w_m]x I - [I w_m]x)
+        K = I.copy()
+        for c in range(3):
+            e = np.zeros(3)
+            e[c] = 1.0
+            K[:, c] += 0.5 * dt * (np.cross(e, Iwm) + np.cross(wm, I[:, c]))
+        step = np.linalg.solve(K, r)
+        u = u - step
+        if np.sqrt(step @ step) <= _MIDPOINT_TOLERANCE * (np.sqrt(u @ u) + np.sqrt(w @ w)):
+            break
+    return u
 
 
 @njit(cache=True)

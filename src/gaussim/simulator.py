@@ -61,6 +61,7 @@ class Simulator:
         self.last_step: StepReport | None = None
         self._floating = scene.robot.floating
         self._last_state: State | None = None  # the state the last step returned: already valid
+        self._rigid_bases = bool(self.dynamics.bases.rigid.any())
         self._nv = self.model.nv  # read each step: a plain int, not a property of the Pinocchio model
         # the torque shapes a step takes: (nv,), and a floating robot's actuated joints' (nv - 6,)
         self._torque_shapes = {(self._nv,), (self._nv - 6,)} if self._floating else {(self._nv,)}
@@ -89,7 +90,10 @@ class Simulator:
         """One module per constraint family the scene declares, and no other."""
         modules: list[ConstraintModule] = []
         if scene.pairs:
-            modules.append(ContactModule(scene.robot.model, options.friction_facets, options.friction_mode))
+            robot = scene.robot
+            modules.append(
+                ContactModule(robot.model, options.friction_facets, options.friction_mode, robot.collision_model)
+            )
         if scene.joint_limits:
             modules.append(LimitModule(scene.robot.model))
         if scene.bilaterals:
@@ -200,8 +204,8 @@ class Simulator:
         o = self.options
         report = StepReport(state.t, o.timings)
         mark = report.mark
-        acceleration, moved = o.scheme == "acceleration", None
-        x_free = self.dynamics.free_motion(state.q, state.v, tau, None if acceleration else o.dt)
+        acceleration = o.scheme == "acceleration"
+        x_free = self.dynamics.free_motion(state.q, state.v, tau, o.dt, acceleration)
         mark("dynamics")
         contacts = NO_CONTACTS
         if self.detector:  # it looks when the step's motion may have brought a pair within its margin
@@ -213,7 +217,7 @@ class Simulator:
             v = self._impact(state, dyn.M, contacts, report)
             if v is not state.v:  # the damping acts on the velocity after the impact
                 damped = tau if self._damping is None else tau - self._damping * (v - state.v)
-                self.dynamics.free_motion(state.q, v, damped, None)
+                self.dynamics.free_motion(state.q, v, damped, o.dt, True)
                 dyn = self.dynamics.problem()
             v_next = v + o.dt * self._gauss("acceleration", state.q, v, dyn, contacts, report, 1.0)
         elif len(contacts.gap) or self._rows_without_contact:
@@ -222,13 +226,14 @@ class Simulator:
             )
         else:  # nothing can restrict the motion: no Gauss problem to pose
             v_next = x_free
-            moved = self.dynamics.moved  # its displacement, when the free motion's kernel gave it
-        q_next = integrate(self.model, state.q, v_next, o.dt, self._scratch, moved)
+        bases = self.dynamics.bases
+        free = bases.untouched(report, report.impact) if self._rigid_bases else None
+        moved = integrate(self.model, state.q, state.v, v_next, o.dt, self._scratch, bases, free)
         mark("integrate")
-        if q_next is None:
+        if moved is None:
             raise SolverError(f"step at t={state.t:.6g} s produced a non-finite velocity", report)
         self.last_step = report
-        self._last_state = State.adopt(state.t + o.dt, q_next, v_next)  # both arrays are this step's own
+        self._last_state = State.adopt(state.t + o.dt, *moved)  # both arrays are this step's own
         return self._last_state
 
     def _problem(self, report: StepReport) -> Dynamics:

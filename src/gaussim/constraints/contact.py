@@ -36,6 +36,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from functools import cached_property
 
+import coal
 import numpy as np
 import pinocchio as pin
 from numba import njit
@@ -297,8 +298,17 @@ class ContactModule:
 
     name = "contact"
 
-    def __init__(self, model: pin.Model, facets: int, mode: str) -> None:
+    def __init__(
+        self, model: pin.Model, facets: int, mode: str, geometry: pin.GeometryModel | None = None
+    ) -> None:
         self.mode = mode
+        # the radius of each sphere-swept collision geometry (sphere, capsule): its acceleration-level
+        # drift is its centre's (see _drifts)
+        self.radii = {
+            g.name: float(g.geometry.radius)
+            for g in (geometry.geometryObjects if geometry is not None else [])
+            if isinstance(g.geometry, (coal.Sphere, coal.Capsule))
+        }
         self.facets = facets
         angles = 2.0 * np.pi * np.arange(facets) / facets
         self.cos, self.sin = np.cos(angles), np.sin(angles)
@@ -321,7 +331,7 @@ class ContactModule:
                 contacts = contacts.select(keep)
         m = len(contacts)
         no_slip, no_stops, no_force, no_drift = self._blank(m)
-        drift = _drifts(ctx, contacts) if level == "acceleration" else no_drift
+        drift = _drifts(ctx, contacts, self.radii) if level == "acceleration" else no_drift
         nv, most = len(ctx.v), m * self.facets  # at most m facets rows
         rows, bound = np.empty((most, nv)), np.empty(most)
         packed, starts = np.empty(3 * m * nv + 3 * most + 6 * m), np.empty(m + 1, np.int64)
@@ -458,16 +468,23 @@ def _moving_slip(J, slip, starts, x, normal, i):  # type: ignore[no-untyped-def]
     return speed > SLIP_SPEED or np.sqrt(u0**2 + u1**2 + u2**2) > SLIP_SPEED, u0, u1, u2
 
 
-def _drifts(ctx: Context, contacts: Contacts) -> np.ndarray:
+def _drifts(ctx: Context, contacts: Contacts, radii: dict[str, float]) -> np.ndarray:
     """Jdot v of the contact points, shape (m, 3), relative to the other body's point when the
-    obstacle is another robot geometry."""
+    obstacle is another robot geometry.
+
+    On a sphere-swept geometry (``radii``) the contact point is not a material point: it stays at
+    the radius from the centre while the body rolls, so its acceleration is the centre's, without the
+    centripetal r |w|^2 of the material point that a rolling ball would take for a lift-off."""
     model, data = ctx.model, ctx.data
     joints = contacts.joint.tolist()
-    result = point_drifts(model, data, joints, point_placements(data, joints, contacts.point))
+    n = contacts.normal
+    centres = contacts.point + np.array([radii.get(g, 0.0) for g in contacts.geometry])[:, None] * n
+    result = point_drifts(model, data, joints, point_placements(data, joints, centres))
     others = np.flatnonzero(contacts.other_joint)
     if len(others):
         other_joints = contacts.other_joint[others].tolist()
-        points = contacts.point[others]
+        depth = contacts.gap[others] + np.array([radii.get(contacts.obstacle[i], 0.0) for i in others])
+        points = contacts.point[others] - depth[:, None] * n[others]
         result[others] -= point_drifts(
             model, data, other_joints, point_placements(data, other_joints, points)
         )
