@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
@@ -37,25 +37,46 @@ def standing_window(quick: bool) -> float:
     return 0.2 if quick else 1.0
 
 
-_FREE_CUBE = """
+_FREE_BODY = """
   <joint name="{name}_joint" type="floating"><parent link="world"/><child link="{name}"/></joint>
   <link name="{name}">
     <inertial>
-      <mass value="{mass}"/><inertia ixx="{i}" ixy="0" ixz="0" iyy="{i}" iyz="0" izz="{i}"/>
-    </inertial>
-    <collision><geometry><box size="{side} {side} {side}"/></geometry></collision>
+      <mass value="{mass}"/><inertia ixx="{ixx}" ixy="0" ixz="0" iyy="{iyy}" iyz="0" izz="{izz}"/>
+    </inertial>{collision}
   </link>"""
+
+
+def free_bodies(
+    path: Path, name: str, bodies: Sequence[tuple[str, float, Sequence[float], str | None]]
+) -> Robot:
+    """A robot of free bodies, each (name, mass [kg], principal inertia (3,) [kg m^2] about its origin,
+    collision geometry as URDF XML or None), written as a URDF at ``path`` (each body's geometry is
+    ``<name>_0``; its centre of mass is the origin of its floating joint)."""
+    links = "".join(
+        _FREE_BODY.format(
+            name=body,
+            mass=mass,
+            ixx=inertia[0],
+            iyy=inertia[1],
+            izz=inertia[2],
+            collision=""
+            if geometry is None
+            else f"\n    <collision><geometry>{geometry}</geometry></collision>",
+        )
+        for body, mass, inertia, geometry in bodies
+    )
+    path.write_text(f'<?xml version="1.0"?>\n<robot name="{name}"><link name="world"/>{links}\n</robot>\n')
+    return load_robot(path)
 
 
 def two_boxes(path: Path, bottom: float, top: float) -> Robot:
     """Two free cubes named bottom and top, of masses ``bottom`` and ``top`` [kg], written as a URDF
     at ``path`` (their collision geometries are bottom_0 and top_0)."""
-    cubes = "".join(
-        _FREE_CUBE.format(name=name, mass=mass, i=mass * BOX_SIDE**2 / 6, side=BOX_SIDE)
-        for name, mass in (("bottom", bottom), ("top", top))
-    )
-    path.write_text(f'<?xml version="1.0"?>\n<robot name="pair"><link name="world"/>{cubes}\n</robot>\n')
-    return load_robot(path)
+    cube = f'<box size="{BOX_SIDE} {BOX_SIDE} {BOX_SIDE}"/>'
+    cubes = [
+        (body, mass, [mass * BOX_SIDE**2 / 6] * 3, cube) for body, mass in (("bottom", bottom), ("top", top))
+    ]
+    return free_bodies(path, "pair", cubes)
 
 
 _ROD = """
@@ -172,6 +193,15 @@ def _sliding(heading_deg: float, mu: float = 0.5) -> Callable[[Options, bool], d
     return run
 
 
+def on_incline(theta: float, height: float) -> tuple[np.ndarray, np.ndarray]:
+    """The normal (3,) of an incline of ``theta`` [rad] through the origin (it falls toward -x) and
+    the free-flyer configuration (7,) of a body resting on it whose origin is ``height`` [m] above
+    its lowest face, that face on the incline."""
+    normal = np.array([-np.sin(theta), 0.0, np.cos(theta)])
+    q = np.concatenate([height * normal, pin.Quaternion(pin.rpy.rpyToMatrix(0, -theta, 0)).coeffs()])
+    return normal, q
+
+
 def _incline(offset: float, mu: float = 0.5) -> Callable[[Options, bool], dict[str, float]]:
     """A block on an incline of slope mu + offset: it must stick (offset < 0) or slide at
     g (sin - mu cos)."""
@@ -179,11 +209,8 @@ def _incline(offset: float, mu: float = 0.5) -> Callable[[Options, bool], dict[s
     def run(options: Options, quick: bool) -> dict[str, float]:
         box = load_robot("box", floating_base=True)
         theta = np.arctan(mu + offset)
-        normal = np.array([-np.sin(theta), 0.0, np.cos(theta)])
+        normal, q = on_incline(theta, BOX_HALF_HEIGHT)
         sim, rec = _recorder(Scene(box, ground=Ground(friction=mu, normal=tuple(normal))), options)
-        q = box.neutral()
-        q[:3] = BOX_HALF_HEIGHT * normal
-        q[3:7] = pin.Quaternion(pin.rpy.rpyToMatrix(0, -theta, 0)).coeffs()
         state = rec.run(sim.reset(q), 0.5 if quick else 1.0)
         travel = float(np.linalg.norm(state.q[:3] - q[:3]))
         if offset < 0:  # sticks: any travel is creep
