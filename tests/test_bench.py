@@ -175,3 +175,56 @@ def test_a_run_with_non_finite_metrics_is_recorded_as_diverged(monkeypatch):
     record = run_point(Point("solo12", "setting", "dt=1", engine="blown"))
     assert record["status"] == "diverged: non-finite slip_per_s"
     assert record["metrics"]["penetration"] == 6e8
+
+
+NEW_CASES = (
+    "rolling_flat",
+    "rolling_incline",
+    "spinning_free",
+)
+
+
+@pytest.mark.parametrize("name", NEW_CASES)
+def test_a_reference_case_runs_at_quick_settings_with_finite_metrics(name):
+    from gaussim.bench.cases import options_with
+
+    metrics = CASES[name].run(options_with(), True)
+    assert set(METRICS) <= set(metrics)
+    assert all(math.isfinite(v) for v in metrics.values()), metrics
+
+
+REFERENCE_TOLERANCE = 1e-10
+
+
+def test_the_rolling_references_hold_for_a_ball_constrained_at_its_contact_point():
+    """Pinocchio's constraintDynamics of the ball with its contact point held (rolling without slip):
+    on the 30 degree incline its centre accelerates at twice rolling_travel's coefficient, with the
+    friction ratio 2/7 tan(theta) below the case's mu 0.5; rolling_velocity leaves that point at rest."""
+    import numpy as np
+    import pinocchio as pin
+
+    from gaussim.bench.cases import INCLINE_DEG, on_incline, rolling_travel, rolling_velocity
+    from gaussim.robot import load_robot
+
+    model = load_robot("ball", floating_base=True).model
+    data, radius, theta = model.createData(), 0.1, np.radians(INCLINE_DEG)
+    normal, q = on_incline(theta, radius)
+    R = pin.XYZQUATToSE3(q).rotation
+    point = pin.SE3(np.eye(3), R.T @ (-radius * normal))
+    constraint = pin.RigidConstraintModel(
+        pin.ContactType.CONTACT_3D, model, 1, point, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+    )
+    models, datas = pin.StdVec_RigidConstraintModel(), pin.StdVec_RigidConstraintData()
+    models.append(constraint)
+    datas.append(constraint.createData())
+    pin.initConstraintDynamics(model, data, models, datas)
+    a = pin.constraintDynamics(model, data, q, np.zeros(6), np.zeros(6), models, datas)
+    assert np.isclose(np.linalg.norm(R @ a[:3]), 2 * rolling_travel(theta, 1.0), rtol=1e-9)
+    f = datas[0].contact_force.linear
+    assert np.linalg.norm(f - (f @ normal) * normal) / (f @ normal) < 0.5
+    downhill = np.array([-np.cos(theta), 0.0, -np.sin(theta)])
+    v = rolling_velocity(3.0, radius, R.T @ downhill, R.T @ normal)  # in the body frame, as q's
+    pin.forwardKinematics(model, data, q, v)
+    body = data.v[1]
+    contact = R @ (body.linear + np.cross(body.angular, point.translation))
+    assert np.linalg.norm(contact) < 1e-12 and np.isclose(np.linalg.norm(v[:3]), 3.0)

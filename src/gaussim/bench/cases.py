@@ -355,6 +355,86 @@ def _stack(ratio: float) -> Callable[[Options, bool], dict[str, float]]:
     return run
 
 
+def _world_velocity(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """The world velocity [m/s] of a free body's origin from its free-flyer q (7,) and v (6,):
+    Pinocchio's v[:3] is in the body frame."""
+    return pin.XYZQUATToSE3(q[:7]).rotation @ v[:3]
+
+
+def rolling_velocity(speed: float, radius: float, direction: np.ndarray, normal: np.ndarray) -> np.ndarray:
+    """The free-flyer velocity (6,) of a ball of ``radius`` [m] at the identity orientation rolling
+    without slip at ``speed`` [m/s] along the unit ``direction`` on a plane of unit ``normal``: its
+    contact point, at -radius normal from the centre, is at rest (w x (-r n) = -v)."""
+    linear = speed * np.asarray(direction, dtype=float)
+    return np.concatenate([linear, np.cross(normal, linear) / radius])
+
+
+def _rolling_flat(options: Options, quick: bool) -> dict[str, float]:
+    """A ball rolling without slip at 3 m/s on flat ground (mu 0.8) for 2 s: rolling is free motion
+    under the contact (no rolling resistance), so its speed must stay; ``slip_speed`` [m/s] is its
+    contact point's at the end, the summary's ``penetration`` how deep it sank."""
+    ball = load_robot("ball", floating_base=True)
+    sim, rec = _recorder(Scene(ball, ground=Ground(friction=0.8)), options)
+    radius, speed, normal = _ball_radius(ball), 3.0, np.array([0.0, 0.0, 1.0])
+    q = ball.neutral()
+    q[2] = radius
+    state = rec.run(
+        sim.reset(q, rolling_velocity(speed, radius, np.array([1.0, 0, 0]), normal)), 0.5 if quick else 2.0
+    )
+    R = pin.XYZQUATToSE3(state.q[:7]).rotation
+    centre = R @ state.v[:3]
+    slip = centre + np.cross(R @ state.v[3:], -radius * normal)
+    return {
+        **rec.summary(),
+        "error": abs(float(np.linalg.norm(centre)) / speed - 1),
+        "slip_speed": float(np.linalg.norm(slip)),
+    }
+
+
+INCLINE_DEG = 30.0
+
+
+def _rolling_incline(options: Options, quick: bool) -> dict[str, float]:
+    """A ball released from rest on a 30 degree incline (the ground's normal tilted, as the block's
+    incline), mu 0.5: it rolls without slip (the friction it needs is 2/7 tan(theta) < mu) and travels
+    5/14 g sin(theta) t^2."""
+    ball = load_robot("ball", floating_base=True)
+    theta = np.radians(INCLINE_DEG)
+    normal, q = on_incline(theta, _ball_radius(ball))
+    sim, rec = _recorder(Scene(ball, ground=Ground(friction=0.5, normal=tuple(normal))), options)
+    state = rec.run(sim.reset(q), 0.5 if quick else 1.0)
+    travel = float(np.linalg.norm(state.q[:3] - q[:3]))
+    return {**rec.summary(), "error": abs(travel / rolling_travel(theta, state.t) - 1), "travel": travel}
+
+
+def rolling_travel(theta: float, t: float) -> float:
+    """How far [m] a solid ball rolling without slip down an incline of ``theta`` [rad] goes from rest
+    in ``t`` [s]: its acceleration is g sin(theta) / (1 + I / (m r^2)) = 5/7 g sin(theta)."""
+    return 5 / 14 * G * np.sin(theta) * t**2
+
+
+def _spinning_free(options: Options, quick: bool) -> dict[str, float]:
+    """A ball in zero gravity, no ground, moving at 3 m/s along x and spinning at 30 rad/s about z:
+    its world momentum and its kinetic energy must stay (the largest relative changes over 1 s)."""
+    ball = load_robot("ball", floating_base=True)
+    sim, rec = _recorder(Scene(ball, gravity=(0.0, 0.0, 0.0)), options)
+    model, data = sim.model, sim.model.createData()
+    velocity = np.array([3.0, 0, 0])
+    state = sim.reset(ball.neutral(), np.array([*velocity, 0, 0, 30.0]))
+    energy = pin.computeKineticEnergy(model, data, state.q, state.v)
+    momentum = energy_change = 0.0
+    for _ in range(round((0.2 if quick else 1.0) / options.dt)):
+        state = rec.step(state)
+        momentum = max(momentum, float(np.linalg.norm(_world_velocity(state.q, state.v) - velocity)))
+        change = pin.computeKineticEnergy(model, data, state.q, state.v) / energy - 1
+        energy_change = max(energy_change, abs(change))
+    return {
+        **rec.summary(),
+        "error": momentum / float(np.linalg.norm(velocity)),
+        "energy_change": energy_change,
+    }
+
+
 CASES: dict[str, Case] = {
     case.name: case
     for case in [
@@ -378,6 +458,15 @@ CASES: dict[str, Case] = {
         ),
         Case("solo12", "|sum f_z - m g| / m g", _scene_file("solo12_standing", _standing)),
         Case("talos", "|sum f_z - m g| / m g", _scene_file("talos_standing", _standing)),
+        Case(
+            "rolling_flat", "relative speed change of a ball rolling at 3 m/s for 2 s, mu 0.8", _rolling_flat
+        ),
+        Case(
+            "rolling_incline",
+            "relative error of a rolling ball's travel against 5/14 g sin(theta) t^2, 30 deg, mu 0.5",
+            _rolling_incline,
+        ),
+        Case("spinning_free", "largest relative world momentum error, 3 m/s, 30 rad/s spin", _spinning_free),
     ]
 }
 QUICK_CASES = ("ball_rest", "ball_bounce", "sliding_30", "incline_stick", "stack_100", "solo12")
