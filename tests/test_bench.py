@@ -181,6 +181,9 @@ NEW_CASES = (
     "rolling_flat",
     "rolling_incline",
     "spinning_free",
+    "intermediate_axis",
+    "intermediate_axis_fast",
+    "double_pendulum",
 )
 
 
@@ -194,6 +197,68 @@ def test_a_reference_case_runs_at_quick_settings_with_finite_metrics(name):
 
 
 REFERENCE_TOLERANCE = 1e-10
+
+
+def test_the_free_rotation_reference_keeps_energy_and_world_momentum_and_turns_about_a_principal_axis():
+    """DOP853 of Euler's equations and the quaternion kinematics: through the intermediate-axis flip
+    the energy and the world angular momentum stay; spun about a principal axis, the body turns at
+    constant rate about it (closed form)."""
+    import numpy as np
+    import pinocchio as pin
+
+    from gaussim.bench.cases import PRINCIPAL_INERTIA, free_rotation
+
+    I = np.array(PRINCIPAL_INERTIA)
+    times = np.linspace(0.0, 5.0, 51)
+    quaternions, omegas = free_rotation(I, np.array([0.01, 5.0, 0.01]), times)
+    assert omegas[-1, 1] < 0, "it flips within 5 s"
+    energy = np.einsum("ij,j,ij->i", omegas, I, omegas) / 2
+    momentum = np.array([pin.Quaternion(x).matrix() @ (I * w) for x, w in zip(quaternions, omegas)])
+    assert np.abs(energy / energy[0] - 1).max() < REFERENCE_TOLERANCE
+    assert np.linalg.norm(momentum - momentum[0], axis=1).max() / np.linalg.norm(momentum[0]) < 1e-9
+    quaternions, _ = free_rotation(I, np.array([0.0, 2.0, 0.0]), times)
+    expected = [pin.Quaternion(pin.rpy.rpyToMatrix(0, 2 * t, 0)).coeffs() for t in times]
+    signs = np.sign(np.sum(quaternions * expected, axis=1))[:, None]  # q and -q are the same attitude
+    assert np.abs(quaternions - signs * expected).max() < 1e-9
+
+
+def _lagrangian_double_pendulum(y):
+    """d/dt (angles, velocities) of two uniform 1 kg, 0.5 m rods hinged about y (q = 0 hangs down), by
+    hand: absolute angles p = (q1, q1 + q2), M(p) p'' + c(p, p') + dV/dp = 0."""
+    import numpy as np
+
+    m, l, g = 1.0, 0.5, 9.81
+    Ic = 0.0208333  # the URDF's: m l^2 / 12 to its digits
+    q, v = y[:2], y[2:]
+    p, w = np.array([q[0], q[0] + q[1]]), np.array([v[0], v[0] + v[1]])
+    c = m * l**2 / 2 * np.cos(p[0] - p[1])
+    s = m * l**2 / 2 * np.sin(p[0] - p[1])
+    M = np.array([[m * l**2 * 5 / 4 + Ic, c], [c, m * l**2 / 4 + Ic]])
+    rest = np.array(
+        [s * w[1] ** 2 + 1.5 * m * g * l * np.sin(p[0]), -s * w[0] ** 2 + m * g * l / 2 * np.sin(p[1])]
+    )
+    pdd = np.linalg.solve(M, -rest)
+    return np.concatenate([v, [pdd[0], pdd[1] - pdd[0]]])
+
+
+def test_the_double_pendulum_reference_is_its_lagrangian_and_keeps_its_energy():
+    """The RHS integrated for double_pendulum (Pinocchio's aba) equals the hand-written Lagrangian of
+    two rods at random states, and DOP853 keeps the energy over 2 s."""
+    import numpy as np
+    import pinocchio as pin
+
+    from gaussim.bench.cases import PENDULUM_START, angles_to_q, pendulum_reference, pendulum_rhs
+    from gaussim.robot import load_robot
+
+    model = load_robot("double_pendulum").model
+    rhs = pendulum_rhs(model)
+    for y in np.random.default_rng(0).uniform(-3, 3, (20, 4)):
+        assert np.allclose(rhs(0.0, y), _lagrangian_double_pendulum(y), rtol=1e-6, atol=1e-6), y
+    states = pendulum_reference(model, np.array(PENDULUM_START), np.linspace(0.0, 2.0, 41))
+    data = model.createData()
+    energy = [pin.computeMechanicalEnergy(model, data, angles_to_q(y[:2]), y[2:]) for y in states]
+    kinetic = max(pin.computeKineticEnergy(model, data, angles_to_q(y[:2]), y[2:]) for y in states)
+    assert np.ptp(energy) / kinetic < REFERENCE_TOLERANCE
 
 
 def test_the_rolling_references_hold_for_a_ball_constrained_at_its_contact_point():

@@ -413,6 +413,26 @@ def rolling_travel(theta: float, t: float) -> float:
     return 5 / 14 * G * np.sin(theta) * t**2
 
 
+ODE_TOLERANCE = 1e-12  # rtol = atol of the ODE references
+
+
+def dop853(rhs: Callable[[float, np.ndarray], np.ndarray], y0: np.ndarray, times: np.ndarray) -> np.ndarray:
+    """The states (n, len(y0)) at ``times`` (n,) [s] of y' = rhs(t, y) from y(0) = ``y0``, integrated by
+    scipy's DOP853 at rtol = atol = ODE_TOLERANCE (scipy comes with ``pip install -e '.[bench]'``)."""
+    try:
+        from scipy.integrate import solve_ivp
+    except ImportError as err:
+        raise ImportError(
+            "the ODE references of gaussim.bench need scipy: pip install -e '.[bench]'"
+        ) from err
+    solution = solve_ivp(
+        rhs, (0.0, times[-1]), y0, method="DOP853", t_eval=times, rtol=ODE_TOLERANCE, atol=ODE_TOLERANCE
+    )
+    if not solution.success:
+        raise RuntimeError(f"the DOP853 reference failed: {solution.message}")
+    return solution.y.T
+
+
 def _spinning_free(options: Options, quick: bool) -> dict[str, float]:
     """A ball in zero gravity, no ground, moving at 3 m/s along x and spinning at 30 rad/s about z:
     its world momentum and its kinetic energy must stay (the largest relative changes over 1 s)."""
@@ -432,6 +452,122 @@ def _spinning_free(options: Options, quick: bool) -> dict[str, float]:
         **rec.summary(),
         "error": momentum / float(np.linalg.norm(velocity)),
         "energy_change": energy_change,
+    }
+
+
+# The torque-free body of intermediate_axis: its principal inertia [kg m^2] (mass 1 kg).
+PRINCIPAL_INERTIA = (1.0, 2.0, 2.5)
+
+
+def free_rotation(
+    inertia: Sequence[float] | np.ndarray, w0: np.ndarray, times: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The torque-free rotation of a rigid body of principal ``inertia`` (3,) [kg m^2] from the
+    identity with body angular velocity ``w0`` (3,) [rad/s]: its quaternions (x, y, z, w) and body
+    angular velocities at ``times`` (n,) [s], shapes (n, 4) and (n, 3), from Euler's equations
+    I w' = -w x I w and q' = q (x) (w, 0) / 2 integrated by :func:`dop853`."""
+    I = np.asarray(inertia, dtype=float)
+
+    def rhs(t: float, y: np.ndarray) -> np.ndarray:
+        w, vector, scalar = y[:3], y[3:6], y[6]
+        return np.concatenate(
+            [-np.cross(w, I * w) / I, (scalar * w + np.cross(vector, w)) / 2, [-vector @ w / 2]]
+        )
+
+    y0 = np.concatenate([w0, [0.0, 0.0, 0.0, 1.0]])
+    states = dop853(rhs, y0, times)
+    return states[:, 3:], states[:, :3]
+
+
+def _intermediate_axis(w0: tuple[float, float, float]) -> Callable[[Options, bool], dict[str, float]]:
+    """A torque-free body (PRINCIPAL_INERTIA, its centre of mass at its joint) in zero gravity spinning
+    near its intermediate axis from ``w0`` [rad/s] (body frame), 5 s (1 s with ``quick``), against
+    :func:`free_rotation`: ``error`` is the attitude error [rad] at the end, with the relative error
+    of the angular velocity there and the largest relative energy and world angular momentum drifts."""
+
+    def run(options: Options, quick: bool) -> dict[str, float]:
+        with tempfile.TemporaryDirectory() as folder:
+            body = free_bodies(Path(folder) / "body.urdf", "body", [("body", 1.0, PRINCIPAL_INERTIA, None)])
+        sim, rec = _recorder(Scene(body, gravity=(0.0, 0.0, 0.0)), options)
+        I, w = np.array(PRINCIPAL_INERTIA), np.array(w0)
+        state = sim.reset(body.neutral(), np.array([0, 0, 0, *w]))
+        energy, momentum = w @ (I * w) / 2, I * w
+        energy_drift = momentum_drift = 0.0
+        for _ in range(round((1.0 if quick else 5.0) / options.dt)):
+            state = rec.step(state)
+            w = state.v[3:]
+            energy_drift = max(energy_drift, abs(w @ (I * w) / 2 / energy - 1))
+            world = pin.XYZQUATToSE3(state.q).rotation @ (I * w)
+            momentum_drift = max(
+                momentum_drift, float(np.linalg.norm(world - momentum) / np.linalg.norm(momentum))
+            )
+        quaternions, omegas = free_rotation(I, np.array(w0), np.array([0.0, state.t]))
+        R = pin.Quaternion(quaternions[-1]).matrix()
+        attitude = float(np.linalg.norm(pin.log3(R.T @ pin.XYZQUATToSE3(state.q).rotation)))
+        return {
+            **rec.summary(),
+            "error": attitude,
+            "omega_error": float(np.linalg.norm(w - omegas[-1]) / np.linalg.norm(omegas[-1])),
+            "energy_drift": energy_drift,
+            "momentum_drift": momentum_drift,
+        }
+
+    return run
+
+
+PENDULUM_START = (1.2, -0.6, 0.0, 2.0)  # (q1, q2 [rad], v1, v2 [rad/s]) of double_pendulum
+
+
+def pendulum_reference(
+    model: pin.Model, start: Sequence[float] | np.ndarray, times: np.ndarray
+) -> np.ndarray:
+    """The joint angles and velocities (n, 4) [rad, rad/s] at ``times`` (n,) [s] of
+    robots/double_pendulum.urdf's ``model`` (continuous joints: q holds (cos, sin) per joint) from the
+    angles and velocities ``start`` (4,):
+    Pinocchio's ``aba`` (M(q) a = -b(q, v)) integrated by :func:`dop853`."""
+    return dop853(pendulum_rhs(model), np.asarray(start, dtype=float), times)
+
+
+def pendulum_rhs(model: pin.Model) -> Callable[[float, np.ndarray], np.ndarray]:
+    """d/dt (angles, velocities) of the double pendulum ``model`` by Pinocchio's ``aba``."""
+    data = model.createData()
+    zero = np.zeros(2)
+
+    def rhs(t: float, y: np.ndarray) -> np.ndarray:
+        return np.concatenate([y[2:], pin.aba(model, data, angles_to_q(y[:2]), y[2:], zero)])
+
+    return rhs
+
+
+def angles_to_q(angles: np.ndarray) -> np.ndarray:
+    """The configuration (cos, sin per joint) of continuous joints at ``angles`` [rad]."""
+    return np.column_stack([np.cos(angles), np.sin(angles)]).ravel()
+
+
+def _double_pendulum(options: Options, quick: bool) -> dict[str, float]:
+    """robots/double_pendulum.urdf, no contacts or limits, from PENDULUM_START for 2 s (0.5 s with
+    ``quick``) against :func:`pendulum_reference`: ``error`` is the RMS joint angle error [rad] over
+    the steps, ``energy_drift`` the largest change of the mechanical energy relative to the largest
+    kinetic energy of the reference."""
+    robot = load_robot("double_pendulum")
+    sim, rec = _recorder(Scene(robot), options)
+    model, data = sim.model, sim.model.createData()
+    start = np.array(PENDULUM_START)
+    state = sim.reset(angles_to_q(start[:2]), start[2:])
+    energy = pin.computeMechanicalEnergy(model, data, state.q, state.v)
+    configurations, drift = [], 0.0
+    for _ in range(round((0.5 if quick else 2.0) / options.dt)):
+        state = rec.step(state)
+        configurations.append(state.q)
+        drift = max(drift, abs(pin.computeMechanicalEnergy(model, data, state.q, state.v) - energy))
+    times = options.dt * np.arange(1, len(configurations) + 1)
+    reference = pendulum_reference(model, start, times)
+    errors = [pin.difference(model, angles_to_q(r[:2]), q) for r, q in zip(reference, configurations)]
+    kinetic = max(pin.computeKineticEnergy(model, data, angles_to_q(r[:2]), r[2:]) for r in reference)
+    return {
+        **rec.summary(),
+        "error": float(np.sqrt(np.mean(np.square(errors)))),
+        "energy_drift": drift / kinetic,
     }
 
 
@@ -467,6 +603,20 @@ CASES: dict[str, Case] = {
             _rolling_incline,
         ),
         Case("spinning_free", "largest relative world momentum error, 3 m/s, 30 rad/s spin", _spinning_free),
+        Case(
+            "intermediate_axis",
+            "attitude error [rad] at 5 s against DOP853, I = (1, 2, 2.5), w0 = (0.01, 1, 0.01) rad/s",
+            _intermediate_axis((0.01, 1.0, 0.01)),
+        ),
+        Case(
+            "intermediate_axis_fast",
+            "attitude error [rad] at 5 s against DOP853, I = (1, 2, 2.5), w0 = (0.01, 5, 0.01) rad/s"
+            " (it flips at 4.2 s)",
+            _intermediate_axis((0.01, 5.0, 0.01)),
+        ),
+        Case(
+            "double_pendulum", "RMS joint angle error [rad] over 2 s against DOP853 of aba", _double_pendulum
+        ),
     ]
 }
 QUICK_CASES = ("ball_rest", "ball_bounce", "sliding_30", "incline_stick", "stack_100", "solo12")
