@@ -183,6 +183,7 @@ NEW_CASES = (
     "spinning_free",
     "intermediate_axis",
     "intermediate_axis_fast",
+    "newtons_cradle",
     "double_pendulum",
 )
 
@@ -293,3 +294,19 @@ def test_the_rolling_references_hold_for_a_ball_constrained_at_its_contact_point
     body = data.v[1]
     contact = R @ (body.linear + np.cross(body.angular, point.translation))
     assert np.linalg.norm(contact) < 1e-12 and np.isclose(np.linalg.norm(v[:3]), 3.0)
+
+
+def test_the_cradle_reference_is_the_impulsive_gauss_projection():
+    """CRADLE_REFERENCE solves min 1/2 |w - v-|^2_M over J w >= -e J v- for the two closed contacts
+    (solved here by scipy's SLSQP), keeping momentum and energy."""
+    import numpy as np
+    from scipy.optimize import minimize
+
+    from gaussim.bench.cases import CRADLE_REFERENCE
+
+    v = np.array([1.0, 0.0, 0.0])
+    J = np.array([[-1.0, 1.0, 0.0], [0.0, -1.0, 1.0]])  # the gaps' rates
+    rows = {"type": "ineq", "fun": lambda w: J @ w + J @ v}  # e = 1
+    w = minimize(lambda w: (w - v) @ (w - v) / 2, v, constraints=[rows], method="SLSQP", tol=1e-14).x
+    assert np.allclose(w, CRADLE_REFERENCE, atol=1e-7)
+    assert np.isclose(sum(CRADLE_REFERENCE), 1.0) and np.isclose(np.square(CRADLE_REFERENCE).sum(), 1.0)
