@@ -184,6 +184,7 @@ NEW_CASES = (
     "intermediate_axis",
     "intermediate_axis_fast",
     "newtons_cradle",
+    "tipping",
     "double_pendulum",
 )
 
@@ -262,6 +263,33 @@ def test_the_double_pendulum_reference_is_its_lagrangian_and_keeps_its_energy():
     assert np.ptp(energy) / kinetic < REFERENCE_TOLERANCE
 
 
+def test_the_tipping_angle_puts_the_centre_of_mass_over_the_lower_edge():
+    """Placed on the incline as the case places it, the tall box's centre of mass is uphill of its
+    lower collision corners just below tipping_angle and downhill of them just above."""
+    import tempfile
+    from pathlib import Path
+
+    import numpy as np
+    import pinocchio as pin
+
+    from gaussim.bench.cases import TALL_BOX, free_bodies, on_incline, tipping_angle
+
+    width, height = TALL_BOX
+    with tempfile.TemporaryDirectory() as folder:
+        box = free_bodies(
+            Path(folder) / "b.urdf", "b", [("b", 1.0, (1, 1, 1), f'<box size="{width} {width} {height}"/>')]
+        )
+    corners = np.array(
+        [[x, y, -height / 2] for x in (-width / 2, width / 2) for y in (-width / 2, width / 2)]
+    )
+    for factor, tips in ((0.99, False), (1.01, True)):
+        _, q = on_incline(factor * tipping_angle(width, height), height / 2)
+        placement = pin.XYZQUATToSE3(q)
+        lowest = min(placement.act(c)[0] for c in corners)  # the incline falls toward -x
+        com = pin.centerOfMass(box.model, box.model.createData(), q)
+        assert (com[0] < lowest) == tips, factor
+
+
 def test_the_rolling_references_hold_for_a_ball_constrained_at_its_contact_point():
     """Pinocchio's constraintDynamics of the ball with its contact point held (rolling without slip):
     on the 30 degree incline its centre accelerates at twice rolling_travel's coefficient, with the
@@ -310,3 +338,33 @@ def test_the_cradle_reference_is_the_impulsive_gauss_projection():
     w = minimize(lambda w: (w - v) @ (w - v) / 2, v, constraints=[rows], method="SLSQP", tol=1e-14).x
     assert np.allclose(w, CRADLE_REFERENCE, atol=1e-7)
     assert np.isclose(sum(CRADLE_REFERENCE), 1.0) and np.isclose(np.square(CRADLE_REFERENCE).sum(), 1.0)
+
+
+def test_a_recorder_absorbs_another_runs_steps():
+    """A case of several runs (tipping's bisection) reports all their steps: the counts add up, the
+    residuals are the larger of the two."""
+    from gaussim.bench.metrics import Recorder
+    from gaussim.robot import load_robot
+    from gaussim.scene import Ground, Scene
+    from gaussim.simulator import Simulator
+
+    ball = load_robot("ball", floating_base=True)
+    recorders = []
+    for height in (0.1, 0.095):  # resting, and dropped in 5 mm deep
+        sim = Simulator(Scene(ball, ground=Ground()))
+        q = ball.neutral()
+        q[2] = height
+        rec = Recorder(sim)
+        rec.run(sim.reset(q), 0.01 * len(recorders) + 0.01)
+        recorders.append(rec)
+    first, second = recorders
+    steps, iterations, deepest = (
+        len(first.seconds) + len(second.seconds),
+        first.iterations + second.iterations,
+        second.penetration,
+    )
+    assert deepest > first.penetration
+    first.absorb(second)
+    summary = first.summary()
+    assert len(first.seconds) == steps == 30
+    assert summary["iterations"] == iterations / steps and summary["penetration"] == deepest

@@ -556,6 +556,57 @@ def _newtons_cradle(options: Options, quick: bool) -> dict[str, float]:
     }
 
 
+TALL_BOX = (0.1, 0.4)  # [m] the tipping box's width (x and y) and height (z)
+TIPPED = 0.2  # [rad] the tilt from the incline's normal at which a box has tipped
+
+
+def tipping_angle(width: float, height: float) -> float:
+    """The incline [rad] beyond which a box of ``width`` and ``height`` [m] standing on it (with the
+    friction to stick) tips over its lower edge: there its centre of mass passes over that edge,
+    tan(theta) = width / height."""
+    return float(np.arctan(width / height))
+
+
+def _tipping(options: Options, quick: bool) -> dict[str, float]:
+    """A 0.1 x 0.1 x 0.4 m box (1 kg) at rest on an incline (mu 1, more than the tan(theta) it needs
+    to stick), the incline found by bisection on [0.5, 1.5] times :func:`tipping_angle` at which it
+    tips (its tilt passes TIPPED within 2 s): ``error`` is that angle's relative error, its floor the
+    bisection's resolution 1/2048 (10 halvings; 1/128, 6, with ``quick``), which it reaches when every
+    run is decided right; the metrics are those of all the runs."""
+    width, height = TALL_BOX
+    inertia = [(width**2 + height**2) / 12] * 2 + [width**2 / 6]
+    with tempfile.TemporaryDirectory() as folder:
+        box = free_bodies(
+            Path(folder) / "tall.urdf",
+            "tall",
+            [("tall", 1.0, inertia, f'<box size="{width} {width} {height}"/>')],
+        )
+    recorders = []
+
+    def tips(theta: float) -> bool:
+        normal, q = on_incline(theta, height / 2)
+        sim, rec = _recorder(Scene(box, ground=Ground(friction=1.0, normal=tuple(normal))), options)
+        recorders.append(rec)
+        state = sim.reset(q)
+        for _ in range(round(2.0 / options.dt)):
+            state = rec.step(state)
+            axis = pin.XYZQUATToSE3(state.q).rotation[:, 2]
+            if np.arccos(min(1.0, float(axis @ normal))) > TIPPED:
+                return True
+        return False
+
+    expected = tipping_angle(width, height)
+    low, high = 0.5 * expected, 1.5 * expected
+    for _ in range(6 if quick else 10):
+        middle = (low + high) / 2
+        low, high = (low, middle) if tips(middle) else (middle, high)
+    found = (low + high) / 2
+    first, *others = recorders
+    for rec in others:
+        first.absorb(rec)
+    return {**first.summary(), "error": abs(found / expected - 1), "threshold_deg": float(np.degrees(found))}
+
+
 PENDULUM_START = (1.2, -0.6, 0.0, 2.0)  # (q1, q2 [rad], v1, v2 [rad/s]) of double_pendulum
 
 
@@ -656,6 +707,7 @@ CASES: dict[str, Case] = {
             _intermediate_axis((0.01, 5.0, 0.01)),
         ),
         Case("newtons_cradle", "largest velocity error [m/s] against (-1/3, 2/3, 2/3)", _newtons_cradle),
+        Case("tipping", "relative error of the tipping incline, tan(theta) = 0.1 / 0.4", _tipping),
         Case(
             "double_pendulum", "RMS joint angle error [rad] over 2 s against DOP853 of aba", _double_pendulum
         ),
