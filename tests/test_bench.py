@@ -175,3 +175,196 @@ def test_a_run_with_non_finite_metrics_is_recorded_as_diverged(monkeypatch):
     record = run_point(Point("solo12", "setting", "dt=1", engine="blown"))
     assert record["status"] == "diverged: non-finite slip_per_s"
     assert record["metrics"]["penetration"] == 6e8
+
+
+NEW_CASES = (
+    "rolling_flat",
+    "rolling_incline",
+    "spinning_free",
+    "intermediate_axis",
+    "intermediate_axis_fast",
+    "newtons_cradle",
+    "tipping",
+    "double_pendulum",
+)
+
+
+@pytest.mark.parametrize("name", NEW_CASES)
+def test_a_reference_case_runs_at_quick_settings_with_finite_metrics(name):
+    from gaussim.bench.cases import options_with
+
+    metrics = CASES[name].run(options_with(), True)
+    assert set(METRICS) <= set(metrics)
+    assert all(math.isfinite(v) for v in metrics.values()), metrics
+
+
+REFERENCE_TOLERANCE = 1e-10
+
+
+def test_the_free_rotation_reference_keeps_energy_and_world_momentum_and_turns_about_a_principal_axis():
+    """DOP853 of Euler's equations and the quaternion kinematics: through the intermediate-axis flip
+    the energy and the world angular momentum stay; spun about a principal axis, the body turns at
+    constant rate about it (closed form)."""
+    import numpy as np
+    import pinocchio as pin
+
+    from gaussim.bench.cases import PRINCIPAL_INERTIA, free_rotation
+
+    I = np.array(PRINCIPAL_INERTIA)
+    times = np.linspace(0.0, 5.0, 51)
+    quaternions, omegas = free_rotation(I, np.array([0.01, 5.0, 0.01]), times)
+    assert omegas[-1, 1] < 0, "it flips within 5 s"
+    energy = np.einsum("ij,j,ij->i", omegas, I, omegas) / 2
+    momentum = np.array([pin.Quaternion(x).matrix() @ (I * w) for x, w in zip(quaternions, omegas)])
+    assert np.abs(energy / energy[0] - 1).max() < REFERENCE_TOLERANCE
+    assert np.linalg.norm(momentum - momentum[0], axis=1).max() / np.linalg.norm(momentum[0]) < 1e-9
+    quaternions, _ = free_rotation(I, np.array([0.0, 2.0, 0.0]), times)
+    expected = [pin.Quaternion(pin.rpy.rpyToMatrix(0, 2 * t, 0)).coeffs() for t in times]
+    signs = np.sign(np.sum(quaternions * expected, axis=1))[:, None]  # q and -q are the same attitude
+    assert np.abs(quaternions - signs * expected).max() < 1e-9
+
+
+def _lagrangian_double_pendulum(y):
+    """d/dt (angles, velocities) of two uniform 1 kg, 0.5 m rods hinged about y (q = 0 hangs down), by
+    hand: absolute angles p = (q1, q1 + q2), M(p) p'' + c(p, p') + dV/dp = 0."""
+    import numpy as np
+
+    m, l, g = 1.0, 0.5, 9.81
+    Ic = 0.0208333  # the URDF's: m l^2 / 12 to its digits
+    q, v = y[:2], y[2:]
+    p, w = np.array([q[0], q[0] + q[1]]), np.array([v[0], v[0] + v[1]])
+    c = m * l**2 / 2 * np.cos(p[0] - p[1])
+    s = m * l**2 / 2 * np.sin(p[0] - p[1])
+    M = np.array([[m * l**2 * 5 / 4 + Ic, c], [c, m * l**2 / 4 + Ic]])
+    rest = np.array(
+        [s * w[1] ** 2 + 1.5 * m * g * l * np.sin(p[0]), -s * w[0] ** 2 + m * g * l / 2 * np.sin(p[1])]
+    )
+    pdd = np.linalg.solve(M, -rest)
+    return np.concatenate([v, [pdd[0], pdd[1] - pdd[0]]])
+
+
+def test_the_double_pendulum_reference_is_its_lagrangian_and_keeps_its_energy():
+    """The RHS integrated for double_pendulum (Pinocchio's aba) equals the hand-written Lagrangian of
+    two rods at random states, and DOP853 keeps the energy over 2 s."""
+    import numpy as np
+    import pinocchio as pin
+
+    from gaussim.bench.cases import PENDULUM_START, angles_to_q, pendulum_reference, pendulum_rhs
+    from gaussim.robot import load_robot
+
+    model = load_robot("double_pendulum").model
+    rhs = pendulum_rhs(model)
+    for y in np.random.default_rng(0).uniform(-3, 3, (20, 4)):
+        assert np.allclose(rhs(0.0, y), _lagrangian_double_pendulum(y), rtol=1e-6, atol=1e-6), y
+    states = pendulum_reference(model, np.array(PENDULUM_START), np.linspace(0.0, 2.0, 41))
+    data = model.createData()
+    energy = [pin.computeMechanicalEnergy(model, data, angles_to_q(y[:2]), y[2:]) for y in states]
+    kinetic = max(pin.computeKineticEnergy(model, data, angles_to_q(y[:2]), y[2:]) for y in states)
+    assert np.ptp(energy) / kinetic < REFERENCE_TOLERANCE
+
+
+def test_the_tipping_angle_puts_the_centre_of_mass_over_the_lower_edge():
+    """Placed on the incline as the case places it, the tall box's centre of mass is uphill of its
+    lower collision corners just below tipping_angle and downhill of them just above."""
+    import tempfile
+    from pathlib import Path
+
+    import numpy as np
+    import pinocchio as pin
+
+    from gaussim.bench.cases import TALL_BOX, free_bodies, on_incline, tipping_angle
+
+    width, height = TALL_BOX
+    with tempfile.TemporaryDirectory() as folder:
+        box = free_bodies(
+            Path(folder) / "b.urdf", "b", [("b", 1.0, (1, 1, 1), f'<box size="{width} {width} {height}"/>')]
+        )
+    corners = np.array(
+        [[x, y, -height / 2] for x in (-width / 2, width / 2) for y in (-width / 2, width / 2)]
+    )
+    for factor, tips in ((0.99, False), (1.01, True)):
+        _, q = on_incline(factor * tipping_angle(width, height), height / 2)
+        placement = pin.XYZQUATToSE3(q)
+        lowest = min(placement.act(c)[0] for c in corners)  # the incline falls toward -x
+        com = pin.centerOfMass(box.model, box.model.createData(), q)
+        assert (com[0] < lowest) == tips, factor
+
+
+def test_the_rolling_references_hold_for_a_ball_constrained_at_its_contact_point():
+    """Pinocchio's constraintDynamics of the ball with its contact point held (rolling without slip):
+    on the 30 degree incline its centre accelerates at twice rolling_travel's coefficient, with the
+    friction ratio 2/7 tan(theta) below the case's mu 0.5; rolling_velocity leaves that point at rest."""
+    import numpy as np
+    import pinocchio as pin
+
+    from gaussim.bench.cases import INCLINE_DEG, on_incline, rolling_travel, rolling_velocity
+    from gaussim.robot import load_robot
+
+    model = load_robot("ball", floating_base=True).model
+    data, radius, theta = model.createData(), 0.1, np.radians(INCLINE_DEG)
+    normal, q = on_incline(theta, radius)
+    R = pin.XYZQUATToSE3(q).rotation
+    point = pin.SE3(np.eye(3), R.T @ (-radius * normal))
+    constraint = pin.RigidConstraintModel(
+        pin.ContactType.CONTACT_3D, model, 1, point, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+    )
+    models, datas = pin.StdVec_RigidConstraintModel(), pin.StdVec_RigidConstraintData()
+    models.append(constraint)
+    datas.append(constraint.createData())
+    pin.initConstraintDynamics(model, data, models, datas)
+    a = pin.constraintDynamics(model, data, q, np.zeros(6), np.zeros(6), models, datas)
+    assert np.isclose(np.linalg.norm(R @ a[:3]), 2 * rolling_travel(theta, 1.0), rtol=1e-9)
+    f = datas[0].contact_force.linear
+    assert np.linalg.norm(f - (f @ normal) * normal) / (f @ normal) < 0.5
+    downhill = np.array([-np.cos(theta), 0.0, -np.sin(theta)])
+    v = rolling_velocity(3.0, radius, R.T @ downhill, R.T @ normal)  # in the body frame, as q's
+    pin.forwardKinematics(model, data, q, v)
+    body = data.v[1]
+    contact = R @ (body.linear + np.cross(body.angular, point.translation))
+    assert np.linalg.norm(contact) < 1e-12 and np.isclose(np.linalg.norm(v[:3]), 3.0)
+
+
+def test_the_cradle_reference_is_the_impulsive_gauss_projection():
+    """CRADLE_REFERENCE solves min 1/2 |w - v-|^2_M over J w >= -e J v- for the two closed contacts
+    (solved here by scipy's SLSQP), keeping momentum and energy."""
+    import numpy as np
+    from scipy.optimize import minimize
+
+    from gaussim.bench.cases import CRADLE_REFERENCE
+
+    v = np.array([1.0, 0.0, 0.0])
+    J = np.array([[-1.0, 1.0, 0.0], [0.0, -1.0, 1.0]])  # the gaps' rates
+    rows = {"type": "ineq", "fun": lambda w: J @ w + J @ v}  # e = 1
+    w = minimize(lambda w: (w - v) @ (w - v) / 2, v, constraints=[rows], method="SLSQP", tol=1e-14).x
+    assert np.allclose(w, CRADLE_REFERENCE, atol=1e-7)
+    assert np.isclose(sum(CRADLE_REFERENCE), 1.0) and np.isclose(np.square(CRADLE_REFERENCE).sum(), 1.0)
+
+
+def test_a_recorder_absorbs_another_runs_steps():
+    """A case of several runs (tipping's bisection) reports all their steps: the counts add up, the
+    residuals are the larger of the two."""
+    from gaussim.bench.metrics import Recorder
+    from gaussim.robot import load_robot
+    from gaussim.scene import Ground, Scene
+    from gaussim.simulator import Simulator
+
+    ball = load_robot("ball", floating_base=True)
+    recorders = []
+    for height in (0.1, 0.095):  # resting, and dropped in 5 mm deep
+        sim = Simulator(Scene(ball, ground=Ground()))
+        q = ball.neutral()
+        q[2] = height
+        rec = Recorder(sim)
+        rec.run(sim.reset(q), 0.01 * len(recorders) + 0.01)
+        recorders.append(rec)
+    first, second = recorders
+    steps, iterations, deepest = (
+        len(first.seconds) + len(second.seconds),
+        first.iterations + second.iterations,
+        second.penetration,
+    )
+    assert deepest > first.penetration
+    first.absorb(second)
+    summary = first.summary()
+    assert len(first.seconds) == steps == 30
+    assert summary["iterations"] == iterations / steps and summary["penetration"] == deepest

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
@@ -37,25 +37,46 @@ def standing_window(quick: bool) -> float:
     return 0.2 if quick else 1.0
 
 
-_FREE_CUBE = """
+_FREE_BODY = """
   <joint name="{name}_joint" type="floating"><parent link="world"/><child link="{name}"/></joint>
   <link name="{name}">
     <inertial>
-      <mass value="{mass}"/><inertia ixx="{i}" ixy="0" ixz="0" iyy="{i}" iyz="0" izz="{i}"/>
-    </inertial>
-    <collision><geometry><box size="{side} {side} {side}"/></geometry></collision>
+      <mass value="{mass}"/><inertia ixx="{ixx}" ixy="0" ixz="0" iyy="{iyy}" iyz="0" izz="{izz}"/>
+    </inertial>{collision}
   </link>"""
+
+
+def free_bodies(
+    path: Path, name: str, bodies: Sequence[tuple[str, float, Sequence[float], str | None]]
+) -> Robot:
+    """A robot of free bodies, each (name, mass [kg], principal inertia (3,) [kg m^2] about its origin,
+    collision geometry as URDF XML or None), written as a URDF at ``path`` (each body's geometry is
+    ``<name>_0``; its centre of mass is the origin of its floating joint)."""
+    links = "".join(
+        _FREE_BODY.format(
+            name=body,
+            mass=mass,
+            ixx=inertia[0],
+            iyy=inertia[1],
+            izz=inertia[2],
+            collision=""
+            if geometry is None
+            else f"\n    <collision><geometry>{geometry}</geometry></collision>",
+        )
+        for body, mass, inertia, geometry in bodies
+    )
+    path.write_text(f'<?xml version="1.0"?>\n<robot name="{name}"><link name="world"/>{links}\n</robot>\n')
+    return load_robot(path)
 
 
 def two_boxes(path: Path, bottom: float, top: float) -> Robot:
     """Two free cubes named bottom and top, of masses ``bottom`` and ``top`` [kg], written as a URDF
     at ``path`` (their collision geometries are bottom_0 and top_0)."""
-    cubes = "".join(
-        _FREE_CUBE.format(name=name, mass=mass, i=mass * BOX_SIDE**2 / 6, side=BOX_SIDE)
-        for name, mass in (("bottom", bottom), ("top", top))
-    )
-    path.write_text(f'<?xml version="1.0"?>\n<robot name="pair"><link name="world"/>{cubes}\n</robot>\n')
-    return load_robot(path)
+    cube = f'<box size="{BOX_SIDE} {BOX_SIDE} {BOX_SIDE}"/>'
+    cubes = [
+        (body, mass, [mass * BOX_SIDE**2 / 6] * 3, cube) for body, mass in (("bottom", bottom), ("top", top))
+    ]
+    return free_bodies(path, "pair", cubes)
 
 
 _ROD = """
@@ -172,6 +193,15 @@ def _sliding(heading_deg: float, mu: float = 0.5) -> Callable[[Options, bool], d
     return run
 
 
+def on_incline(theta: float, height: float) -> tuple[np.ndarray, np.ndarray]:
+    """The normal (3,) of an incline of ``theta`` [rad] through the origin (it falls toward -x) and
+    the free-flyer configuration (7,) of a body resting on it whose origin is ``height`` [m] above
+    its lowest face, that face on the incline."""
+    normal = np.array([-np.sin(theta), 0.0, np.cos(theta)])
+    q = np.concatenate([height * normal, pin.Quaternion(pin.rpy.rpyToMatrix(0, -theta, 0)).coeffs()])
+    return normal, q
+
+
 def _incline(offset: float, mu: float = 0.5) -> Callable[[Options, bool], dict[str, float]]:
     """A block on an incline of slope mu + offset: it must stick (offset < 0) or slide at
     g (sin - mu cos)."""
@@ -179,11 +209,8 @@ def _incline(offset: float, mu: float = 0.5) -> Callable[[Options, bool], dict[s
     def run(options: Options, quick: bool) -> dict[str, float]:
         box = load_robot("box", floating_base=True)
         theta = np.arctan(mu + offset)
-        normal = np.array([-np.sin(theta), 0.0, np.cos(theta)])
+        normal, q = on_incline(theta, BOX_HALF_HEIGHT)
         sim, rec = _recorder(Scene(box, ground=Ground(friction=mu, normal=tuple(normal))), options)
-        q = box.neutral()
-        q[:3] = BOX_HALF_HEIGHT * normal
-        q[3:7] = pin.Quaternion(pin.rpy.rpyToMatrix(0, -theta, 0)).coeffs()
         state = rec.run(sim.reset(q), 0.5 if quick else 1.0)
         travel = float(np.linalg.norm(state.q[:3] - q[:3]))
         if offset < 0:  # sticks: any travel is creep
@@ -328,6 +355,314 @@ def _stack(ratio: float) -> Callable[[Options, bool], dict[str, float]]:
     return run
 
 
+def _world_velocity(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """The world velocity [m/s] of a free body's origin from its free-flyer q (7,) and v (6,):
+    Pinocchio's v[:3] is in the body frame."""
+    return pin.XYZQUATToSE3(q[:7]).rotation @ v[:3]
+
+
+def rolling_velocity(speed: float, radius: float, direction: np.ndarray, normal: np.ndarray) -> np.ndarray:
+    """The free-flyer velocity (6,) of a ball of ``radius`` [m] at the identity orientation rolling
+    without slip at ``speed`` [m/s] along the unit ``direction`` on a plane of unit ``normal``: its
+    contact point, at -radius normal from the centre, is at rest (w x (-r n) = -v)."""
+    linear = speed * np.asarray(direction, dtype=float)
+    return np.concatenate([linear, np.cross(normal, linear) / radius])
+
+
+def _rolling_flat(options: Options, quick: bool) -> dict[str, float]:
+    """A ball rolling without slip at 3 m/s on flat ground (mu 0.8) for 2 s: rolling is free motion
+    under the contact (no rolling resistance), so its speed must stay; ``slip_speed`` [m/s] is its
+    contact point's at the end, the summary's ``penetration`` how deep it sank."""
+    ball = load_robot("ball", floating_base=True)
+    sim, rec = _recorder(Scene(ball, ground=Ground(friction=0.8)), options)
+    radius, speed, normal = _ball_radius(ball), 3.0, np.array([0.0, 0.0, 1.0])
+    q = ball.neutral()
+    q[2] = radius
+    state = rec.run(
+        sim.reset(q, rolling_velocity(speed, radius, np.array([1.0, 0, 0]), normal)), 0.5 if quick else 2.0
+    )
+    R = pin.XYZQUATToSE3(state.q[:7]).rotation
+    centre = R @ state.v[:3]
+    slip = centre + np.cross(R @ state.v[3:], -radius * normal)
+    return {
+        **rec.summary(),
+        "error": abs(float(np.linalg.norm(centre)) / speed - 1),
+        "slip_speed": float(np.linalg.norm(slip)),
+    }
+
+
+INCLINE_DEG = 30.0
+
+
+def _rolling_incline(options: Options, quick: bool) -> dict[str, float]:
+    """A ball released from rest on a 30 degree incline (the ground's normal tilted, as the block's
+    incline), mu 0.5: it rolls without slip (the friction it needs is 2/7 tan(theta) < mu) and travels
+    5/14 g sin(theta) t^2."""
+    ball = load_robot("ball", floating_base=True)
+    theta = np.radians(INCLINE_DEG)
+    normal, q = on_incline(theta, _ball_radius(ball))
+    sim, rec = _recorder(Scene(ball, ground=Ground(friction=0.5, normal=tuple(normal))), options)
+    state = rec.run(sim.reset(q), 0.5 if quick else 1.0)
+    travel = float(np.linalg.norm(state.q[:3] - q[:3]))
+    return {**rec.summary(), "error": abs(travel / rolling_travel(theta, state.t) - 1), "travel": travel}
+
+
+def rolling_travel(theta: float, t: float) -> float:
+    """How far [m] a solid ball rolling without slip down an incline of ``theta`` [rad] goes from rest
+    in ``t`` [s]: its acceleration is g sin(theta) / (1 + I / (m r^2)) = 5/7 g sin(theta)."""
+    return 5 / 14 * G * np.sin(theta) * t**2
+
+
+ODE_TOLERANCE = 1e-12  # rtol = atol of the ODE references
+
+
+def dop853(rhs: Callable[[float, np.ndarray], np.ndarray], y0: np.ndarray, times: np.ndarray) -> np.ndarray:
+    """The states (n, len(y0)) at ``times`` (n,) [s] of y' = rhs(t, y) from y(0) = ``y0``, integrated by
+    scipy's DOP853 at rtol = atol = ODE_TOLERANCE (scipy comes with ``pip install -e '.[bench]'``)."""
+    try:
+        from scipy.integrate import solve_ivp
+    except ImportError as err:
+        raise ImportError(
+            "the ODE references of gaussim.bench need scipy: pip install -e '.[bench]'"
+        ) from err
+    solution = solve_ivp(
+        rhs, (0.0, times[-1]), y0, method="DOP853", t_eval=times, rtol=ODE_TOLERANCE, atol=ODE_TOLERANCE
+    )
+    if not solution.success:
+        raise RuntimeError(f"the DOP853 reference failed: {solution.message}")
+    return solution.y.T
+
+
+def _spinning_free(options: Options, quick: bool) -> dict[str, float]:
+    """A ball in zero gravity, no ground, moving at 3 m/s along x and spinning at 30 rad/s about z:
+    its world momentum and its kinetic energy must stay (the largest relative changes over 1 s)."""
+    ball = load_robot("ball", floating_base=True)
+    sim, rec = _recorder(Scene(ball, gravity=(0.0, 0.0, 0.0)), options)
+    model, data = sim.model, sim.model.createData()
+    velocity = np.array([3.0, 0, 0])
+    state = sim.reset(ball.neutral(), np.array([*velocity, 0, 0, 30.0]))
+    energy = pin.computeKineticEnergy(model, data, state.q, state.v)
+    momentum = energy_change = 0.0
+    for _ in range(round((0.2 if quick else 1.0) / options.dt)):
+        state = rec.step(state)
+        momentum = max(momentum, float(np.linalg.norm(_world_velocity(state.q, state.v) - velocity)))
+        change = pin.computeKineticEnergy(model, data, state.q, state.v) / energy - 1
+        energy_change = max(energy_change, abs(change))
+    return {
+        **rec.summary(),
+        "error": momentum / float(np.linalg.norm(velocity)),
+        "energy_change": energy_change,
+    }
+
+
+# The torque-free body of intermediate_axis: its principal inertia [kg m^2] (mass 1 kg).
+PRINCIPAL_INERTIA = (1.0, 2.0, 2.5)
+
+
+def free_rotation(
+    inertia: Sequence[float] | np.ndarray, w0: np.ndarray, times: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The torque-free rotation of a rigid body of principal ``inertia`` (3,) [kg m^2] from the
+    identity with body angular velocity ``w0`` (3,) [rad/s]: its quaternions (x, y, z, w) and body
+    angular velocities at ``times`` (n,) [s], shapes (n, 4) and (n, 3), from Euler's equations
+    I w' = -w x I w and q' = q (x) (w, 0) / 2 integrated by :func:`dop853`."""
+    I = np.asarray(inertia, dtype=float)
+
+    def rhs(t: float, y: np.ndarray) -> np.ndarray:
+        w, vector, scalar = y[:3], y[3:6], y[6]
+        return np.concatenate(
+            [-np.cross(w, I * w) / I, (scalar * w + np.cross(vector, w)) / 2, [-vector @ w / 2]]
+        )
+
+    y0 = np.concatenate([w0, [0.0, 0.0, 0.0, 1.0]])
+    states = dop853(rhs, y0, times)
+    return states[:, 3:], states[:, :3]
+
+
+def _intermediate_axis(w0: tuple[float, float, float]) -> Callable[[Options, bool], dict[str, float]]:
+    """A torque-free body (PRINCIPAL_INERTIA, its centre of mass at its joint) in zero gravity spinning
+    near its intermediate axis from ``w0`` [rad/s] (body frame), 5 s (1 s with ``quick``), against
+    :func:`free_rotation`: ``error`` is the attitude error [rad] at the end, with the relative error
+    of the angular velocity there and the largest relative energy and world angular momentum drifts."""
+
+    def run(options: Options, quick: bool) -> dict[str, float]:
+        with tempfile.TemporaryDirectory() as folder:
+            body = free_bodies(Path(folder) / "body.urdf", "body", [("body", 1.0, PRINCIPAL_INERTIA, None)])
+        sim, rec = _recorder(Scene(body, gravity=(0.0, 0.0, 0.0)), options)
+        I, w = np.array(PRINCIPAL_INERTIA), np.array(w0)
+        state = sim.reset(body.neutral(), np.array([0, 0, 0, *w]))
+        energy, momentum = w @ (I * w) / 2, I * w
+        energy_drift = momentum_drift = 0.0
+        for _ in range(round((1.0 if quick else 5.0) / options.dt)):
+            state = rec.step(state)
+            w = state.v[3:]
+            energy_drift = max(energy_drift, abs(w @ (I * w) / 2 / energy - 1))
+            world = pin.XYZQUATToSE3(state.q).rotation @ (I * w)
+            momentum_drift = max(
+                momentum_drift, float(np.linalg.norm(world - momentum) / np.linalg.norm(momentum))
+            )
+        quaternions, omegas = free_rotation(I, np.array(w0), np.array([0.0, state.t]))
+        R = pin.Quaternion(quaternions[-1]).matrix()
+        attitude = float(np.linalg.norm(pin.log3(R.T @ pin.XYZQUATToSE3(state.q).rotation)))
+        return {
+            **rec.summary(),
+            "error": attitude,
+            "omega_error": float(np.linalg.norm(w - omegas[-1]) / np.linalg.norm(omegas[-1])),
+            "energy_drift": energy_drift,
+            "momentum_drift": momentum_drift,
+        }
+
+    return run
+
+
+CRADLE_REFERENCE = (-1 / 3, 2 / 3, 2 / 3)  # [m/s]
+
+
+def _newtons_cradle(options: Options, quick: bool) -> dict[str, float]:
+    """Three equal balls (robots/ball.urdf's) touching in a row along x, zero gravity, frictionless
+    contacts with e = 1, the first at 1 m/s toward the others; after 0.2 s their velocities against
+    CRADLE_REFERENCE, ``error`` the largest [m/s], with the relative momentum and energy errors.
+
+    The reference is Moreau's simultaneous impact, the answer of a time-stepping scheme: both contacts
+    are closed in the step of the impact, so one impulsive Gauss problem with Newton's law
+    J v+ >= -e J v- on each (the far contact has J v- = 0) gives (-1/3, 2/3, 2/3), keeping momentum and
+    energy. A real cradle gives (0, 0, 1): its impacts run in sequence, as elastic waves through the
+    balls, which a rigid simultaneous-impact law does not model (with gaps wider than |v| dt the
+    scheme also meets them in sequence).
+    """
+    ball = load_robot("ball", floating_base=True)
+    radius, mass = _ball_radius(ball), ball.mass
+    inertia = ball.model.inertias[1].inertia.diagonal()
+    sphere = f'<sphere radius="{radius}"/>'
+    with tempfile.TemporaryDirectory() as folder:
+        robot = free_bodies(
+            Path(folder) / "cradle.urdf", "cradle", [(b, mass, inertia, sphere) for b in "abc"]
+        )
+    contacts = [("a_0", "b_0"), ("b_0", "c_0")]
+    scene = Scene(robot, contacts=contacts, gravity=(0.0, 0.0, 0.0), self_contact=(0.0, 1.0))
+    sim, rec = _recorder(scene, options)
+    q, v = robot.neutral(), np.zeros(robot.model.nv)
+    q[[0, 7, 14]] = 0.0, 2 * radius, 4 * radius
+    v[0] = 1.0
+    state = rec.run(sim.reset(q, v), 0.2)
+    velocities = np.array([_world_velocity(state.q[7 * k :], state.v[6 * k :]) for k in range(3)])
+    reference = np.array([[u, 0.0, 0.0] for u in CRADLE_REFERENCE])
+    energy = pin.computeKineticEnergy(sim.model, sim.model.createData(), state.q, state.v)
+    return {
+        **rec.summary(),
+        "error": float(np.abs(velocities - reference).max()),
+        "momentum_error": float(np.linalg.norm(mass * velocities.sum(axis=0) - [mass, 0, 0]) / mass),
+        "energy_error": abs(energy / (mass / 2) - 1),
+    }
+
+
+TALL_BOX = (0.1, 0.4)  # [m] the tipping box's width (x and y) and height (z)
+TIPPED = 0.2  # [rad] the tilt from the incline's normal at which a box has tipped
+
+
+def tipping_angle(width: float, height: float) -> float:
+    """The incline [rad] beyond which a box of ``width`` and ``height`` [m] standing on it (with the
+    friction to stick) tips over its lower edge: there its centre of mass passes over that edge,
+    tan(theta) = width / height."""
+    return float(np.arctan(width / height))
+
+
+def _tipping(options: Options, quick: bool) -> dict[str, float]:
+    """A 0.1 x 0.1 x 0.4 m box (1 kg) at rest on an incline (mu 1, more than the tan(theta) it needs
+    to stick), the incline found by bisection on [0.5, 1.5] times :func:`tipping_angle` at which it
+    tips (its tilt passes TIPPED within 2 s): ``error`` is that angle's relative error, its floor the
+    bisection's resolution 1/2048 (10 halvings; 1/128, 6, with ``quick``), which it reaches when every
+    run is decided right; the metrics are those of all the runs."""
+    width, height = TALL_BOX
+    inertia = [(width**2 + height**2) / 12] * 2 + [width**2 / 6]
+    with tempfile.TemporaryDirectory() as folder:
+        box = free_bodies(
+            Path(folder) / "tall.urdf",
+            "tall",
+            [("tall", 1.0, inertia, f'<box size="{width} {width} {height}"/>')],
+        )
+    recorders = []
+
+    def tips(theta: float) -> bool:
+        normal, q = on_incline(theta, height / 2)
+        sim, rec = _recorder(Scene(box, ground=Ground(friction=1.0, normal=tuple(normal))), options)
+        recorders.append(rec)
+        state = sim.reset(q)
+        for _ in range(round(2.0 / options.dt)):
+            state = rec.step(state)
+            axis = pin.XYZQUATToSE3(state.q).rotation[:, 2]
+            if np.arccos(min(1.0, float(axis @ normal))) > TIPPED:
+                return True
+        return False
+
+    expected = tipping_angle(width, height)
+    low, high = 0.5 * expected, 1.5 * expected
+    for _ in range(6 if quick else 10):
+        middle = (low + high) / 2
+        low, high = (low, middle) if tips(middle) else (middle, high)
+    found = (low + high) / 2
+    first, *others = recorders
+    for rec in others:
+        first.absorb(rec)
+    return {**first.summary(), "error": abs(found / expected - 1), "threshold_deg": float(np.degrees(found))}
+
+
+PENDULUM_START = (1.2, -0.6, 0.0, 2.0)  # (q1, q2 [rad], v1, v2 [rad/s]) of double_pendulum
+
+
+def pendulum_reference(
+    model: pin.Model, start: Sequence[float] | np.ndarray, times: np.ndarray
+) -> np.ndarray:
+    """The joint angles and velocities (n, 4) [rad, rad/s] at ``times`` (n,) [s] of
+    robots/double_pendulum.urdf's ``model`` (continuous joints: q holds (cos, sin) per joint) from the
+    angles and velocities ``start`` (4,):
+    Pinocchio's ``aba`` (M(q) a = -b(q, v)) integrated by :func:`dop853`."""
+    return dop853(pendulum_rhs(model), np.asarray(start, dtype=float), times)
+
+
+def pendulum_rhs(model: pin.Model) -> Callable[[float, np.ndarray], np.ndarray]:
+    """d/dt (angles, velocities) of the double pendulum ``model`` by Pinocchio's ``aba``."""
+    data = model.createData()
+    zero = np.zeros(2)
+
+    def rhs(t: float, y: np.ndarray) -> np.ndarray:
+        return np.concatenate([y[2:], pin.aba(model, data, angles_to_q(y[:2]), y[2:], zero)])
+
+    return rhs
+
+
+def angles_to_q(angles: np.ndarray) -> np.ndarray:
+    """The configuration (cos, sin per joint) of continuous joints at ``angles`` [rad]."""
+    return np.column_stack([np.cos(angles), np.sin(angles)]).ravel()
+
+
+def _double_pendulum(options: Options, quick: bool) -> dict[str, float]:
+    """robots/double_pendulum.urdf, no contacts or limits, from PENDULUM_START for 2 s (0.5 s with
+    ``quick``) against :func:`pendulum_reference`: ``error`` is the RMS joint angle error [rad] over
+    the steps, ``energy_drift`` the largest change of the mechanical energy relative to the largest
+    kinetic energy of the reference."""
+    robot = load_robot("double_pendulum")
+    sim, rec = _recorder(Scene(robot), options)
+    model, data = sim.model, sim.model.createData()
+    start = np.array(PENDULUM_START)
+    state = sim.reset(angles_to_q(start[:2]), start[2:])
+    energy = pin.computeMechanicalEnergy(model, data, state.q, state.v)
+    configurations, drift = [], 0.0
+    for _ in range(round((0.5 if quick else 2.0) / options.dt)):
+        state = rec.step(state)
+        configurations.append(state.q)
+        drift = max(drift, abs(pin.computeMechanicalEnergy(model, data, state.q, state.v) - energy))
+    times = options.dt * np.arange(1, len(configurations) + 1)
+    reference = pendulum_reference(model, start, times)
+    errors = [pin.difference(model, angles_to_q(r[:2]), q) for r, q in zip(reference, configurations)]
+    kinetic = max(pin.computeKineticEnergy(model, data, angles_to_q(r[:2]), r[2:]) for r in reference)
+    return {
+        **rec.summary(),
+        "error": float(np.sqrt(np.mean(np.square(errors)))),
+        "energy_drift": drift / kinetic,
+    }
+
+
 CASES: dict[str, Case] = {
     case.name: case
     for case in [
@@ -351,6 +686,31 @@ CASES: dict[str, Case] = {
         ),
         Case("solo12", "|sum f_z - m g| / m g", _scene_file("solo12_standing", _standing)),
         Case("talos", "|sum f_z - m g| / m g", _scene_file("talos_standing", _standing)),
+        Case(
+            "rolling_flat", "relative speed change of a ball rolling at 3 m/s for 2 s, mu 0.8", _rolling_flat
+        ),
+        Case(
+            "rolling_incline",
+            "relative error of a rolling ball's travel against 5/14 g sin(theta) t^2, 30 deg, mu 0.5",
+            _rolling_incline,
+        ),
+        Case("spinning_free", "largest relative world momentum error, 3 m/s, 30 rad/s spin", _spinning_free),
+        Case(
+            "intermediate_axis",
+            "attitude error [rad] at 5 s against DOP853, I = (1, 2, 2.5), w0 = (0.01, 1, 0.01) rad/s",
+            _intermediate_axis((0.01, 1.0, 0.01)),
+        ),
+        Case(
+            "intermediate_axis_fast",
+            "attitude error [rad] at 5 s against DOP853, I = (1, 2, 2.5), w0 = (0.01, 5, 0.01) rad/s"
+            " (it flips at 4.2 s)",
+            _intermediate_axis((0.01, 5.0, 0.01)),
+        ),
+        Case("newtons_cradle", "largest velocity error [m/s] against (-1/3, 2/3, 2/3)", _newtons_cradle),
+        Case("tipping", "relative error of the tipping incline, tan(theta) = 0.1 / 0.4", _tipping),
+        Case(
+            "double_pendulum", "RMS joint angle error [rad] over 2 s against DOP853 of aba", _double_pendulum
+        ),
     ]
 }
 QUICK_CASES = ("ball_rest", "ball_bounce", "sliding_30", "incline_stick", "stack_100", "solo12")

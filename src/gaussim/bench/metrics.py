@@ -77,6 +77,14 @@ class Recorder:
             self.cone = max(self.cone, float(np.linalg.norm(f_t)) - mu * f_n)
             self.dissipation = max(self.dissipation, float(f_t @ u_t) + mu * f_n * float(np.linalg.norm(u_t)))
 
+    def absorb(self, other: Recorder) -> None:
+        """Count the steps ``other`` recorded as this one's (a case made of several runs)."""
+        self.seconds += other.seconds
+        self.iterations += other.iterations
+        self.unconverged += other.unconverged
+        for name in ("penetration", "signorini", "cone", "dissipation", "kkt_residual"):
+            setattr(self, name, max(getattr(self, name), getattr(other, name)))
+
     def summary(self) -> dict[str, float]:
         """The per-run metrics: the contact metrics' maxima, ProxQP iterations per step, the largest KKT
         residual of a step's QPs, the steps whose QPs did not converge (reported, with
