@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pinocchio as pin
 import pytest
 
 import gaussim
@@ -37,6 +38,23 @@ def at_height(robot: gaussim.Robot, z: float) -> np.ndarray:
     q = robot.neutral()
     q[2] = z
     return q
+
+
+def step_velocity(before: gaussim.State, after: gaussim.State) -> np.ndarray:
+    """A floating robot's new velocity v+ as its step posed it, (nv,): the base's linear velocity in
+    the frame of the step's start (the step re-expresses it in the new frame, R+^T R v_l+)."""
+    v = after.v.copy()
+    turn = pin.Quaternion(before.q[3:7]).matrix().T @ pin.Quaternion(after.q[3:7]).matrix()
+    v[:3] = turn @ v[:3]
+    return v
+
+
+def frame_acceleration(v: np.ndarray) -> np.ndarray:
+    """-w x v_l on a floating base's linear velocity, zeros elsewhere, (nv,): Pinocchio's acceleration
+    less that of the Gauss problem's coordinates, in which the base origin's world velocity is held."""
+    c = np.zeros(len(v))
+    c[:3] = -np.cross(v[3:6], v[:3])
+    return c
 
 
 def run(sim: gaussim.Simulator, state: gaussim.State, steps: int, tau=None, each=None) -> gaussim.State:

@@ -34,3 +34,8 @@ def test_watch_box_stack(tmp_path):
     stdout = _run(str(EXAMPLES / "watch_box_stack.py"), "--duration", "0.1", "--out", str(tmp_path / "stack"))
     assert "replay page:" in stdout
     assert (tmp_path / "stack.html").stat().st_size > 0 and (tmp_path / "stack.png").stat().st_size > 0
+
+
+def test_free_bodies():
+    stdout = _run(str(EXAMPLES / "free_bodies.py"), "--dt", "2e-3")
+    assert "rolling:" in stdout and "flipping: turned over 1 times" in stdout  # it flips at 4.2 s

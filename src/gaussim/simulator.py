@@ -6,6 +6,11 @@ velocity scheme (default), the discrete Gauss principle (Moreau-Jean time steppi
          (M from CRBA only when a module can produce rows; else v+ = v_free)
     q+ = q (+) dt v+
 
+floating bases (dynamics.FloatingBases, integrator): the base's linear velocity is its origin's in the
+    frame of the step's start, so a_free leaves out the frame's turn -w x v_l, and q+ = q (+) dt v+ moves
+    the base on R3 x SO(3) (MuJoCo's free joint); a free rigid body's gyroscopic term is taken at the
+    step's midpoint (in free flight it keeps energy and angular momentum exactly)
+
 implicit damping D (``step(..., damping=D)``, e.g. a PD drive's kd + dt kp): the joints get tau - D v+,
     which is M + dt D in place of M and tau - D v in place of tau (Pinocchio's armature carries dt D
     through CRBA and ABA alike); stable at any dt, where explicit damping diverges once D dt exceeds
@@ -92,7 +97,9 @@ class Simulator:
         if scene.pairs:
             robot = scene.robot
             modules.append(
-                ContactModule(robot.model, options.friction_facets, options.friction_mode, robot.collision_model)
+                ContactModule(
+                    robot.model, options.friction_facets, options.friction_mode, robot.collision_model
+                )
             )
         if scene.joint_limits:
             modules.append(LimitModule(scene.robot.model))

@@ -53,7 +53,8 @@ from ..dynamics import (
 from ..linalg import dot
 from .base import LEVELS, Context, Rows, bound_of, is_active
 
-# Below this tangential speed a contact sticks at the acceleration level [m/s].
+# Below this tangential speed a contact sticks: no sliding force at the acceleration level, no De
+# Saxce shift (a lagged slip that small is the step's own error, which mu would amplify) [m/s].
 SLIP_SPEED = 1e-4
 # Fixed-point iterations on the slip stop when max(1, mu) times its change is below this [m/s].
 SLIP_TOLERANCE = {"accurate": 1e-4, "exact": 1e-9}
@@ -246,7 +247,7 @@ def _pyramids(  # type: ignore[no-untyped-def]
             # the margin finds contacts earlier) leaves at -e u_n at least; De Saxce shift mu |slip|
             if e[i] > 0 and -u_n > threshold and gap[i] + dt * dot(n, J3[i] @ x_free) <= 0.0:
                 contact_bound[i] = max(contact_bound[i], -e[i] * u_n)
-            if not pyramid:
+            if not pyramid and speed > SLIP_SPEED:  # slower, it sticks: no shift to make
                 contact_bound[i] -= mu[i] * speed
     total = starts[m]
     J, generators, slip, friction = _unpacked(packed[: 3 * m * nv + 3 * total + 6 * m], m, nv)
