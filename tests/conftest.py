@@ -2,13 +2,35 @@
 
 from __future__ import annotations
 
+import hashlib
+import importlib.util
+import os
+import tempfile
 from pathlib import Path
 
-import numpy as np
-import pinocchio as pin
-import pytest
 
-import gaussim
+def _key_the_kernel_cache() -> None:
+    """Point numba's on-disk cache at a directory named by a hash of every source of the package.
+
+    numba keys a cached kernel on its own file only: a kernel that inlines a function from another
+    file (``linalg.dot``, ``inline="always"``) kept its stale code when only that file changed (a broken
+    ``linalg.dot`` passed a slip test). Set before numba is imported, so every pytest run uses it."""
+    spec = importlib.util.find_spec("gaussim")
+    assert spec is not None and spec.origin is not None, "gaussim is not importable"
+    digest = hashlib.sha256()
+    for source in sorted(Path(spec.origin).parent.rglob("*.py")):
+        digest.update(source.read_bytes())
+    base = os.environ.get("NUMBA_CACHE_DIR") or os.path.join(tempfile.gettempdir(), "gaussim-numba")
+    os.environ["NUMBA_CACHE_DIR"] = os.path.join(base, digest.hexdigest()[:16])
+
+
+_key_the_kernel_cache()
+
+import numpy as np  # noqa: E402
+import pinocchio as pin  # noqa: E402
+import pytest  # noqa: E402
+
+import gaussim  # noqa: E402
 
 G = 9.81
 

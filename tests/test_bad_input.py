@@ -272,3 +272,16 @@ def test_infeasible_constraints_name_the_rows(ball):
         sim.step(sim.reset(at_height(ball, 0.1)))
     assert any(row.startswith("contact ball_0/ground") for row in info.value.rows)
     assert any(row.startswith("anchor ball") for row in info.value.rows)
+
+
+def test_infeasibility_names_the_rows_held_at_their_bound(pendulum):
+    """The pendulum rests against its upper limit (0.5 rad) and its tip is anchored 0.1 m beyond its
+    reach along the rod: the closest feasible motion keeps the pendulum still, so the limit holds at
+    its bound while the anchor is violated; the report names both."""
+    radial = np.array([-np.sin(0.5), 0.0, -np.cos(0.5)])
+    anchor = gaussim.Anchor("tip", np.array([0.0, 0.0, 2.0]) + 1.1 * radial)
+    sim = gaussim.Simulator(gaussim.Scene(pendulum, joint_limits=True, bilaterals=[anchor]))
+    with pytest.raises(gaussim.InfeasibleConstraints) as info:
+        sim.step(sim.reset(np.array([0.5])))
+    assert "limit hinge upper" in info.value.rows
+    assert any(row.startswith("anchor tip") for row in info.value.rows)

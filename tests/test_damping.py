@@ -115,3 +115,23 @@ def test_pd_command_and_scene_file_switch(tmp_path):
     path.write_text(text.format(extra='implicit = "yes"\n'))
     with pytest.raises(SceneFileError, match=r"control.implicit: must be true or false"):
         gaussim.load_scene(path)
+
+
+def test_damping_after_an_impact_acts_on_the_new_velocity(ball):
+    """Acceleration scheme: a ball hits the ground at u = 2 m/s (restitution e = 0.5) under a vertical
+    damping d = 5 m [N s/m]: the impact leaves at e u, and the damping acts on that velocity, not
+    the approach's. The flight then follows the backward Euler closed form of m v' = -m g - d v:
+    v_k = (e u + g / lambda) (1 + lambda dt)^-k - g / lambda, lambda = d / m."""
+    e, u, rate = 0.5, 2.0, 5.0
+    sim = gaussim.Simulator(
+        gaussim.Scene(ball, ground=gaussim.Ground(restitution=e)), gaussim.Options(scheme="acceleration")
+    )
+    dt, g = sim.options.dt, 9.81
+    D = np.zeros(6)
+    D[2] = rate * ball.mass
+    state = sim.reset(at_height(ball, 0.1), np.array([0, 0, -u, 0, 0, 0]))
+    for k in range(1, 51):
+        state = sim.step(state, damping=D)
+        assert (sim.last_step.impact is not None) == (k == 1)
+        expected = (e * u + g / rate) * (1 + rate * dt) ** -k - g / rate
+        assert state.v[2] == pytest.approx(expected, abs=1e-9)
