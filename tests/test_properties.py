@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import gaussim
-from gaussim.options import Options
+from gaussim.options import MAXIMA, Options
 
 from .conftest import at_height
 
@@ -34,7 +34,7 @@ def _valid(field: str, value: object) -> bool:
     integer = isinstance(value, int) and not isinstance(value, bool)
     minimum = {"friction_facets": 3, "friction_iterations": 1, "max_iter": 1}
     if field in minimum:
-        return integer and value >= minimum[field]  # type: ignore[operator]
+        return integer and minimum[field] <= value <= MAXIMA[field]  # type: ignore[operator]
     if field in ("restitution_threshold", "limit_margin"):
         return real and value >= 0  # type: ignore[operator]
     if field == "stabilisation":
