@@ -119,7 +119,9 @@ class Sphere:
     def __post_init__(self) -> None:
         _material(self.name, self.friction, self.restitution)
         if not (is_real(self.radius) and self.radius > 0):
-            raise InvalidOptions(f"{self.name}.radius", f"must be a finite number > 0, got {shown(self.radius)}")
+            raise InvalidOptions(
+                f"{self.name}.radius", f"must be a finite number > 0, got {shown(self.radius)}"
+            )
         _vector(f"{self.name}.position", self.position, 3)
 
     def shape(self) -> coal.CollisionGeometry:
@@ -244,7 +246,8 @@ class Scene:
             key = frozenset(pair)
             if key in seen:  # the same pair twice would double its rows and halve its reported forces
                 raise InvalidOptions(
-                    f"contacts[{k}]", f"({geometry}, {obstacle}) repeats contacts[{seen[key]}] {contacts[seen[key]]}"
+                    f"contacts[{k}]",
+                    f"({geometry}, {obstacle}) repeats contacts[{seen[key]}] {contacts[seen[key]]}",
                 )
             seen[key] = k
             first = self.robot.geometry_id(geometry)

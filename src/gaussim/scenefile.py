@@ -172,10 +172,14 @@ class _Reader:
         )
         if contacts is not None:
             if not isinstance(contacts, list):
-                self.fail("contacts.pairs", f"must be a list of [geometry, obstacle] pairs, got {shown(contacts)}")
+                self.fail(
+                    "contacts.pairs", f"must be a list of [geometry, obstacle] pairs, got {shown(contacts)}"
+                )
             for k, pair in enumerate(contacts):
                 if not (isinstance(pair, list) and len(pair) == 2 and all(isinstance(n, str) for n in pair)):
-                    self.fail(f"contacts.pairs[{k}]", f"must be [geometry, obstacle] (two names), got {shown(pair)}")
+                    self.fail(
+                        f"contacts.pairs[{k}]", f"must be [geometry, obstacle] (two names), got {shown(pair)}"
+                    )
         limits = self.boolean("limits.enabled", self.table("limits").get("enabled", False))
         bilaterals = [self.bilateral(i, b, robot) for i, b in enumerate(self.list("bilaterals"))]
         try:
