@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 
 import gaussim
 from gaussim.options import MAXIMA, Options
+from gaussim.scene import MAX_FRICTION
 
 from .conftest import at_height
 
@@ -35,7 +36,7 @@ def _valid(field: str, value: object) -> bool:
     minimum = {"friction_facets": 3, "friction_iterations": 1, "max_iter": 1}
     if field in minimum:
         return integer and minimum[field] <= value <= MAXIMA[field]  # type: ignore[operator]
-    if field in ("restitution_threshold", "limit_margin"):
+    if field in ("restitution_threshold", "limit_margin", "start_penetration"):
         return real and value >= 0  # type: ignore[operator]
     if field == "stabilisation":
         return real and 0 < value <= 1  # type: ignore[operator]
@@ -85,9 +86,15 @@ def test_a_non_finite_entry_is_named_and_never_stepped(ball_sim, ball, index, ba
 )
 def test_any_valid_state_steps_to_a_finite_state(ball_sim, position, rotation, velocity):
     """A ball anywhere near the ground, any orientation and velocity up to 20 m/s (or rad/s): the step
-    returns a finite state, or a clear error, never NaN."""
+    returns a finite state, or a clear error, never NaN; a start more than Options.start_penetration
+    inside the ground is refused with the pair and the depth."""
     q = np.concatenate([position, np.array(rotation) / np.linalg.norm(rotation)])
     q[2] += 0.1
+    depth = 0.1 - q[2]  # the ball's radius less its height
+    if depth > ball_sim.options.start_penetration:
+        with pytest.raises(gaussim.InvalidState, match=rf"'ball_0' {1e3 * depth:.4g} mm inside 'ground'"):
+            ball_sim.reset(q, np.array(velocity))
+        return
     state = ball_sim.reset(q, np.array(velocity))
     for _ in range(5):
         state = ball_sim.step(state)
@@ -133,7 +140,7 @@ def test_scene_file_values_are_accepted_or_named(tmp_path_factory, friction, res
 
     f, e, step = number(friction), number(restitution), number(dt)
     valid = {
-        "ground.friction": f is not None and f >= 0,
+        "ground.friction": f is not None and 0 <= f <= MAX_FRICTION,
         "ground.restitution": e is not None and 0 <= e <= 1,
         "options.dt": step is not None and step > 0,
     }

@@ -51,6 +51,9 @@ class Options:
         on_failure: ``"raise"`` (default) a :class:`SolverError` when ProxQP does not converge, or
             ``"report"`` (accept the finite iterate and record the status). A non-finite solution
             or an infeasible constraint set always raises.
+        start_penetration: how deep a pair may overlap at :meth:`Simulator.reset` [m]: a deeper start
+            is an error naming the pair (the step would push it out at once: kN forces, a body thrown
+            up); raise it to start so all the same.
         timings: record each step's wall time per stage in ``StepReport.timings`` (profiling; off by
             default: each stage's mark costs about 0.1 us, and a free-flight step is 7.5 us).
     """
@@ -68,6 +71,7 @@ class Options:
     eps_abs: float = 1e-9
     max_iter: int = 1000
     on_failure: str = "raise"
+    start_penetration: float = 1e-3
     timings: bool = False
 
     def __post_init__(self) -> None:
@@ -89,6 +93,7 @@ class Options:
         _positive("active_tolerance", self.active_tolerance)
         _non_negative("restitution_threshold", self.restitution_threshold)
         _non_negative("limit_margin", self.limit_margin)
+        _non_negative("start_penetration", self.start_penetration)
         if not isinstance(self.timings, bool):
             raise InvalidOptions("timings", f"must be True or False, got {shown(self.timings)}")
         if not (is_real(self.stabilisation) and 0.0 < self.stabilisation <= 1.0):

@@ -26,6 +26,9 @@ from .solver import CONVERGED
 from .state import State
 
 FORMAT_VERSION = 1
+# A run whose contacts sink deeper than this is flagged by its summary [m] (the velocity scheme closes an
+# approach exactly and rests within g dt^2 of the surface: a deeper penetration is lost accuracy)
+PENETRATION_TOLERANCE = 1e-3
 # what each array of a log holds: its numpy kinds (b bool, i int, f float, U text) and its shape, in
 # the sizes N (steps), nq, nv, C (contact rows), K (contact names), L (limit rows), J (limit names)
 LAYOUT: dict[str, tuple[str, tuple[str, ...]]] = {
@@ -293,16 +296,42 @@ class RunLog:
             raise GaussimError("contact_forces() needs pandas: pip install 'gaussim[analysis]'") from err
         return pd.DataFrame(self.contact_records())
 
+    def warnings(self) -> list[str]:
+        """What makes the run's motion less accurate than its options promise: contacts sinking
+        deeper than PENETRATION_TOLERANCE, steps whose QP did not converge (kept by
+        ``on_failure='report'``); empty for a run to trust."""
+        c, s, o = self.contact_arrays(), self.solver_arrays(), self.options
+        found = []
+        depth = max(0.0, -c["gap"].min()) if len(c["gap"]) else 0.0
+        if depth > PENETRATION_TOLERANCE:
+            found.append(
+                f"contacts sank {1e3 * depth:.4g} mm, more than {1e3 * PENETRATION_TOLERANCE:g} mm: "
+                f"dt = {o.dt:g} s is too coarse for the {o.scheme} scheme on this scene; reduce dt "
+                "(or the friction)"
+            )
+        failed = int(np.sum(~np.isin(s["status"], [*CONVERGED, "NO_QP"])))
+        if failed:
+            found.append(
+                f"{failed} steps did not converge (max KKT residual {s['kkt_residual'].max():.2e}, "
+                f"eps_abs = {o.eps_abs:g}): on_failure = '{o.on_failure}' kept their iterates, which need "
+                "not be the Gauss principle's motion"
+            )
+        return found
+
     def summary(self) -> str:
-        """A plain-text summary: run, solver and per-contact force statistics."""
+        """A plain-text summary: run, solver and per-contact force statistics, and a WARNING line for
+        each of :meth:`warnings`."""
         c, s = self.contact_arrays(), self.solver_arrays()
         wall_time = self.wall_time
         failed = int(np.sum(~np.isin(s["status"], [*CONVERGED, "NO_QP"])))
         t = self.t
+        warnings = self.warnings()
+        status = "complete" if self.complete else "INCOMPLETE: " + self.reason
         lines = [
             f"robot {self.robot}: {self.steps} steps, {t[-1] - t[0]:.4g} s simulated"
             + (f" in {wall_time:.3g} s wall ({self.steps / wall_time:.0f} steps/s)" if wall_time else ""),
-            f"status: {'complete' if self.complete else 'INCOMPLETE: ' + self.reason}",
+            f"status: {status}" + (f", with {len(warnings)} warning(s)" if warnings else ""),
+            *(f"WARNING: {w}" for w in warnings),
             f"max penetration: {max(0.0, -c['gap'].min()) * 1e3 if len(c['gap']) else 0.0:.4f} mm;"
             f" max KKT residual: {s['kkt_residual'].max() if self.steps else 0.0:.2e};"
             f" QPs: {int(s['qps'].sum())}, steps not converged: {failed}",
@@ -361,6 +390,7 @@ def _read(path: Path) -> dict[str, np.ndarray]:
             + ("; upgrade gaussim" if newer else "")
         )
     sizes: dict[str, int] = {"3": 3}
+    origin = {"3": "a point"}  # the array each size was read from
     for key, (kind, shape) in LAYOUT.items():
         if key not in data:
             raise RunLogError(f"{path}: damaged run log: no array '{key}'")
@@ -372,10 +402,11 @@ def _read(path: Path) -> dict[str, np.ndarray]:
             )
         for size, name in zip(arr.shape, shape):
             n, base = (name[:-2], 1) if name.endswith("+1") else (name, 0)
+            origin.setdefault(n, f"'{key}'")
             if sizes.setdefault(n, size - base) != size - base:
                 raise RunLogError(
-                    f"{path}: damaged run log: '{key}' has shape {arr.shape}, its axis {name} disagrees with "
-                    f"the other arrays ({n} = {sizes[n]})"
+                    f"{path}: damaged run log: '{key}' has shape {arr.shape}, where {origin[n]} has "
+                    f"{n} = {sizes[n]}"
                 )
     for ids, names in (("contact_id", "contact_names"), ("limit_id", "limit_names")):
         if len(data[ids]) and not (0 <= data[ids].min() and data[ids].max() < len(data[names])):

@@ -45,6 +45,9 @@ SECTIONS = {
     "simulation": {"duration"},
     "options": {f.name for f in fields(Options)},
 }
+# The largest joint torque a scene may command [N m] (Talos's strongest joint gives 300): beyond it the
+# QP's rows span hundreds of orders of magnitude and ProxQP stops without a motion (tau = 1e300)
+MAX_TORQUE = 1e6
 # where a field a Scene names (its constructor's argument) sits in a scene file
 SCENE_FIELDS = {"contacts": "contacts.pairs", "self_contact": "contacts"}
 
@@ -137,7 +140,7 @@ class _Reader:
         return value
 
     def array(self, key: str, value: Any, size: int | None = None) -> np.ndarray:
-        wanted = f"must be {size or 'a list of'} finite numbers, got {shown(value)}"
+        wanted = f"must be {'a list of' if size is None else size} finite numbers, got {shown(value)}"
         if not isinstance(value, (list, np.ndarray)) or any(not _is_number(x) for x in value):
             self.fail(key, wanted)
         arr = np.asarray(value, dtype=float)
@@ -326,7 +329,12 @@ class _Reader:
             return zero_torque
         if kind == "constant":
             n = nv - 6 if robot.floating else nv
-            return constant_torque(self.array("control.tau", section.get("tau"), n))
+            tau = self.array("control.tau", section.get("tau"), n)
+            if np.abs(tau).max(initial=0.0) > MAX_TORQUE:
+                self.fail(
+                    "control.tau", f"beyond any actuator (|tau| <= {MAX_TORQUE:g} N m), got {shown(tau)}"
+                )
+            return constant_torque(tau)
         if kind == "pd":
             target = section.get("target", "neutral")
             if isinstance(target, str):
