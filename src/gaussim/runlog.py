@@ -11,8 +11,6 @@ from __future__ import annotations
 import json
 import os
 import tempfile
-import zipfile
-import zlib
 from dataclasses import asdict, fields
 from pathlib import Path
 from typing import Any
@@ -376,8 +374,9 @@ def _read(path: Path) -> dict[str, np.ndarray]:
         ValueError
     ) as err:  # not numpy's words: they advise allow_pickle=True, which runs what a file holds
         raise RunLogError(f"{path}: not a gaussim run log (one is a .npz archive of plain arrays)") from err
-    except (EOFError, zipfile.BadZipFile, zlib.error) as err:
-        raise RunLogError(f"{path}: a truncated or damaged .npz archive ({err})") from err
+    except Exception as err:  # zipfile reads a damaged archive's bytes as anything: encryption, a method
+        what = f"{type(err).__name__}: {err}"
+        raise RunLogError(f"{path}: a truncated or damaged .npz archive ({what})") from err
     if "format_version" not in data:
         raise RunLogError(f"{path}: not a gaussim run log (no format_version)")
     version = data["format_version"]
