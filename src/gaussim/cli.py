@@ -13,6 +13,7 @@ import re
 import sys
 import time
 from pathlib import Path
+from typing import TextIO
 
 from .exceptions import ContactError, GaussimError, InvalidOptions, InvalidRobot, InvalidState, SolverError
 from .options import FRICTION_MODES, SCHEMES
@@ -29,7 +30,7 @@ def _printable(text: object) -> str:
     return _CONTROL.sub(lambda m: repr(m[0])[1:-1], str(text))
 
 
-def _say(text: object, file: object = None) -> None:
+def _say(text: object, file: TextIO | None = None) -> None:
     print(_printable(text), file=file or sys.stdout)
 
 

@@ -20,10 +20,11 @@ MAX_FRICTION = 1e3
 
 def _vector(field_name: str, value: object, size: int) -> np.ndarray:
     try:
-        arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        arr = np.zeros(0)
-    if arr.shape != (size,) or not np.all(np.isfinite(arr)) or np.iscomplexobj(value):
+        raw = np.asarray(value)
+    except ValueError:  # a ragged list
+        raw = np.zeros(0)
+    arr = raw.astype(float) if raw.dtype.kind in "iuf" else np.zeros(0)  # not text, bool or complex
+    if arr.shape != (size,) or not np.all(np.isfinite(arr)):
         raise InvalidOptions(field_name, f"must be {size} finite numbers, got {shown(value)}")
     return arr
 

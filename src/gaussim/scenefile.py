@@ -21,7 +21,7 @@ import re
 import tomllib
 from dataclasses import dataclass, fields
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import numpy as np
 import pinocchio as pin
@@ -126,7 +126,7 @@ class _Reader:
             if key not in SECTIONS:
                 self.fail(key, f"unknown section; known: {', '.join(sorted(SECTIONS))}")
 
-    def fail(self, key: str, message: str) -> SceneFileError:
+    def fail(self, key: str, message: str) -> NoReturn:
         raise SceneFileError(self.path, key, message)
 
     def table(self, name: str, entry: Any = None, key: str | None = None) -> dict[str, Any]:
