@@ -582,7 +582,7 @@ def test_a_damaged_or_foreign_file_is_no_log(tmp_path, capsys, small_log, damage
 
 
 def test_unwritable_outputs_exit_2_naming_the_path(tmp_path, capsys, small_log):
-    """Item 15: CSV and PNG outputs that cannot be written leaked tracebacks; item 16: a --plot path
+    """Item 15: CSV, PNG and HTML outputs that cannot be written leaked tracebacks; item 16: a --plot path
     without a format's suffix was written elsewhere (matplotlib adds .png) than reported."""
     log = small_log[0]
     (tmp_path / "folder.png").mkdir()
@@ -590,6 +590,8 @@ def test_unwritable_outputs_exit_2_naming_the_path(tmp_path, capsys, small_log):
     assert code == 2 and f"gaussim: {tmp_path}: cannot write it: Is a directory" in err, err
     code, err = _cli(capsys, "plot", log, "-o", tmp_path / "folder.png")
     assert code == 2 and f"gaussim: {tmp_path / 'folder.png'}: cannot write it" in err, err
+    code, err = _cli(capsys, "replay", log, "--html", tmp_path)
+    assert code == 2 and f"gaussim: {tmp_path}: cannot write it: Is a directory" in err, err
     code, err = _cli(capsys, "plot", log, "-o", tmp_path / "forces")
     assert code == 2 and f"{tmp_path / 'forces'}: the image's suffix must be one of .png, .pdf, .svg" in err
     scene = tmp_path / "scene.toml"
