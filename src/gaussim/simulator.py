@@ -37,9 +37,9 @@ from .state import State, real_array
 
 # A velocity violating an impulse-level row by more than this is an impact [m/s or rad/s].
 IMPACT_TOLERANCE = 1e-9
-_FLOAT = np.dtype(float)
 # How far from 1 the norm of a configuration's quaternion may be.
 UNIT_TOLERANCE = 1e-6
+_FLOAT = np.dtype(float)  # a torque of this dtype is read as given
 
 
 class Simulator:
