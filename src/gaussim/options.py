@@ -111,8 +111,13 @@ class Options:
 
 
 def is_real(value: object) -> bool:
-    """True for a finite int or float, numpy's too (not a bool)."""
-    return isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value)
+    """True for a finite int or float, numpy's too (not a bool, nor an int beyond any float)."""
+    if not isinstance(value, numbers.Real) or isinstance(value, bool):
+        return False
+    try:
+        return math.isfinite(value)
+    except OverflowError:  # a TOML integer of 400 digits
+        return False
 
 
 def _positive(field: str, value: object) -> None:

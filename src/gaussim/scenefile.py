@@ -28,7 +28,7 @@ import pinocchio as pin
 
 from .control import Controller, PDHold, constant_torque, zero_torque
 from .exceptions import GaussimError, InvalidOptions, shown
-from .options import Options
+from .options import Options, is_real
 from .robot import Robot, load_robot
 from .scene import Anchor, Box, Ground, LoopClosure, Scene, Sphere
 from .state import State
@@ -149,7 +149,7 @@ class _Reader:
         return arr
 
     def number(self, key: str, value: Any) -> float:
-        if not (_is_number(value) and np.isfinite(value)):
+        if not _is_number(value):
             self.fail(key, f"must be a finite number, got {shown(value)}")
         return float(value)
 
@@ -352,8 +352,8 @@ class _Reader:
 
 
 def _is_number(value: Any) -> bool:
-    """True for an int or a float (a TOML bool is not a number)."""
-    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
+    """True for a finite int or float (a TOML bool is not a number, nor an integer beyond any float)."""
+    return isinstance(value, (int, float, np.integer, np.floating)) and is_real(value)
 
 
 def place_on_ground(scene: Scene, q: np.ndarray, clearance: float) -> np.ndarray:
