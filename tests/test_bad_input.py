@@ -474,6 +474,9 @@ TRACEBACKS = [  # item 15: each of these leaked a Python traceback with exit 1
     (BALL_SCENE + "[ground]\n[contacts]\npairs = [[1, 2]]\n", r"contacts.pairs\[0\]", "two names"),
     (BALL_SCENE + "[options]\nmax_iter = 1e20\n", "options.max_iter", "must be an integer"),
     (BALL_SCENE + "[options]\nmax_iter = 100000000000000000000\n", "options.max_iter", "must be an integer"),
+    (BALL_SCENE + "[options]\ndt = 1" + "0" * 400 + "\n", "options.dt", "must be a finite number > 0"),
+    (BALL_SCENE + "[ground]\nfriction = 1" + "0" * 400 + "\n", "ground.friction", "must be a finite number"),
+    (BALL_SCENE.replace("0.5", "1" + "0" * 400), "initial.q", "must be 7 finite numbers"),
     (BALL_SCENE + "[[obstacles]]\ntype = 'box'\nsize = [1, 1, 1]\n", r"obstacles\[0\].name", "missing"),
     (
         BALL_SCENE + "[[bilaterals]]\ntype = 'loop'\nframes = ['ball', 'ball']\norientation = 'no'\n",
