@@ -541,6 +541,15 @@ LOG_FAULTS = {  # item 15: each leaked a traceback; item 16: format_version was 
     "bad-option": ({"options": np.array('{"dt": -1}')}, "options.dt: must be a finite number > 0"),
     "wrong-shape": ({"v": np.zeros((4, 2))}, "'tau' has shape (3, 6), where 'v' has nv = 2"),
     "wrong-kind": ({"t": np.array(["a", "b", "c", "d"])}, "'t' is a 1-d <U1 array, not the 1-d float array"),
+    "bad-ids": (
+        {
+            "contact_step": np.array([0]),
+            "contact_id": np.array([5]),
+            **{f"contact_{k}": np.zeros((1, 3)) for k in ("point", "normal", "force")},
+            "contact_gap": np.zeros(1),
+        },
+        "'contact_id' refers to entries not in 'contact_names'",
+    ),
     "wrong-length": ({"solver_qps": np.zeros(9, int)}, "'solver_qps' has shape (9,), where 't' has N = 3"),
     "newer": (
         {"format_version": np.array(2)},
