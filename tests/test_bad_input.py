@@ -1,11 +1,18 @@
 """Every bad input gets a clear error that names the cause (one test per class)."""
 
+import os
+import re
+import stat
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 import gaussim
 
 from .conftest import at_height
+
+SCENES = Path(__file__).resolve().parents[1] / "robots" / "scenes"
 
 
 @pytest.fixture
@@ -256,7 +263,8 @@ def test_non_convergence_is_reported_or_raised(box):
         for _ in range(5):
             strict.step(strict.reset(q, v))
     lenient = gaussim.Simulator(scene, gaussim.Options(max_iter=3, on_failure="report"))
-    state = lenient.step(lenient.reset(q, v))
+    with pytest.warns(gaussim.GaussimWarning, match="on_failure='report' kept its iterate"):
+        state = lenient.step(lenient.reset(q, v))
     assert not lenient.last_step.converged
     certificate = lenient.last_step.certificates[-1]
     assert certificate.status == "PROXQP_MAX_ITER_REACHED"
@@ -285,3 +293,384 @@ def test_infeasibility_names_the_rows_held_at_their_bound(pendulum):
         sim.step(sim.reset(np.array([0.5])))
     assert "limit hinge upper" in info.value.rows
     assert any(row.startswith("anchor tip") for row in info.value.rows)
+
+
+# -- issue 19, items 10-16: a clear answer to every bad input ---------------------------------------------
+
+BALL_SCENE = '[robot]\nname = "ball"\nfloating_base = true\n[initial]\nq = [0, 0, 0.5, 0, 0, 0, 1]\n'
+
+
+def _cli(capsys, *argv):
+    """Run ``gaussim argv`` in this process: (exit code, stderr)."""
+    from gaussim.cli import main
+
+    code = main([str(a) for a in argv])
+    return code, capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("inertia", "message"),
+    [
+        ('izz="-1"', r"principal moments of inertia -1, 0.1, 0.1 \[kg m\^2\]: a negative one"),
+        ('izz="0.3"', r"principal moments of inertia 0.1, 0.1, 0.3 \[kg m\^2\]: I1 \+ I2 < I3"),
+        ('ixy="0.2"', r"principal moments of inertia -0.1, 0.1, 0.3 \[kg m\^2\]: a negative one"),
+    ],
+    ids=["negative", "triangle", "indefinite"],
+)
+def test_an_unphysical_inertia_names_the_link_and_the_file(tmp_path, inertia, message):
+    """Item 10: a link with izz = -1 passed the mass-matrix check at the neutral pose and its run gained
+    energy; each body's principal moments are checked now."""
+    path = tmp_path / "robot.urdf"
+    arm = _ARM.replace(
+        inertia.split("=")[0] + '="' + ("0" if inertia.startswith("ixy") else "0.1") + '"', inertia
+    )
+    path.write_text(_URDF.format(**{**_GOOD, "arm": arm}))
+    with pytest.raises(
+        gaussim.InvalidRobot, match=rf"{path}: link 'arm' \(the body of joint 'j'\) .*{message}"
+    ):
+        gaussim.load_robot(path, floating_base=True)
+
+
+def test_joint_limits_lower_above_upper_are_refused(tmp_path):
+    """Item 16: lower > upper made the limit rows infeasible and the solver advised raising max_iter."""
+    path = tmp_path / "robot.urdf"
+    path.write_text(_URDF.format(**_GOOD).replace('lower="-1" upper="1"', 'lower="1" upper="-1"'))
+    with pytest.raises(gaussim.InvalidRobot, match=rf"{path}: joint 'j' has its lower limit \[1.0\] above"):
+        gaussim.load_robot(path)
+
+
+def test_a_mimic_joint_is_named_in_a_warning(tmp_path):
+    """Item 10: <mimic> was ignored without a word (the mimicking joint moves freely)."""
+    path = tmp_path / "robot.urdf"
+    path.write_text(_URDF.format(**_GOOD).replace("<axis", '<mimic joint="base_joint"/><axis'))
+    with pytest.warns(
+        gaussim.GaussimWarning, match=rf"{path}: gaussim does not honour <mimic>: .*'j' \(mimics"
+    ):
+        gaussim.load_robot(path)
+
+
+@pytest.mark.parametrize(
+    ("initial", "obstacle", "where"),
+    [
+        ("q = [0, 0, 0.05, 0, 0, 0, 1]", "", "'ball_0' 50 mm inside 'ground'"),
+        (
+            "q = [0, 0, 0.5, 0, 0, 0, 1]",
+            "[[obstacles]]\ntype = 'box'\nname = 'table'\nsize = [1, 1, 1]\nposition = [0, 0, 0.05]\n",
+            "'ball_0' 150 mm inside 'table'",
+        ),
+    ],
+    ids=["ground", "box"],
+)
+def test_a_start_inside_an_obstacle_is_refused(tmp_path, capsys, initial, obstacle, where):
+    """Item 11: a start 50 mm inside the ground was pushed out at once (kN forces) and the run reported
+    'complete'; reset refuses it naming the pair and the depth, unless start_penetration allows it."""
+    path = tmp_path / "scene.toml"
+    scene = f'[robot]\nname = "ball"\nfloating_base = true\n[initial]\n{initial}\n[ground]\n{obstacle}'
+    path.write_text(scene + "[simulation]\nduration = 0.002\n")
+    code, err = _cli(capsys, "run", path, "--out", tmp_path / "log.npz", "--quiet")
+    assert code == 2 and f"{path}: the initial configuration has {where}" in err, err
+    assert "start_penetration" in err and not (tmp_path / "log.npz").exists()
+    path.write_text(scene + "[options]\nstart_penetration = 0.2\n[simulation]\nduration = 0.002\n")
+    assert _cli(capsys, "run", path, "--out", tmp_path / "log.npz", "--quiet")[0] == 0
+
+
+def test_a_negative_ground_clearance_is_refused_at_reset(tmp_path, capsys):
+    """Item 11: Solo-12 placed 0.5 m into the ground by ground_clearance = -0.5."""
+    path = tmp_path / "solo.toml"
+    path.write_text(
+        '[robot]\nname = "solo12"\n[initial]\nconfiguration = "standing"\nground_clearance = -0.5\n[ground]\n'
+    )
+    code, err = _cli(capsys, "run", path, "--out", tmp_path / "log.npz", "--quiet")
+    assert code == 2 and re.search(rf"{path}: .*'[FH][LR]_FOOT_0' 500 mm inside 'ground'", err), err
+
+
+@pytest.mark.parametrize(
+    "pairs",
+    [[("ball_0", "ground"), ("ball_0", "ground")], [("FL_FOOT_0", "HR_FOOT_0"), ("HR_FOOT_0", "FL_FOOT_0")]],
+)
+def test_duplicate_contact_pairs_are_refused(ball, solo12, pairs):
+    """Item 12: a pair given twice doubled its rows (the summary counted 348 steps in a 200-step run, a
+    foot's mean normal force halved); (a, b) and (b, a) are the same pair."""
+    robot = ball if pairs[0][0] == "ball_0" else solo12
+    with pytest.raises(gaussim.InvalidOptions, match=r"^contacts\[1\]: .* repeats contacts\[0\]"):
+        gaussim.Scene(robot, ground=gaussim.Ground(), contacts=pairs)
+
+
+def test_a_duplicate_pair_in_a_scene_file_is_named_once(tmp_path):
+    path = tmp_path / "scene.toml"
+    path.write_text(
+        BALL_SCENE + "[ground]\n[contacts]\npairs = [['ball_0', 'ground'], ['ground', 'ball_0']]\n"
+    )
+    with pytest.raises(
+        gaussim.InvalidOptions, match=rf"^{path}: contacts.pairs\[1\]: \(ground, ball_0\) repeats"
+    ):
+        gaussim.load_scene(path)
+
+
+def test_a_robot_without_collision_geometry_among_obstacles_is_refused(tmp_path):
+    """Item 13: it fell through the ground without a word."""
+    path = tmp_path / "robot.urdf"
+    path.write_text(
+        _URDF.format(**{**_GOOD, "geometry": ""}).replace(
+            '<collision><origin xyz="0 0 0"/><geometry></geometry></collision>', ""
+        )
+    )
+    robot = gaussim.load_robot(path, floating_base=True)
+    assert robot.collision_model.ngeoms == 0
+    with pytest.raises(gaussim.InvalidOptions, match=r"^robot: 'robot' has no collision geometry .* ground"):
+        gaussim.Scene(robot, ground=gaussim.Ground())
+    gaussim.Scene(robot)  # nothing to touch: fine
+
+
+def test_complex_and_text_arrays_are_refused(sim, ball):
+    """Item 13: a complex tau lost its imaginary part (numpy's ComplexWarning the only word)."""
+    state = sim.reset(at_height(ball, 1.0))
+    with pytest.raises(gaussim.InvalidState, match=r"tau must hold real numbers, got complex128"):
+        sim.step(state, np.zeros(6) + 1j)
+    with pytest.raises(gaussim.InvalidState, match=r"q must hold real numbers, got complex128"):
+        gaussim.State(0.0, at_height(ball, 1.0) + 0j, np.zeros(6))
+    with pytest.raises(gaussim.InvalidState, match=r"v must hold real numbers"):
+        gaussim.State(0.0, at_height(ball, 1.0), ["a"] * 6)
+
+
+def test_state_arrays_cannot_be_made_writable_again(sim, ball):
+    """Item 13: a state's arrays could be made writable, changed, and the simulator stepped the state it
+    had returned without checking it again."""
+    for state in (sim.reset(at_height(ball, 1.0)), sim.step(sim.reset(at_height(ball, 1.0)))):
+        for arr in (state.q, state.v):
+            with pytest.raises(ValueError, match="cannot set WRITEABLE flag"):
+                arr.setflags(write=True)
+
+
+def test_kept_unconverged_iterates_warn_once_and_flag_the_summary(tmp_path, box):
+    """Item 13: on_failure = 'report' with absurd torques returned |v| = 8.5e20 at a KKT residual of 8.9e38
+    and the run 'completed'; the solver warns once, the summary flags every such step."""
+    path = tmp_path / "box.toml"
+    path.write_text(
+        '[robot]\nname = "box"\nfloating_base = true\n[initial]\nq = [0, 0, 0.05, 0, 0, 0, 1]\n'
+        "v = [1.0, 0.0, -1.0, 2.0, 0.0, 0.0]\n[ground]\n[options]\nmax_iter = 1\non_failure = 'report'\n"
+        "[simulation]\nduration = 0.005\n"
+    )
+    with pytest.warns(gaussim.GaussimWarning, match="on_failure='report' kept its iterate") as caught:
+        log = gaussim.run(gaussim.load_scene(path))
+    assert len([w for w in caught if "kept its iterate" in str(w.message)]) == 1
+    assert re.search(
+        r"^status: complete, with 1 warning\(s\)\nWARNING: \d+ steps did not converge", log.summary(), re.M
+    )
+
+
+def test_a_coarse_run_is_flagged_by_its_summary():
+    """Item 14: the acceleration scheme at dt 0.1 sank a ball 88 mm and its summary said nothing."""
+    spec = gaussim.load_scene(SCENES / "ball_bounce.toml", dt=0.1, scheme="acceleration")
+    log = gaussim.run(spec)
+    depth = -log.contact_arrays()["gap"].min()
+    assert depth > gaussim.runlog.PENETRATION_TOLERANCE
+    assert f"WARNING: contacts sank {1e3 * depth:.4g} mm, more than 1 mm: dt = 0.1 s" in log.summary()
+    fine = gaussim.load_scene(SCENES / "ball_bounce.toml", dt=1e-3)
+    fine.duration = 0.6  # past the first landing, at 0.45 s
+    fine = gaussim.run(fine)
+    assert len(fine.contact_arrays()["gap"]) and "WARNING" not in fine.summary() and fine.warnings() == []
+
+
+TRACEBACKS = [  # item 15: each of these leaked a Python traceback with exit 1
+    ("[robot]\nname = 12\n", "robot.name", "must be a string"),
+    ("[robot]\nurdf = 12\n", "robot.urdf", "must be a string"),
+    ('[robot]\nname = "ball"\npackage_dirs = 5\n', "robot.package_dirs", "list of folder names"),
+    ('[robot]\nname = "ball"\npackage_dirs = "meshes"\n', "robot.package_dirs", "list of folder names"),
+    (BALL_SCENE + '[ground]\nheight = "x"\n', "ground.height", "must be 1 finite numbers"),
+    (BALL_SCENE + '[ground]\nnormal = "up"\n', "ground.normal", "must be 3 finite numbers"),
+    (
+        BALL_SCENE + "[[obstacles]]\ntype = 'sphere'\nname = 's'\nradius = 'big'\n",
+        r"obstacles\[0\].radius",
+        "finite",
+    ),
+    (BALL_SCENE + "[ground]\n[contacts]\npairs = [[1, 2]]\n", r"contacts.pairs\[0\]", "two names"),
+    (BALL_SCENE + "[options]\nmax_iter = 1e20\n", "options.max_iter", "must be an integer"),
+    (BALL_SCENE + "[options]\nmax_iter = 100000000000000000000\n", "options.max_iter", "must be an integer"),
+    (BALL_SCENE + "[options]\ndt = 1" + "0" * 400 + "\n", "options.dt", "must be a finite number > 0"),
+    (BALL_SCENE + "[ground]\nfriction = 1" + "0" * 400 + "\n", "ground.friction", "must be a finite number"),
+    (BALL_SCENE.replace("0.5", "1" + "0" * 400), "initial.q", "must be 7 finite numbers"),
+    (BALL_SCENE + "[[obstacles]]\ntype = 'box'\nsize = [1, 1, 1]\n", r"obstacles\[0\].name", "missing"),
+    (
+        BALL_SCENE + "[[bilaterals]]\ntype = 'loop'\nframes = ['ball', 'ball']\norientation = 'no'\n",
+        r"bilaterals\[0\].orientation",
+        "must be true or false",
+    ),  # item 13: was read as true
+    (BALL_SCENE + "[ground]\nfriction = 1e300\n", "ground.friction", "beyond any material"),  # item 16
+    (
+        "[robot]\nname = 'pendulum'\n[control]\ntype = 'constant'\ntau = [1e300]\n",
+        "control.tau",
+        "beyond any actuator",
+    ),
+    (
+        BALL_SCENE + "[[bilaterals]]\ntype = 'anchor'\nframe = 'nose'\nposition = [0, 0, 1]\n",
+        r"bilaterals\[0\].frame",
+        "no frame 'nose'",
+    ),  # item 16: was labelled contacts
+]
+
+
+@pytest.mark.parametrize(("text", "key", "message"), TRACEBACKS, ids=[f"{i}" for i in range(len(TRACEBACKS))])
+def test_a_malformed_scene_exits_2_naming_the_file_and_key(tmp_path, capsys, text, key, message):
+    path = tmp_path / "scene.toml"
+    path.write_text(text)
+    code, err = _cli(capsys, "inspect", path)
+    assert code == 2 and re.fullmatch(rf"gaussim: {path}: {key}: .*{message}.*\n", err, re.S), err
+    assert err.count("\n") == 1  # one paragraph
+
+
+@pytest.mark.parametrize("content", [b"\xff\xfe\x00binary", "name = 'caf\u00e9'".encode("latin-1")])
+def test_a_non_utf8_scene_file_is_named(tmp_path, capsys, content):
+    path = tmp_path / "scene.toml"
+    path.write_bytes(content)
+    code, err = _cli(capsys, "inspect", path)
+    assert code == 2 and f"{path}: file: not a UTF-8 text file" in err
+
+
+def test_an_infinite_duration_is_refused(tmp_path, capsys):
+    path = tmp_path / "scene.toml"
+    path.write_text(BALL_SCENE)
+    code, err = _cli(capsys, "run", path, "--duration", "inf")
+    assert code == 2 and "--duration: must be a finite number > 0, got inf" in err
+
+
+@pytest.fixture(scope="module")
+def small_log(tmp_path_factory):
+    """A 3-step run log of a falling ball, and its arrays."""
+    folder = tmp_path_factory.mktemp("log")
+    (folder / "scene.toml").write_text(BALL_SCENE + "[ground]\n[simulation]\nduration = 0.003\n")
+    path = gaussim.run(gaussim.load_scene(folder / "scene.toml"), folder / "log.npz") and folder / "log.npz"
+    with np.load(path) as f:
+        return path, {k: f[k] for k in f.files}
+
+
+LOG_FAULTS = {  # item 15: each leaked a traceback; item 16: format_version was never read
+    "missing-key": ({"q": None}, "damaged run log: no array 'q'"),
+    "bad-json": ({"options": np.array("{dt: 1")}, "options: not JSON"),
+    "unknown-option": (
+        {"options": np.array('{"timestep": 1}')},
+        "options: must be a JSON object of Options fields",
+    ),
+    "bad-option": ({"options": np.array('{"dt": -1}')}, "options.dt: must be a finite number > 0"),
+    "wrong-shape": ({"v": np.zeros((4, 2))}, "'tau' has shape (3, 6), where 'v' has nv = 2"),
+    "wrong-kind": ({"t": np.array(["a", "b", "c", "d"])}, "'t' is a 1-d <U1 array, not the 1-d float array"),
+    "bad-ids": (
+        {
+            "contact_step": np.array([0]),
+            "contact_id": np.array([5]),
+            **{f"contact_{k}": np.zeros((1, 3)) for k in ("point", "normal", "force")},
+            "contact_gap": np.zeros(1),
+        },
+        "'contact_id' refers to entries not in 'contact_names'",
+    ),
+    "wrong-length": ({"solver_qps": np.zeros(9, int)}, "'solver_qps' has shape (9,), where 't' has N = 3"),
+    "newer": (
+        {"format_version": np.array(2)},
+        "format_version 2 is newer than this gaussim reads (it reads format 1); upgrade",
+    ),
+    "unknown-version": ({"format_version": np.array("one")}, "format_version 'one' is unknown"),
+}
+
+
+@pytest.mark.parametrize("fault", LOG_FAULTS)
+def test_a_tampered_log_exits_2_naming_the_file_and_array(tmp_path, capsys, small_log, fault):
+    changes, message = LOG_FAULTS[fault]
+    arrays = {k: v for k, v in {**small_log[1], **changes}.items() if v is not None}
+    path = tmp_path / "log.npz"
+    np.savez(path, **arrays)
+    code, err = _cli(capsys, "forces", path, "--csv", tmp_path / "f.csv")
+    assert code == 2 and f"gaussim: {path}: " in err and message in err, err
+
+
+@pytest.mark.parametrize("damage", ["truncated", "flipped", "text", "npy", "pickle"])
+def test_a_damaged_or_foreign_file_is_no_log(tmp_path, capsys, small_log, damage):
+    """Item 16: a non-log file was told to use allow_pickle (which would run what a pickle holds)."""
+    raw = small_log[0].read_bytes()
+    path = tmp_path / "log.npz"
+    if damage == "truncated":
+        path.write_bytes(raw[: len(raw) // 2])
+    elif damage == "flipped":
+        path.write_bytes(raw[:2000] + bytes(b ^ 0xFF for b in raw[2000:2100]) + raw[2100:])
+    elif damage == "text":
+        path.write_text("hello\n")
+    else:
+        with path.open("wb") as f:
+            np.save(
+                f, np.zeros(3) if damage == "npy" else np.array([{"a": 1}], dtype=object), allow_pickle=True
+            )
+    for command in (
+        ["forces", path, "--csv", tmp_path / "f.csv"],
+        ["replay", path, "--html", tmp_path / "r.html"],
+    ):
+        code, err = _cli(capsys, *command)
+        assert code == 2 and f"gaussim: {path}: " in err and "allow_pickle" not in err, err
+
+
+def test_unwritable_outputs_exit_2_naming_the_path(tmp_path, capsys, small_log):
+    """Item 15: CSV, PNG and HTML outputs that cannot be written leaked tracebacks; item 16: a --plot path
+    without a format's suffix was written elsewhere (matplotlib adds .png) than reported."""
+    log = small_log[0]
+    (tmp_path / "folder.png").mkdir()
+    code, err = _cli(capsys, "forces", log, "--csv", tmp_path)
+    assert code == 2 and f"gaussim: {tmp_path}: cannot write it: Is a directory" in err, err
+    code, err = _cli(capsys, "plot", log, "-o", tmp_path / "folder.png")
+    assert code == 2 and f"gaussim: {tmp_path / 'folder.png'}: cannot write it" in err, err
+    code, err = _cli(capsys, "replay", log, "--html", tmp_path)
+    assert code == 2 and f"gaussim: {tmp_path}: cannot write it: Is a directory" in err, err
+    code, err = _cli(capsys, "plot", log, "-o", tmp_path / "forces")
+    assert code == 2 and f"{tmp_path / 'forces'}: the image's suffix must be one of .png, .pdf, .svg" in err
+    scene = tmp_path / "scene.toml"
+    scene.write_text(BALL_SCENE)
+    code, err = _cli(capsys, "run", scene, "--plot", tmp_path / "forces", "--out", tmp_path / "l.npz")
+    assert code == 2 and not (tmp_path / "l.npz").exists(), "refused before the run"
+
+
+def test_echoed_values_are_cut_to_a_line(tmp_path, capsys):
+    """Item 16: an 8-million-element value was echoed back as 40 MB."""
+    path = tmp_path / "scene.toml"
+    path.write_text(BALL_SCENE.replace("q = [0, 0, 0.5, 0, 0, 0, 1]", "q = [" + "0, " * 100_000 + "1]"))
+    code, err = _cli(capsys, "inspect", path)
+    assert code == 2 and "initial.q: must be 7 finite numbers, got [0, 0, 0, 0, 0, 0, 0, 0, ...]" in err
+    assert len(err) < 300
+    with pytest.raises(gaussim.InvalidOptions) as info:
+        gaussim.Options(dt=list(range(8_000_000)))
+    assert len(str(info.value)) < 200
+
+
+def test_numpy_integers_are_integers():
+    """Item 16: numpy integers were refused where ints are asked; kept as Python's (a run log's JSON)."""
+    options = gaussim.Options(max_iter=np.int64(50), friction_facets=np.int32(8), dt=np.float32(0.5))
+    assert (options.max_iter, options.friction_facets, options.dt) == (50, 8, 0.5)
+    assert type(options.max_iter) is int and type(options.dt) is float
+
+
+def test_terminal_escape_codes_are_printed_escaped(tmp_path, capsys):
+    """Item 16: a name holding escape codes was printed raw (it could clear the terminal)."""
+    path = tmp_path / "scene.toml"
+    path.write_text(BALL_SCENE + '[ground]\n[contacts]\npairs = [["ball_0", "\\u001b[2Jwall"]]\n')
+    code, err = _cli(capsys, "inspect", path)
+    assert code == 2 and "\x1b" not in err and r"'\x1b[2Jwall'" in err, err
+
+
+def test_a_log_follows_the_umask(tmp_path, small_log):
+    """Item 16: logs were written 0600 (mkstemp's) while every other output follows the umask."""
+    mask = os.umask(0o027)
+    try:
+        path = gaussim.RunLog.load(small_log[0]).save(tmp_path / "log.npz")
+    finally:
+        os.umask(mask)
+    assert stat.S_IMODE(path.stat().st_mode) == 0o640
+
+
+def test_ctrl_c_before_the_first_step_writes_no_log(tmp_path, capsys, monkeypatch):
+    """Item 16: a Ctrl-C while the scene loaded claimed 'the log of the steps made was written'."""
+    import gaussim.runner
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    path = tmp_path / "scene.toml"
+    path.write_text(BALL_SCENE)
+    monkeypatch.setattr(gaussim.runner, "run", interrupted)
+    code, err = _cli(capsys, "run", path, "--out", tmp_path / "log.npz")
+    assert code == 1 and "interrupted; no log written" in err and not (tmp_path / "log.npz").exists()

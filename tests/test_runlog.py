@@ -168,7 +168,7 @@ def test_parquet_round_trip(tmp_path):
             2,
             "options.dt: must be a finite number > 0",
         ),
-        (["forces", "missing.npz", "--csv", "x.csv"], 2, "missing.npz: not a readable"),
+        (["forces", "missing.npz", "--csv", "x.csv"], 2, "missing.npz: cannot read it: No such file"),
     ],
 )
 def test_cli_bad_input_exits_2_without_traceback(tmp_path, args, code, message):
@@ -209,7 +209,7 @@ def test_cli_contact_failure_exits_1_and_keeps_the_log(tmp_path, monkeypatch, ca
     stderr = capsys.readouterr().err
     assert "simulation failed" in stderr and "non-finite contact" in stderr and str(out) in stderr
     log = gaussim.RunLog.load(out)
-    assert not log.complete and log.steps == 14  # two narrow phases a step: the 15th step failed
+    assert not log.complete and log.steps == 13  # two narrow phases at reset and a step: the 14th failed
 
 
 def test_cli_ctrl_c_keeps_the_log(tmp_path):

@@ -60,12 +60,12 @@ BALL = '[robot]\nname = "ball"\nfloating_base = true\n'
         ),
         (
             BALL + "[ground]\n[contacts]\npairs = [['ball_9', 'ground']]\n",
-            "contacts",
+            r"contacts.pairs",
             "no collision geometry 'ball_9'.*ball_0",
         ),
         (
             BALL + "[ground]\n[contacts]\npairs = [['ball_0', 'table']]\n",
-            "contacts",
+            r"contacts.pairs",
             "no obstacle 'table'.*ground",
         ),
         (
@@ -75,7 +75,7 @@ BALL = '[robot]\nname = "ball"\nfloating_base = true\n'
         ),
         (
             BALL + "[[bilaterals]]\ntype = 'anchor'\nframe = 'nose'\nposition = [0, 0, 1]\n",
-            "contacts",
+            r"bilaterals\[0\].frame",
             "no frame 'nose'",
         ),
         (BALL + "[control]\ntype = 'pd'\nkp = -1.0\n", "control", "gains must be >= 0"),

@@ -8,8 +8,12 @@ from __future__ import annotations
 
 import argparse
 import csv
+import math
+import re
 import sys
+import time
 from pathlib import Path
+from typing import TextIO
 
 from .exceptions import ContactError, GaussimError, InvalidOptions, InvalidRobot, InvalidState, SolverError
 from .options import FRICTION_MODES, SCHEMES
@@ -17,6 +21,17 @@ from .options import FRICTION_MODES, SCHEMES
 EXIT_OK, EXIT_FAILURE, EXIT_BAD_INPUT = 0, 1, 2
 # what stops a simulation midway (the other GaussimErrors are bad input)
 SIMULATION_FAILURES = (SolverError, ContactError)
+# control characters (but newline and tab): a name in a file must not drive the terminal
+_CONTROL = re.compile(r"[\x00-\x08\x0b-\x1f\x7f-\x9f]")
+
+
+def _printable(text: object) -> str:
+    """``text`` with its control characters (terminal escape codes) shown escaped, as repr does."""
+    return _CONTROL.sub(lambda m: repr(m[0])[1:-1], str(text))
+
+
+def _say(text: object, file: TextIO | None = None) -> None:
+    print(_printable(text), file=file or sys.stdout)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -89,13 +104,17 @@ def main(argv: list[str] | None = None) -> int:
         }
         return commands_[args.command](args)
     except KeyboardInterrupt:
-        print("gaussim: interrupted; the log of the steps made was written", file=sys.stderr)
+        print("gaussim: interrupted", file=sys.stderr)
         return EXIT_FAILURE
     except SIMULATION_FAILURES as err:
-        print(f"gaussim: simulation failed: {err}", file=sys.stderr)
+        _say(f"gaussim: simulation failed: {err}", sys.stderr)
         return EXIT_FAILURE
     except (InvalidOptions, InvalidRobot, InvalidState, GaussimError) as err:
-        print(f"gaussim: {err}", file=sys.stderr)
+        _say(f"gaussim: {err}", sys.stderr)
+        return EXIT_BAD_INPUT
+    except OSError as err:  # an output that cannot be written (a folder, no permission, a full disk)
+        where = f"{err.filename}: " if err.filename else ""
+        _say(f"gaussim: {where}cannot write it: {err.strerror or err}", sys.stderr)
         return EXIT_BAD_INPUT
 
 
@@ -151,12 +170,17 @@ def _run(args: argparse.Namespace) -> int:
     from .runner import run
     from .scenefile import load_scene
 
+    if args.plot:
+        from .plots import plot_path
+
+        plot_path(args.plot)  # before the run, not after it
     spec = load_scene(args.scene, dt=args.dt, scheme=args.scheme, friction_mode=args.friction_mode)
     if args.duration is not None:
-        if not args.duration > 0:
-            raise InvalidOptions("--duration", f"must be > 0, got {args.duration}")
+        if not (math.isfinite(args.duration) and args.duration > 0):
+            raise InvalidOptions("--duration", f"must be a finite number > 0, got {args.duration}")
         spec.duration = args.duration
     out = args.out or Path("out") / f"{args.scene.stem}.npz"
+    started = time.time()
     viewer = None
     if args.view:
         from .viewer import Viewer, follow
@@ -172,12 +196,21 @@ def _run(args: argparse.Namespace) -> int:
             observer=follow(viewer, args.speed) if viewer else None,
         )
     except SIMULATION_FAILURES as err:
-        print(f"gaussim: simulation failed: {err}\ngaussim: the steps made are in {out}", file=sys.stderr)
+        _say(f"gaussim: simulation failed: {err}\ngaussim: the steps made are in {out}", sys.stderr)
+        return EXIT_FAILURE
+    except InvalidState as err:  # the scene's initial state or its controller's torques
+        raise InvalidState(f"{args.scene}: {err}") from err
+    except KeyboardInterrupt:
+        written = out.is_file() and out.stat().st_mtime >= started - 1.0  # (a coarse clock's second)
+        print(
+            "gaussim: interrupted; " + (f"the steps made are in {out}" if written else "no log written"),
+            file=sys.stderr,
+        )
         return EXIT_FAILURE
     finally:
         if viewer is not None:
             viewer.close()
-    print(log.summary())
+    _say(log.summary())
     print(f"\nrun log: {out}")
     if args.html:
         print(f"replay page: {_write_replay(log, spec.scene, args.html, args.force_scale)}")
@@ -207,7 +240,10 @@ def _log_and_scene(path: Path):  # type: ignore[no-untyped-def]
     log = RunLog.load(path)
     if log.steps == 0:
         raise GaussimError(f"{path}: the run log holds no step")
-    return log, load_scene_text(log.scene_text, log.scene_path or path).scene
+    try:
+        return log, load_scene_text(log.scene_text, log.scene_path or path).scene
+    except GaussimError as err:
+        raise GaussimError(f"{path}: the scene this log holds does not load: {err}") from err
 
 
 def _write_replay(
@@ -243,8 +279,9 @@ def _replay(args: argparse.Namespace) -> int:
 
 
 def _plot(args: argparse.Namespace) -> int:
-    from .plots import save_plot
+    from .plots import plot_path, save_plot
 
+    plot_path(args.output)
     log, scene = _log_and_scene(args.log)
     print(f"{args.what} plot: {save_plot(log, scene, args.output, args.what)}")
     return EXIT_OK
@@ -259,36 +296,36 @@ def _inspect(args: argparse.Namespace) -> int:
     spec = load_scene(args.scene)
     robot, scene, o = spec.robot, spec.scene, spec.options
     model = robot.model
-    print(f"robot {robot.name} ({robot.urdf})")
-    print(f"  nq = {model.nq}, nv = {model.nv}, mass = {robot.mass:.3f} kg, floating base: {robot.floating}")
-    print(f"  frames: {', '.join(f.name for f in model.frames)}")
-    print(f"  collision geometries: {', '.join(g.name for g in robot.collision_model.geometryObjects)}")
+    _say(f"robot {robot.name} ({robot.urdf})")
+    _say(f"  nq = {model.nq}, nv = {model.nv}, mass = {robot.mass:.3f} kg, floating base: {robot.floating}")
+    _say(f"  frames: {', '.join(f.name for f in model.frames)}")
+    _say(f"  collision geometries: {', '.join(g.name for g in robot.collision_model.geometryObjects)}")
     limited = [
         f"{model.names[j]} [{model.lowerPositionLimit[model.joints[j].idx_q]:.3g}, "
         f"{model.upperPositionLimit[model.joints[j].idx_q]:.3g}]"
         for j in range(1, model.njoints)
         if model.joints[j].nq == 1 and np.isfinite(model.upperPositionLimit[model.joints[j].idx_q])
     ]
-    print(f"  joint limits: {', '.join(limited) or 'none'}")
-    print("constraints (only these are built):")
-    print(f"  obstacles: {', '.join(ob.name for ob in scene.obstacles) or 'none'}")
-    print(f"  contact pairs: {len(scene.pairs)}: {', '.join(p.name for p in scene.pairs)}")
-    print(f"  joint limits: {'on' if scene.joint_limits else 'off'}")
+    _say(f"  joint limits: {', '.join(limited) or 'none'}")
+    _say("constraints (only these are built):")
+    _say(f"  obstacles: {', '.join(ob.name for ob in scene.obstacles) or 'none'}")
+    _say(f"  contact pairs: {len(scene.pairs)}: {', '.join(p.name for p in scene.pairs)}")
+    _say(f"  joint limits: {'on' if scene.joint_limits else 'off'}")
     for b in scene.bilaterals:
-        print(f"  {b.name}")
+        _say(f"  {b.name}")
     sim = Simulator(scene, o)
-    print(f"modules: {', '.join(m.name for m in sim.modules) or 'none'}")
+    _say(f"modules: {', '.join(m.name for m in sim.modules) or 'none'}")
     facets = o.friction_facets
     bilateral_rows = sum(
         6 if getattr(b, "rotation", None) is not None or getattr(b, "orientation", False) else 3
         for b in scene.bilaterals
     )
     limit_rows = 2 * len(limited) if scene.joint_limits else 0
-    print(
+    _say(
         f"QP per step ({o.scheme} scheme): {model.nv} unknowns; up to {facets} rows per contact point, "
         f"up to {limit_rows} limit rows, {bilateral_rows} bilateral rows"
     )
-    print(f"options: dt = {o.dt} s, friction {o.friction_mode} ({facets} facets), duration {spec.duration} s")
+    _say(f"options: dt = {o.dt} s, friction {o.friction_mode} ({facets} facets), duration {spec.duration} s")
     return EXIT_OK
 
 

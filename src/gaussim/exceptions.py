@@ -2,13 +2,27 @@
 
 from __future__ import annotations
 
+import reprlib
 from collections.abc import Iterable
 
 import numpy as np
 
+_SHOWN = reprlib.Repr()
+_SHOWN.maxlist = _SHOWN.maxtuple = _SHOWN.maxdict = 8
+_SHOWN.maxstring = _SHOWN.maxother = 60
+
 
 class GaussimError(Exception):
     """Base class of every error gaussim raises on purpose."""
+
+
+class GaussimWarning(UserWarning):
+    """An input gaussim accepts but does not model as given (the message says what it did instead)."""
+
+
+def shown(value: object) -> str:
+    """``repr(value)`` cut to a line: an error echoes what it was given, never megabytes of it."""
+    return _SHOWN.repr(value)
 
 
 def _choices(known: Iterable[str], limit: int = 80) -> str:

@@ -3,13 +3,17 @@
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass, fields
 
-from .exceptions import InvalidOptions
+from .exceptions import InvalidOptions, shown
 
 SCHEMES = ("velocity", "acceleration")
 FRICTION_MODES = ("pyramid", "accurate", "exact")
 ON_FAILURE = ("raise", "report")
+# Upper bounds of the integer options: ProxQP's max_iter is a C int; more facets or fixed-point QPs than
+# these only cost time (a 64-facet pyramid is within 0.12 % of the cone)
+MAXIMA = {"max_iter": 2**31 - 1, "friction_facets": 64, "friction_iterations": 1000}
 
 
 @dataclass(frozen=True)
@@ -50,6 +54,9 @@ class Options:
         on_failure: ``"raise"`` (default) a :class:`SolverError` when ProxQP does not converge, or
             ``"report"`` (accept the finite iterate and record the status). A non-finite solution
             or an infeasible constraint set always raises.
+        start_penetration: how deep a pair may overlap at :meth:`Simulator.reset` [m]: a deeper start
+            is an error naming the pair (the step would push it out at once: kN forces, a body thrown
+            up); raise it to start so all the same.
         timings: record each step's wall time per stage in ``StepReport.timings`` (profiling; off by
             default: each stage's mark costs about 0.1 us, and a free-flight step is 7.5 us).
     """
@@ -67,9 +74,16 @@ class Options:
     eps_abs: float = 1e-9
     max_iter: int = 1000
     on_failure: str = "raise"
+    start_penetration: float = 1e-3
     timings: bool = False
 
     def __post_init__(self) -> None:
+        for f in fields(self):  # numpy scalars in, Python's out (they go to JSON in run logs)
+            value = getattr(self, f.name)
+            if isinstance(value, numbers.Integral) and not isinstance(value, bool) and f.type == "int":
+                object.__setattr__(self, f.name, int(value))
+            elif is_real(value) and f.type == "float":
+                object.__setattr__(self, f.name, float(value))  # type: ignore[arg-type]
         _positive("dt", self.dt)
         _choice("scheme", self.scheme, SCHEMES)
         _choice("friction_mode", self.friction_mode, FRICTION_MODES)
@@ -82,10 +96,11 @@ class Options:
         _positive("active_tolerance", self.active_tolerance)
         _non_negative("restitution_threshold", self.restitution_threshold)
         _non_negative("limit_margin", self.limit_margin)
+        _non_negative("start_penetration", self.start_penetration)
         if not isinstance(self.timings, bool):
-            raise InvalidOptions("timings", f"must be True or False, got {self.timings!r}")
+            raise InvalidOptions("timings", f"must be True or False, got {shown(self.timings)}")
         if not (is_real(self.stabilisation) and 0.0 < self.stabilisation <= 1.0):
-            raise InvalidOptions("stabilisation", f"must be in (0, 1], got {self.stabilisation!r}")
+            raise InvalidOptions("stabilisation", f"must be in (0, 1], got {shown(self.stabilisation)}")
 
     def replace(self, **changes: object) -> Options:
         """Return a copy with some fields changed (validated again)."""
@@ -99,25 +114,31 @@ class Options:
 
 
 def is_real(value: object) -> bool:
-    """True for a finite int or float (not a bool)."""
-    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    """True for a finite int or float, numpy's too (not a bool, nor an int beyond any float)."""
+    if not isinstance(value, numbers.Real) or isinstance(value, bool):
+        return False
+    try:
+        return math.isfinite(value)
+    except OverflowError:  # a TOML integer of 400 digits
+        return False
 
 
 def _positive(field: str, value: object) -> None:
     if not (is_real(value) and value > 0):  # type: ignore[operator]
-        raise InvalidOptions(field, f"must be a finite number > 0, got {value!r}")
+        raise InvalidOptions(field, f"must be a finite number > 0, got {shown(value)}")
 
 
 def _non_negative(field: str, value: object) -> None:
     if not (is_real(value) and value >= 0):  # type: ignore[operator]
-        raise InvalidOptions(field, f"must be a finite number >= 0, got {value!r}")
+        raise InvalidOptions(field, f"must be a finite number >= 0, got {shown(value)}")
 
 
 def _integer(field: str, value: object, minimum: int) -> None:
-    if not (isinstance(value, int) and not isinstance(value, bool) and value >= minimum):
-        raise InvalidOptions(field, f"must be an integer >= {minimum}, got {value!r}")
+    maximum = MAXIMA[field]
+    if not (isinstance(value, int) and not isinstance(value, bool) and minimum <= value <= maximum):
+        raise InvalidOptions(field, f"must be an integer in [{minimum}, {maximum}], got {shown(value)}")
 
 
 def _choice(field: str, value: object, choices: tuple[str, ...]) -> None:
-    if value not in choices:
-        raise InvalidOptions(field, f"{value!r} is not one of {', '.join(choices)}")
+    if not (isinstance(value, str) and value in choices):
+        raise InvalidOptions(field, f"{shown(value)} is not one of {', '.join(choices)}")

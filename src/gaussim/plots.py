@@ -9,10 +9,12 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from .exceptions import InvalidOptions
 from .runlog import RunLog
 from .scene import Scene
 
 WHATS = ("forces", "energy")
+FORMATS = (".png", ".pdf", ".svg")
 
 
 def _pyplot() -> Any:
@@ -90,12 +92,21 @@ def energy_figure(log: RunLog, scene: Scene) -> Any:
     return figure
 
 
-def save_plot(log: RunLog, scene: Scene, path: str | Path, what: str = "forces") -> Path:
-    """Write the ``what`` figure ("forces" or "energy") of a run to an image file."""
-    if what not in WHATS:
-        raise ValueError(f"what must be one of {', '.join(WHATS)}, got {what!r}")
-    figure = (force_figure if what == "forces" else energy_figure)(log, scene)
+def plot_path(path: str | Path) -> Path:
+    """``path`` as a Path, when its suffix names a format save_plot writes (matplotlib would add .png to
+    a name without one, and write elsewhere than told)."""
     path = Path(path)
+    if path.suffix.lower() not in FORMATS:
+        raise InvalidOptions(str(path), f"the image's suffix must be one of {', '.join(FORMATS)}")
+    return path
+
+
+def save_plot(log: RunLog, scene: Scene, path: str | Path, what: str = "forces") -> Path:
+    """Write the ``what`` figure ("forces" or "energy") of a run to an image file (.png, .pdf, .svg)."""
+    if what not in WHATS:
+        raise InvalidOptions("what", f"must be one of {', '.join(WHATS)}, got {what!r}")
+    path = plot_path(path)
+    figure = (force_figure if what == "forces" else energy_figure)(log, scene)
     path.parent.mkdir(parents=True, exist_ok=True)
     figure.savefig(path, dpi=110)
     _pyplot().close(figure)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -10,10 +11,14 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from .exceptions import FrameNotFound, GeometryNotFound, InvalidRobot, RobotNotFound
-from .urdfcheck import check_urdf, mesh_fault
+from .exceptions import FrameNotFound, GaussimWarning, GeometryNotFound, InvalidRobot, RobotNotFound
+from .urdfcheck import check_urdf, mesh_fault, mimic_joints
 
 ROBOTS_DIR = Path(__file__).resolve().parents[2] / "robots"
+# How far a body's principal moments may miss positivity and the triangle inequality I1 + I2 >= I3,
+# relative to its largest moment, plus an absolute floor [kg m^2] (URDFs round their inertias: an
+# iCub link's moments are +-2e-35)
+INERTIA_RTOL, INERTIA_ATOL = 1e-6, 1e-12
 
 
 @dataclass(frozen=True)
@@ -174,6 +179,26 @@ def _finish(
             raise InvalidRobot(
                 f"{urdf or name}: body of joint '{model.names[joint_id]}' has mass {inertia.mass}"
             )
+    _check_inertias(model, urdf or name)
+    for joint_id in range(1, model.njoints):
+        joint = model.joints[joint_id]
+        lower = model.lowerPositionLimit[joint.idx_q : joint.idx_q + joint.nq]
+        upper = model.upperPositionLimit[joint.idx_q : joint.idx_q + joint.nq]
+        if np.any(lower > upper):
+            raise InvalidRobot(
+                f"{urdf or name}: joint '{model.names[joint_id]}' has its lower limit {lower.tolist()} "
+                f"above its upper limit {upper.tolist()}"
+            )
+    mimics = (
+        [(j, target) for j, target in mimic_joints(Path(urdf)) if model.existJointName(j)] if urdf else []
+    )
+    if mimics:
+        listed = ", ".join(f"'{j}' (mimics '{target}')" for j, target in mimics)
+        warnings.warn(
+            f"{urdf}: gaussim does not honour <mimic>: the joints {listed} move as free joints",
+            GaussimWarning,
+            stacklevel=3,
+        )
     data = model.createData()
     mass_matrix = pin.crba(model, data, pin.neutral(model))
     if not np.all(np.isfinite(mass_matrix)) or np.linalg.eigvalsh(mass_matrix).min() <= 0:
@@ -187,3 +212,25 @@ def _finish(
             # to give signed distances and contact patches); built once here.
             geometry.geometry.buildConvexHull(True, "Qt")
     return Robot(name, model, collision, visual, urdf, package_dirs, configurations)
+
+
+def _check_inertias(model: pin.Model, where: str) -> None:
+    """Refuse a body whose principal moments of inertia are negative (a run gains energy) or break the
+    triangle inequality I1 + I2 >= I3 (no mass distribution has them). Checked on Pinocchio's bodies,
+    each the sum of a moving link and the links fixed to it: the example-robot-data robots whose URDF
+    links break it (allegro, go1, anymal) have valid sums."""
+    for joint_id in range(1, model.njoints):
+        moments = np.linalg.eigvalsh(model.inertias[joint_id].inertia)
+        tolerance = INERTIA_RTOL * np.abs(moments).max() + INERTIA_ATOL
+        if moments[0] >= -tolerance and moments[0] + moments[1] >= moments[2] - tolerance:
+            continue
+        body = next(
+            (f.name for f in model.frames if f.type == pin.FrameType.BODY and f.parentJoint == joint_id),
+            model.names[joint_id],
+        )
+        fault = "a negative one" if moments[0] < -tolerance else "I1 + I2 < I3"
+        raise InvalidRobot(
+            f"{where}: link '{body}' (the body of joint '{model.names[joint_id]}') has principal moments of "
+            f"inertia {', '.join(f'{m:.6g}' for m in moments)} [kg m^2]: {fault}, which no body has "
+            "(check the <inertia> of it and of the links fixed to it)"
+        )

@@ -11,19 +11,55 @@ from __future__ import annotations
 import json
 import os
 import tempfile
-from dataclasses import asdict
+from dataclasses import asdict, fields
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from .exceptions import GaussimError
+from .exceptions import GaussimError, InvalidOptions, shown
 from .options import Options
 from .report import StepReport
 from .solver import CONVERGED
 from .state import State
 
 FORMAT_VERSION = 1
+# A run whose contacts sink deeper than this is flagged by its summary [m] (the velocity scheme closes an
+# approach exactly and rests within g dt^2 of the surface: a deeper penetration is lost accuracy)
+PENETRATION_TOLERANCE = 1e-3
+# what each array of a log holds: its numpy kinds (b bool, i int, f float, U text) and its shape, in
+# the sizes N (steps), nq, nv, C (contact rows), K (contact names), L (limit rows), J (limit names)
+LAYOUT: dict[str, tuple[str, tuple[str, ...]]] = {
+    "format_version": ("i", ()),
+    "robot": ("U", ()),
+    "scene_text": ("U", ()),
+    "scene_path": ("U", ()),
+    "options": ("U", ()),
+    "complete": ("b", ()),
+    "reason": ("U", ()),
+    "wall_time": ("f", ()),
+    "t": ("f", ("N+1",)),
+    "q": ("f", ("N+1", "nq")),
+    "v": ("f", ("N+1", "nv")),
+    "tau": ("f", ("N", "nv")),
+    "contact_names": ("U", ("K",)),
+    "contact_geometry": ("U", ("K",)),
+    "contact_obstacle": ("U", ("K",)),
+    "limit_names": ("U", ("J",)),
+    "limit_step": ("i", ("L",)),
+    "limit_id": ("i", ("L",)),
+    "limit_torque": ("f", ("L",)),
+    "contact_step": ("i", ("C",)),
+    "contact_id": ("i", ("C",)),
+    "contact_point": ("f", ("C", "3")),
+    "contact_normal": ("f", ("C", "3")),
+    "contact_force": ("f", ("C", "3")),
+    "contact_gap": ("f", ("C",)),
+    "solver_qps": ("i", ("N",)),
+    "solver_iterations": ("i", ("N",)),
+    "solver_kkt_residual": ("f", ("N",)),
+    "solver_status": ("U", ("N",)),
+}
 
 
 class RunLogError(GaussimError):
@@ -168,6 +204,7 @@ class RunLog:
         }
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
         try:
+            os.chmod(fd, 0o666 & ~_umask())  # mkstemp's 0600, where every other output follows the umask
             with os.fdopen(fd, "wb") as f:
                 np.savez_compressed(f, **arrays)
             os.replace(tmp, path)
@@ -178,15 +215,26 @@ class RunLog:
 
     @classmethod
     def load(cls, path: str | Path) -> RunLog:
-        """Read a log written by :meth:`save`."""
+        """Read a log written by :meth:`save`.
+
+        Raises:
+            RunLogError: the file is not a run log, a damaged or tampered one (the message names the
+                file and the array), or one of a newer format.
+        """
+        data = _read(Path(path))
         try:
-            with np.load(path, allow_pickle=False) as f:
-                data = {k: f[k] for k in f.files}
-        except (OSError, ValueError) as err:
-            raise RunLogError(f"{path}: not a readable .npz run log ({err})") from err
-        if "format_version" not in data:
-            raise RunLogError(f"{path}: not a gaussim run log (no format_version)")
-        log = cls(str(data["robot"]), str(data["scene_text"]), Options(**json.loads(str(data["options"]))))
+            options = Options(**json.loads(str(data["options"])))
+        except json.JSONDecodeError as err:
+            raise RunLogError(f"{path}: options: not JSON ({err})") from err
+        except TypeError as err:  # not a dict, or an option this gaussim does not have
+            known = ", ".join(f.name for f in fields(Options))
+            raise RunLogError(
+                f"{path}: options: must be a JSON object of Options fields ({known}), "
+                f"got {shown(str(data['options']))}"
+            ) from err
+        except InvalidOptions as err:
+            raise RunLogError(f"{path}: options.{err}") from err
+        log = cls(str(data["robot"]), str(data["scene_text"]), options)
         log.scene_path = str(data["scene_path"])
         log.complete, log.reason = bool(data["complete"]), str(data["reason"])
         log.wall_time = None if np.isnan(data["wall_time"]) else float(data["wall_time"])
@@ -246,16 +294,42 @@ class RunLog:
             raise GaussimError("contact_forces() needs pandas: pip install 'gaussim[analysis]'") from err
         return pd.DataFrame(self.contact_records())
 
+    def warnings(self) -> list[str]:
+        """What makes the run's motion less accurate than its options promise: contacts sinking
+        deeper than PENETRATION_TOLERANCE, steps whose QP did not converge (kept by
+        ``on_failure='report'``); empty for a run to trust."""
+        c, s, o = self.contact_arrays(), self.solver_arrays(), self.options
+        found = []
+        depth = max(0.0, -c["gap"].min()) if len(c["gap"]) else 0.0
+        if depth > PENETRATION_TOLERANCE:
+            found.append(
+                f"contacts sank {1e3 * depth:.4g} mm, more than {1e3 * PENETRATION_TOLERANCE:g} mm: "
+                f"dt = {o.dt:g} s is too coarse for the {o.scheme} scheme on this scene; reduce dt "
+                "(or the friction)"
+            )
+        failed = int(np.sum(~np.isin(s["status"], [*CONVERGED, "NO_QP"])))
+        if failed:
+            found.append(
+                f"{failed} steps did not converge (max KKT residual {s['kkt_residual'].max():.2e}, "
+                f"eps_abs = {o.eps_abs:g}): on_failure = '{o.on_failure}' kept their iterates, which need "
+                "not be the Gauss principle's motion"
+            )
+        return found
+
     def summary(self) -> str:
-        """A plain-text summary: run, solver and per-contact force statistics."""
+        """A plain-text summary: run, solver and per-contact force statistics, and a WARNING line for
+        each of :meth:`warnings`."""
         c, s = self.contact_arrays(), self.solver_arrays()
         wall_time = self.wall_time
         failed = int(np.sum(~np.isin(s["status"], [*CONVERGED, "NO_QP"])))
         t = self.t
+        warnings = self.warnings()
+        status = "complete" if self.complete else "INCOMPLETE: " + self.reason
         lines = [
             f"robot {self.robot}: {self.steps} steps, {t[-1] - t[0]:.4g} s simulated"
             + (f" in {wall_time:.3g} s wall ({self.steps / wall_time:.0f} steps/s)" if wall_time else ""),
-            f"status: {'complete' if self.complete else 'INCOMPLETE: ' + self.reason}",
+            f"status: {status}" + (f", with {len(warnings)} warning(s)" if warnings else ""),
+            *(f"WARNING: {w}" for w in warnings),
             f"max penetration: {max(0.0, -c['gap'].min()) * 1e3 if len(c['gap']) else 0.0:.4f} mm;"
             f" max KKT residual: {s['kkt_residual'].max() if self.steps else 0.0:.2e};"
             f" QPs: {int(s['qps'].sum())}, steps not converged: {failed}",
@@ -276,3 +350,67 @@ class RunLog:
                     f" {1e3 * c['gap'][mine].min():>13.4f}"
                 )
         return "\n".join(lines)
+
+
+def _umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def _read(path: Path) -> dict[str, np.ndarray]:
+    """The arrays of the run log at ``path``, each checked against LAYOUT and the others' sizes."""
+    try:
+        archive = np.load(path, allow_pickle=False)
+        if not isinstance(archive, np.lib.npyio.NpzFile):
+            raise RunLogError(f"{path}: not a gaussim run log (a single .npy array, not a .npz archive)")
+        with archive as f:
+            data = {k: f[k] for k in f.files}
+    except RunLogError:
+        raise
+    except OSError as err:
+        raise RunLogError(f"{path}: cannot read it: {err.strerror or err}") from err
+    except (
+        ValueError
+    ) as err:  # not numpy's words: they advise allow_pickle=True, which runs what a file holds
+        raise RunLogError(f"{path}: not a gaussim run log (one is a .npz archive of plain arrays)") from err
+    except Exception as err:  # zipfile reads a damaged archive's bytes as anything: encryption, a method
+        what = f"{type(err).__name__}: {err}"
+        raise RunLogError(f"{path}: a truncated or damaged .npz archive ({what})") from err
+    if "format_version" not in data:
+        raise RunLogError(f"{path}: not a gaussim run log (no format_version)")
+    version = data["format_version"]
+    if version.shape != () or version.dtype.kind != "i" or not 1 <= int(version) <= FORMAT_VERSION:
+        newer = version.shape == () and version.dtype.kind == "i" and int(version) > FORMAT_VERSION
+        raise RunLogError(
+            f"{path}: format_version {shown(version.tolist())} is "
+            + ("newer than this gaussim reads" if newer else "unknown")
+            + f" (it reads format {FORMAT_VERSION})"
+            + ("; upgrade gaussim" if newer else "")
+        )
+    sizes: dict[str, int] = {"3": 3}
+    origin = {"3": "a point"}  # the array each size was read from
+    for key, (kind, shape) in LAYOUT.items():
+        if key not in data:
+            raise RunLogError(f"{path}: damaged run log: no array '{key}'")
+        arr = data[key]
+        if arr.dtype.kind != kind or arr.ndim != len(shape):
+            raise RunLogError(
+                f"{path}: damaged run log: '{key}' is a {arr.ndim}-d {arr.dtype} array, not the "
+                f"{len(shape)}-d {dict(b='bool', i='int', f='float', U='text')[kind]} array it should be"
+            )
+        for size, name in zip(arr.shape, shape):
+            n, base = (name[:-2], 1) if name.endswith("+1") else (name, 0)
+            origin.setdefault(n, f"'{key}'")
+            if sizes.setdefault(n, size - base) != size - base:
+                raise RunLogError(
+                    f"{path}: damaged run log: '{key}' has shape {arr.shape}, where {origin[n]} has "
+                    f"{n} = {sizes[n]}"
+                )
+    for ids, names in (("contact_id", "contact_names"), ("limit_id", "limit_names")):
+        if len(data[ids]) and not (0 <= data[ids].min() and data[ids].max() < len(data[names])):
+            raise RunLogError(f"{path}: damaged run log: '{ids}' refers to entries not in '{names}'")
+    for steps in ("contact_step", "limit_step"):
+        if len(data[steps]) and not (0 <= data[steps].min() and data[steps].max() < sizes["N"]):
+            raise RunLogError(f"{path}: damaged run log: '{steps}' refers to steps the log does not hold")
+    return data

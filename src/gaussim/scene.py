@@ -9,23 +9,35 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from .exceptions import GeometryNotFound, InvalidOptions
+from .exceptions import GeometryNotFound, InvalidOptions, shown
 from .options import is_real
 from .robot import Robot
 
+# The largest Coulomb coefficient a scene may declare: real materials stay below 2; a block sliding on
+# mu = 1000 is tested to stop without sinking, and Solo-12 standing on mu = 1e6 sinks 3.6 mm
+MAX_FRICTION = 1e3
+
 
 def _vector(field_name: str, value: object, size: int) -> np.ndarray:
-    arr = np.asarray(value, dtype=float)
+    try:
+        raw = np.asarray(value)
+    except ValueError:  # a ragged list
+        raw = np.zeros(0)
+    arr = raw.astype(float) if raw.dtype.kind in "iuf" else np.zeros(0)  # not text, bool or complex
     if arr.shape != (size,) or not np.all(np.isfinite(arr)):
-        raise InvalidOptions(field_name, f"must be {size} finite numbers, got {value!r}")
+        raise InvalidOptions(field_name, f"must be {size} finite numbers, got {shown(value)}")
     return arr
 
 
 def _material(owner: str, friction: float, restitution: float) -> None:
     if not (is_real(friction) and friction >= 0):
-        raise InvalidOptions(f"{owner}.friction", f"must be a finite number >= 0, got {friction!r}")
+        raise InvalidOptions(f"{owner}.friction", f"must be a finite number >= 0, got {shown(friction)}")
+    if friction > MAX_FRICTION:  # type: ignore[operator]
+        raise InvalidOptions(
+            f"{owner}.friction", f"{friction:g} is beyond any material (at most {MAX_FRICTION:g})"
+        )
     if not (is_real(restitution) and 0 <= restitution <= 1):
-        raise InvalidOptions(f"{owner}.restitution", f"must be in [0, 1], got {restitution!r}")
+        raise InvalidOptions(f"{owner}.restitution", f"must be in [0, 1], got {shown(restitution)}")
 
 
 @dataclass(frozen=True)
@@ -82,7 +94,7 @@ class Box:
     def __post_init__(self) -> None:
         _material(self.name, self.friction, self.restitution)
         if np.any(_vector(f"{self.name}.size", self.size, 3) <= 0):
-            raise InvalidOptions(f"{self.name}.size", f"must be > 0, got {self.size!r}")
+            raise InvalidOptions(f"{self.name}.size", f"must be > 0, got {shown(self.size)}")
         _vector(f"{self.name}.position", self.position, 3)
         R = np.asarray(self.rotation, dtype=float)
         if R.shape != (3, 3) or not np.allclose(R @ R.T, np.eye(3), atol=1e-9):
@@ -107,8 +119,10 @@ class Sphere:
 
     def __post_init__(self) -> None:
         _material(self.name, self.friction, self.restitution)
-        if not (np.isfinite(self.radius) and self.radius > 0):
-            raise InvalidOptions(f"{self.name}.radius", f"must be > 0, got {self.radius!r}")
+        if not (is_real(self.radius) and self.radius > 0):
+            raise InvalidOptions(
+                f"{self.name}.radius", f"must be a finite number > 0, got {shown(self.radius)}"
+            )
         _vector(f"{self.name}.position", self.position, 3)
 
     def shape(self) -> coal.CollisionGeometry:
@@ -213,16 +227,30 @@ class Scene:
             for frame in (b.frame,) if isinstance(b, Anchor) else (b.frame_a, b.frame_b):
                 robot.frame_id(frame)
         self.pairs = tuple(self._pairs(contacts, names))
+        if self.obstacles and not robot.collision_model.ngeoms:
+            raise InvalidOptions(
+                "robot",
+                f"'{robot.name}' has no collision geometry ({robot.urdf} declares no <collision>): it would "
+                f"pass through {', '.join(names)}; give its links collision elements, or drop the obstacles",
+            )
 
     def _pairs(self, contacts: Sequence[tuple[str, str]] | None, names: list[str]) -> list[ContactPair]:
         geometries = [g.name for g in self.robot.collision_model.geometryObjects]
         if contacts is None:
             contacts = [(g, o) for o in names for g in geometries]
         pairs = []
+        seen: dict[frozenset[str], int] = {}
         for k, pair in enumerate(contacts):
             if len(pair) != 2:
-                raise InvalidOptions(f"contacts[{k}]", f"must be (geometry, obstacle), got {pair!r}")
+                raise InvalidOptions(f"contacts[{k}]", f"must be (geometry, obstacle), got {shown(pair)}")
             geometry, obstacle = pair
+            key = frozenset(pair)
+            if key in seen:  # the same pair twice would double its rows and halve its reported forces
+                raise InvalidOptions(
+                    f"contacts[{k}]",
+                    f"({geometry}, {obstacle}) repeats contacts[{seen[key]}] {contacts[seen[key]]}",
+                )
+            seen[key] = k
             first = self.robot.geometry_id(geometry)
             name = f"{geometry}/{obstacle}"
             if obstacle in names:

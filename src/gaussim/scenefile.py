@@ -17,17 +17,18 @@ Relative paths are taken from the scene file's folder. Unknown keys are errors.
 
 from __future__ import annotations
 
+import re
 import tomllib
 from dataclasses import dataclass, fields
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import numpy as np
 import pinocchio as pin
 
 from .control import Controller, PDHold, constant_torque, zero_torque
-from .exceptions import GaussimError, InvalidOptions
-from .options import Options
+from .exceptions import GaussimError, InvalidOptions, shown
+from .options import Options, is_real
 from .robot import Robot, load_robot
 from .scene import Anchor, Box, Ground, LoopClosure, Scene, Sphere
 from .state import State
@@ -44,6 +45,11 @@ SECTIONS = {
     "simulation": {"duration"},
     "options": {f.name for f in fields(Options)},
 }
+# The largest joint torque a scene may command [N m] (Talos's strongest joint gives 300): beyond it the
+# QP's rows span hundreds of orders of magnitude and ProxQP stops without a motion (tau = 1e300)
+MAX_TORQUE = 1e6
+# where a field a Scene names (its constructor's argument) sits in a scene file
+SCENE_FIELDS = {"contacts": "contacts.pairs", "self_contact": "contacts"}
 
 
 class SceneFileError(InvalidOptions):
@@ -89,9 +95,15 @@ def load_scene(path: str | Path, **overrides: Any) -> SceneSpec:
     """
     path = Path(path)
     try:
-        text = path.read_text()
+        raw = path.read_bytes()
     except OSError as err:
         raise SceneFileError(path, "file", f"cannot read it: {err.strerror}") from err
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as err:
+        raise SceneFileError(
+            path, "file", f"not a UTF-8 text file (byte {raw[err.start]:#04x} at offset {err.start})"
+        ) from err
     return load_scene_text(text, path, **overrides)
 
 
@@ -114,7 +126,7 @@ class _Reader:
             if key not in SECTIONS:
                 self.fail(key, f"unknown section; known: {', '.join(sorted(SECTIONS))}")
 
-    def fail(self, key: str, message: str) -> SceneFileError:
+    def fail(self, key: str, message: str) -> NoReturn:
         raise SceneFileError(self.path, key, message)
 
     def table(self, name: str, entry: Any = None, key: str | None = None) -> dict[str, Any]:
@@ -128,18 +140,28 @@ class _Reader:
         return value
 
     def array(self, key: str, value: Any, size: int | None = None) -> np.ndarray:
-        try:
-            arr = np.asarray(value, dtype=float)
-        except (TypeError, ValueError):
-            self.fail(key, f"must be a list of numbers, got {value!r}")
+        wanted = f"must be {'a list of' if size is None else size} finite numbers, got {shown(value)}"
+        if not isinstance(value, (list, np.ndarray)) or any(not _is_number(x) for x in value):
+            self.fail(key, wanted)
+        arr = np.asarray(value, dtype=float)
         if arr.ndim != 1 or (size is not None and arr.shape != (size,)) or not np.all(np.isfinite(arr)):
-            self.fail(key, f"must be {size or 'a list of'} finite numbers, got {value!r}")
+            self.fail(key, wanted)
         return arr
 
     def number(self, key: str, value: Any) -> float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
-            self.fail(key, f"must be a finite number, got {value!r}")
+        if not _is_number(value):
+            self.fail(key, f"must be a finite number, got {shown(value)}")
         return float(value)
+
+    def string(self, key: str, value: Any) -> str:
+        if not isinstance(value, str):
+            self.fail(key, f"must be a string, got {shown(value)}")
+        return value
+
+    def boolean(self, key: str, value: Any) -> bool:
+        if not isinstance(value, bool):
+            self.fail(key, f"must be true or false, got {shown(value)}")
+        return value
 
     def build(self, text: str, overrides: dict[str, Any]) -> SceneSpec:
         robot = self.robot()
@@ -151,17 +173,20 @@ class _Reader:
             self.number("contacts.friction", contacts_section.get("friction", 0.8)),
             self.number("contacts.restitution", contacts_section.get("restitution", 0.0)),
         )
-        if contacts is not None and not (
-            isinstance(contacts, list) and all(isinstance(p, list) for p in contacts)
-        ):
-            self.fail("contacts.pairs", "must be a list of [geometry, obstacle] pairs")
-        limits = self.table("limits").get("enabled", False)
-        if not isinstance(limits, bool):
-            self.fail("limits.enabled", f"must be true or false, got {limits!r}")
-        bilaterals = [self.bilateral(i, b) for i, b in enumerate(self.list("bilaterals"))]
-        scene = self.wrap(
-            "contacts",
-            lambda: Scene(
+        if contacts is not None:
+            if not isinstance(contacts, list):
+                self.fail(
+                    "contacts.pairs", f"must be a list of [geometry, obstacle] pairs, got {shown(contacts)}"
+                )
+            for k, pair in enumerate(contacts):
+                if not (isinstance(pair, list) and len(pair) == 2 and all(isinstance(n, str) for n in pair)):
+                    self.fail(
+                        f"contacts.pairs[{k}]", f"must be [geometry, obstacle] (two names), got {shown(pair)}"
+                    )
+        limits = self.boolean("limits.enabled", self.table("limits").get("enabled", False))
+        bilaterals = [self.bilateral(i, b, robot) for i, b in enumerate(self.list("bilaterals"))]
+        try:
+            scene = Scene(
                 robot,
                 ground=ground,
                 obstacles=obstacles,
@@ -169,8 +194,13 @@ class _Reader:
                 joint_limits=limits,
                 bilaterals=bilaterals,
                 self_contact=self_contact,
-            ),
-        )
+            )
+        except InvalidOptions as err:
+            owner = re.match(r"\w*", err.field)[0]  # type: ignore[index]
+            place = SCENE_FIELDS.get(owner, owner) + err.field[len(owner) :]
+            raise SceneFileError(self.path, place, str(err)[len(err.field) + 2 :]) from err
+        except GaussimError as err:  # an unknown geometry or obstacle of a pair
+            raise SceneFileError(self.path, "contacts.pairs", str(err)) from err
         options = self.options(overrides)
         duration = self.number("simulation.duration", self.table("simulation").get("duration", 1.0))
         if duration <= 0:
@@ -203,19 +233,21 @@ class _Reader:
         if ("name" in section) == ("urdf" in section):
             self.fail("robot", "give exactly one of name (example-robot-data or robots/) or urdf (a path)")
         floating = section.get("floating_base")
-        if floating is not None and not isinstance(floating, bool):
-            self.fail("robot.floating_base", f"must be true or false, got {floating!r}")
-        dirs = [str(self.path.parent / d) for d in section.get("package_dirs", [])]
+        if floating is not None:
+            self.boolean("robot.floating_base", floating)
+        dirs = section.get("package_dirs", [])
+        if not (isinstance(dirs, list) and all(isinstance(d, str) for d in dirs)):
+            self.fail("robot.package_dirs", f"must be a list of folder names, got {shown(dirs)}")
+        dirs = [str(self.path.parent / d) for d in dirs]
         if "urdf" in section:
-            target = self.path.parent / section["urdf"]
+            target = self.path.parent / self.string("robot.urdf", section["urdf"])
             if not target.is_file():
                 self.fail("robot.urdf", f"no such file: {target}")
             return self.wrap(
                 "robot.urdf", lambda: load_robot(target, package_dirs=dirs, floating_base=floating)
             )
-        return self.wrap(
-            "robot.name", lambda: load_robot(section["name"], package_dirs=dirs, floating_base=floating)
-        )
+        name = self.string("robot.name", section["name"])
+        return self.wrap("robot.name", lambda: load_robot(name, package_dirs=dirs, floating_base=floating))
 
     def ground(self) -> Ground | None:
         if "ground" not in self.data:
@@ -228,31 +260,44 @@ class _Reader:
         section = dict(self.table("obstacles", entry, key))
         kind = section.pop("type", None)
         rpy = self.array(f"{key}.rpy", section.pop("rpy", [0, 0, 0]), 3)
+        if kind not in ("box", "sphere"):
+            self.fail(f"{key}.type", f"{shown(kind)} is not one of box, sphere")
+        dimension, other = ("size", "radius") if kind == "box" else ("radius", "size")
+        if other in section:
+            self.fail(f"{key}.{other}", f"a {kind} has a {dimension}, not a {other}")
+        for required in ("name", dimension):
+            if required not in section:
+                self.fail(f"{key}.{required}", f"missing: a {kind} needs a name and a {dimension}")
+        self.string(f"{key}.name", section["name"])
         if kind == "box":
-            if "radius" in section:
-                self.fail(f"{key}.radius", "a box has a size, not a radius")
             return self.wrap(key, lambda: Box(rotation=pin.rpy.rpyToMatrix(rpy), **section), owned=True)
-        if kind == "sphere":
-            return self.wrap(key, lambda: Sphere(**section), owned=True)
-        self.fail(f"{key}.type", f"{kind!r} is not one of box, sphere")
-        raise AssertionError  # unreachable
+        return self.wrap(key, lambda: Sphere(**section), owned=True)
 
-    def bilateral(self, i: int, entry: Any) -> Anchor | LoopClosure:
+    def bilateral(self, i: int, entry: Any, robot: Robot) -> Anchor | LoopClosure:
         key = f"bilaterals[{i}]"
         section = self.table("bilaterals", entry, key)
         kind = section.get("type")
         if kind == "anchor":
+            frame = self.frame(f"{key}.frame", section.get("frame"), robot)
             position = self.array(f"{key}.position", section.get("position"), 3)
             rpy = section.get("rpy")
             rotation = None if rpy is None else pin.rpy.rpyToMatrix(self.array(f"{key}.rpy", rpy, 3))
-            return Anchor(str(section.get("frame")), position, rotation)
+            return Anchor(frame, position, rotation)
         if kind == "loop":
             frames = section.get("frames")
             if not (isinstance(frames, list) and len(frames) == 2):
-                raise SceneFileError(self.path, f"{key}.frames", f"must be two frame names, got {frames!r}")
-            return LoopClosure(str(frames[0]), str(frames[1]), bool(section.get("orientation", False)))
-        self.fail(f"{key}.type", f"{kind!r} is not one of anchor, loop")
+                self.fail(f"{key}.frames", f"must be two frame names, got {shown(frames)}")
+            frames = [self.frame(f"{key}.frames", frame, robot) for frame in frames]
+            orientation = self.boolean(f"{key}.orientation", section.get("orientation", False))
+            return LoopClosure(frames[0], frames[1], orientation)
+        self.fail(f"{key}.type", f"{shown(kind)} is not one of anchor, loop")
         raise AssertionError  # unreachable
+
+    def frame(self, key: str, name: Any, robot: Robot) -> str:
+        """``name``, a frame of ``robot``."""
+        name = self.string(key, name)
+        self.wrap(key, lambda: robot.frame_id(name))
+        return name
 
     def options(self, overrides: dict[str, Any]) -> Options:
         section = dict(self.table("options"))
@@ -267,8 +312,8 @@ class _Reader:
         if "q" in section:
             q = self.array("initial.q", section["q"], robot.model.nq)
         else:
-            name = section.get("configuration", "neutral")
-            q = self.wrap("initial.configuration", lambda: robot.configuration(str(name)))
+            name = self.string("initial.configuration", section.get("configuration", "neutral"))
+            q = self.wrap("initial.configuration", lambda: robot.configuration(name))
         v = self.array("initial.v", section.get("v", np.zeros(robot.model.nv)), robot.model.nv)
         if "ground_clearance" in section:
             clearance = self.number("initial.ground_clearance", section["ground_clearance"])
@@ -284,7 +329,12 @@ class _Reader:
             return zero_torque
         if kind == "constant":
             n = nv - 6 if robot.floating else nv
-            return constant_torque(self.array("control.tau", section.get("tau"), n))
+            tau = self.array("control.tau", section.get("tau"), n)
+            if np.abs(tau).max(initial=0.0) > MAX_TORQUE:
+                self.fail(
+                    "control.tau", f"beyond any actuator (|tau| <= {MAX_TORQUE:g} N m), got {shown(tau)}"
+                )
+            return constant_torque(tau)
         if kind == "pd":
             target = section.get("target", "neutral")
             if isinstance(target, str):
@@ -295,12 +345,15 @@ class _Reader:
             kd = self.number("control.kd", section.get("kd", 0.0))
             if kp < 0 or kd < 0:
                 self.fail("control", f"gains must be >= 0, got kp={kp}, kd={kd}")
-            implicit = section.get("implicit", True)
-            if not isinstance(implicit, bool):
-                self.fail("control.implicit", f"must be true or false, got {implicit!r}")
+            implicit = self.boolean("control.implicit", section.get("implicit", True))
             return PDHold(robot.model, q_ref, kp, kd, actuated, dt if implicit else None)
-        self.fail("control.type", f"{kind!r} is not one of zero, constant, pd")
+        self.fail("control.type", f"{shown(kind)} is not one of zero, constant, pd")
         raise AssertionError  # unreachable
+
+
+def _is_number(value: Any) -> bool:
+    """True for a finite int or float (a TOML bool is not a number, nor an integer beyond any float)."""
+    return isinstance(value, (int, float, np.integer, np.floating)) and is_real(value)
 
 
 def place_on_ground(scene: Scene, q: np.ndarray, clearance: float) -> np.ndarray:

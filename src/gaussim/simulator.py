@@ -38,12 +38,13 @@ from .options import Options
 from .report import StepReport
 from .scene import Scene
 from .solver import GaussSolver
-from .state import State
+from .state import State, real_array
 
 # A velocity violating an impulse-level row by more than this is an impact [m/s or rad/s].
 IMPACT_TOLERANCE = 1e-9
 # How far from 1 the norm of a configuration's quaternion may be.
 UNIT_TOLERANCE = 1e-6
+_FLOAT = np.dtype(float)  # a torque of this dtype is read as given
 
 
 class Simulator:
@@ -115,8 +116,24 @@ class Simulator:
         v = np.zeros(self.model.nv) if v is None else v
         state = State(t, q, v)
         self._check_state(state)
+        self._check_overlap(state)
         self.last_step = None
         return state
+
+    def _check_overlap(self, state: State) -> None:
+        """Refuse a start whose pairs overlap deeper than ``Options.start_penetration``."""
+        if self.detector is None:
+            return
+        pin.forwardKinematics(self.model, self.data, state.q)
+        self.detector.forget()
+        contacts = self.detector.detect(self.data)
+        if len(contacts) and contacts.gap.min() < -self.options.start_penetration:
+            k = int(np.argmin(contacts.gap))
+            raise InvalidState(
+                f"the initial configuration has '{contacts.geometry[k]}' {-1e3 * contacts.gap[k]:.4g} mm "
+                f"inside '{contacts.obstacle[k]}' (deeper than Options.start_penetration, "
+                f"{1e3 * self.options.start_penetration:g} mm): lift it, or raise start_penetration"
+            )
 
     def _check_state(self, state: State) -> None:
         model = self.model
@@ -164,7 +181,9 @@ class Simulator:
         its entries are checked by the dynamics stage, which reads them."""
         if tau is None:
             return self._no_torque
-        tau = np.asarray(tau, dtype=float)
+        tau = np.asarray(tau)
+        if tau.dtype is not _FLOAT:  # ints, float32, or what is no torque at all (complex, text)
+            tau = real_array(name, tau)
         if tau.shape not in self._torque_shapes:
             nv = self._nv
             hint = f" or ({nv - 6},) for the actuated joints" if self._floating else ""

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import sys
 import types
+import warnings
 from dataclasses import dataclass
 from typing import Any
 
@@ -12,7 +13,7 @@ import numpy as np
 from numba import njit
 
 from .assembly import GaussProblem
-from .exceptions import InfeasibleConstraints, SolverError
+from .exceptions import GaussimWarning, InfeasibleConstraints, SolverError
 from .linalg import backward, cholesky, dot, forward, matvec
 from .options import Options
 
@@ -272,6 +273,7 @@ class GaussSolver:
         self._cap = 0  # the QP object's iteration cap
         self._last: tuple[np.ndarray, np.ndarray] = (np.zeros(0), np.zeros(0))  # x, multipliers
         self._candidate = self._last  # the buffers of the active-set candidate (see _warm)
+        self._warned = False  # about an iterate kept by on_failure='report'
 
     def solve(self, problem: GaussProblem) -> Solution:
         """Solve the Gauss problem; raise :class:`SolverError` as ``Options.on_failure`` says."""
@@ -443,6 +445,15 @@ class GaussSolver:
                 f"{c.dual_residual:.2e}, duality gap {c.duality_gap:.2e}); raise Options.max_iter or "
                 "eps_abs, or set on_failure='report'",
                 c,
+            )
+        if not c.converged and not self._warned:
+            self._warned = True
+            warnings.warn(
+                f"ProxQP did not converge ({c.status}, KKT residual {c.kkt_residual:.2e}): "
+                "on_failure='report' kept its iterate, which need not be the Gauss principle's motion; each "
+                "such step is counted (StepReport.converged, the run log's summary); not repeated",
+                GaussimWarning,
+                stacklevel=2,
             )
 
     def _closest_feasible(self, problem: GaussProblem) -> tuple[np.ndarray, float]:

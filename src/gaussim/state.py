@@ -7,6 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .exceptions import InvalidState, shown
+
 
 @dataclass(frozen=True, slots=True)
 class State:
@@ -16,6 +18,9 @@ class State:
         t: time [s].
         q: configuration, shape (nq,) (Pinocchio convention: free-flyer quaternion xyzw).
         v: generalized velocity, shape (nv,).
+
+    q and v are read-only views of arrays the state owns: ``setflags(write=True)`` is refused (a
+    Simulator steps the state it returned without checking it again).
     """
 
     t: float
@@ -24,9 +29,9 @@ class State:
 
     def __post_init__(self) -> None:
         for name in ("q", "v"):
-            arr = np.array(getattr(self, name), dtype=float)
-            arr.setflags(write=False)
-            object.__setattr__(self, name, arr)
+            object.__setattr__(self, name, _frozen(real_array(name, getattr(self, name))))
+        if isinstance(self.t, (complex, str, bytes)):
+            raise InvalidState(f"t must be a real number, got {shown(self.t)}")
         object.__setattr__(self, "t", float(self.t))
 
     @classmethod
@@ -37,8 +42,8 @@ class State:
         q.setflags(False)  # type: ignore[call-arg]
         v.setflags(False)  # type: ignore[call-arg]
         _set_t(state, float(t))  # past the frozen __setattr__: the slots' own setters (0.52 -> 0.40 us)
-        _set_q(state, q)
-        _set_v(state, v)
+        _set_q(state, q.view())  # views of read-only arrays: numpy will not make them writable (_frozen)
+        _set_v(state, v.view())
         return state
 
     def copy(self) -> State:
@@ -54,6 +59,21 @@ class State:
         """Load a state written by :meth:`save`."""
         with np.load(path, allow_pickle=False) as f:
             return cls(float(f["t"]), f["q"], f["v"])
+
+
+def real_array(name: str, value: object) -> np.ndarray:
+    """``value`` as a new float array; a complex or non-numeric one is an :class:`InvalidState` (numpy
+    would drop the imaginary part with a warning, or fail with its own words)."""
+    arr = np.asarray(value)
+    if arr.dtype.kind not in "biuf":
+        raise InvalidState(f"{name} must hold real numbers, got {arr.dtype} values {shown(value)}")
+    return np.array(arr, dtype=float)
+
+
+def _frozen(arr: np.ndarray) -> np.ndarray:
+    """A read-only view of ``arr``, itself made read-only: numpy refuses to make the view writable again."""
+    arr.setflags(write=False)
+    return arr.view()
 
 
 _new = object.__new__

@@ -44,6 +44,16 @@ def check_urdf(path: Path) -> None:
             raise InvalidRobot(f"{path}: {where}: negative mass {element.get('value')}")
 
 
+def mimic_joints(path: Path) -> list[tuple[str, str]]:
+    """(joint, the joint it mimics) for every joint of the URDF at ``path`` with a <mimic> element."""
+    return [
+        (owner.get("name", ""), mimic.get("joint", ""))
+        for owner in _root(path)
+        if owner.tag == "joint"
+        for mimic in owner.iter("mimic")
+    ]
+
+
 def mesh_fault(path: Path, package_dirs: list[str], error: str) -> str | None:
     """What is wrong with the meshes of the URDF at ``path``, given the ``error`` Pinocchio raised
     building it: the first mesh that is not where Pinocchio looks for it (``package://`` against
@@ -72,13 +82,16 @@ def mesh_fault(path: Path, package_dirs: list[str], error: str) -> str | None:
     return None
 
 
-def _elements(path: Path) -> Iterator[tuple[str, ET.Element]]:
-    """(the link or joint it belongs to, element) for every element of the URDF."""
+def _root(path: Path) -> ET.Element:
     try:
-        root = ET.parse(path).getroot()
+        return ET.parse(path).getroot()
     except ET.ParseError as err:
         raise InvalidRobot(f"{path}: not well-formed XML ({err})") from err
-    for owner in root:
+
+
+def _elements(path: Path) -> Iterator[tuple[str, ET.Element]]:
+    """(the link or joint it belongs to, element) for every element of the URDF."""
+    for owner in _root(path):
         where = f"{owner.tag} '{owner.get('name')}'"
         for element in owner.iter():
             yield where, element
