@@ -241,9 +241,11 @@ def _pyramids(  # type: ignore[no-untyped-def]
         starts[i + 1] = starts[i] + (1 if mu[i] == 0 or sliding[i] else facets)
         contact_bound[i] = bound_of(level, dt, stabilisation, gap[i], 0.0, 0.0, True)
         if not acceleration:
-            # restitution: an approaching contact that closes within the step (under the free motion:
-            # the margin finds contacts earlier) leaves at -e u_n at least; De Saxce shift mu |slip|
-            if e[i] > 0 and -u_n > threshold and gap[i] + dt * dot(n, J3[i] @ x_free) <= 0.0:
+            # restitution: an approaching contact that closes within the step leaves at -e u_n at least
+            # (velocity level: under the free motion, as the margin finds contacts earlier; impulse level:
+            # every contact here, is_active's closing test chose them); De Saxce shift mu |slip|
+            closes = level == 1 or gap[i] + dt * dot(n, J3[i] @ x_free) <= 0.0
+            if e[i] > 0 and -u_n > threshold and closes:
                 contact_bound[i] = max(contact_bound[i], -e[i] * u_n)
             if not pyramid:
                 contact_bound[i] -= mu[i] * speed
