@@ -25,7 +25,8 @@ At the acceleration level a sliding contact (|u_t| > SLIP_SPEED) cannot be posed
 (its force is on the cone's edge opposite the slip, which couples to the normal force): it keeps
 the normal row and receives the friction force -mu lambda_n u_t/|u_t| outside the QP, with lambda_n
 iterated to a fixed point (``Options.friction_iterations``); a contact whose slip that force would
-reverse within the step sticks instead.
+reverse within the step sticks instead. A sticking contact's rows stop its slip within the step (the
+Baumgarte rate on it let a stopping block creep, its slip shrinking by 1 - 2 stabilisation a step).
 
 All contacts of a step are handled at once, as arrays; ``Context.lagged`` holds the fixed-point
 values ("slip", "normal", "stops") aligned with the contacts that produced rows.
@@ -229,10 +230,11 @@ def _pyramids(  # type: ignore[no-untyped-def]
     acceleration = level == 2
     J3 = point_jacobians_from(joint_jacobians, masks, joints, other_joints, points)
     starts[0], sliding = 0, np.zeros(m, np.bool_)
-    contact_bound, slip_used = np.empty(m), slips.copy()
+    contact_bound, slip_used, u = np.empty(m), slips.copy(), np.empty((m, 3))
     for i in range(m):
         n = normal[i]
         u0, u1, u2 = dot(J3[i, 0], v), dot(J3[i, 1], v), dot(J3[i, 2], v)
+        u[i] = (u0, u1, u2)
         u_n = u0 * n[0] + u1 * n[1] + u2 * n[2]
         if acceleration or np.isnan(slips[i, 0]):  # the current slip
             slip_used[i] = (u0 - u_n * n[0], u1 - u_n * n[1], u2 - u_n * n[2])
@@ -266,7 +268,10 @@ def _pyramids(  # type: ignore[no-untyped-def]
         if count == 1:  # the normal row alone
             generators[r] = n
         else:  # friction opposes the tangential velocity the contact would have without it
+            # (acceleration level: the acceleration that keeps it, plus the one that stops it in the step)
             tendency = np.array([dot(J[i, j], x_free) + drift[i, j] for j in range(3)])
+            if acceleration:
+                tendency += u[i] / dt
             t = -tendency + (tendency[0] * n[0] + tendency[1] * n[1] + tendency[2] * n[2]) * n
             norm = np.sqrt(t[0] ** 2 + t[1] ** 2 + t[2] ** 2)
             if pyramid or norm <= 1e-12:  # a fixed basis: n x (the axis of n's smallest component)
@@ -283,10 +288,12 @@ def _pyramids(  # type: ignore[no-untyped-def]
             g = generators[r + k]
             for c in range(nv):
                 rows[r + k, c] = g[0] * J[i, 0, c] + g[1] * J[i, 1, c] + g[2] * J[i, 2, c]
-            if acceleration:  # the row's own rate and drift
-                rate = g[0] * dot(J[i, 0], v) + g[1] * dot(J[i, 1], v) + g[2] * dot(J[i, 2], v)
+            if acceleration:  # the row's drift; Baumgarte on the normal rate, the slip stopped in the step
+                u_n = n[0] * u[i, 0] + n[1] * u[i, 1] + n[2] * u[i, 2]
+                slip_rate = g[0] * u[i, 0] + g[1] * u[i, 1] + g[2] * u[i, 2] - u_n
                 row_drift = g[0] * drift[i, 0] + g[1] * drift[i, 1] + g[2] * drift[i, 2]
-                bound[r + k] = bound_of(level, dt, stabilisation, gap[i], rate, row_drift, True)
+                normal_bound = bound_of(level, dt, stabilisation, gap[i], u_n, row_drift, True)
+                bound[r + k] = normal_bound - slip_rate / dt
             else:
                 bound[r + k] = contact_bound[i]
     if sliding.any():
