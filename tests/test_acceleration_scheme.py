@@ -2,9 +2,11 @@
 restitution from any starting gap, Coulomb's law while sliding, the stop of a sliding block."""
 
 import numpy as np
+import pinocchio as pin
 import pytest
 
 import gaussim
+from gaussim.bench.metrics import Recorder
 
 from .conftest import G, at_height
 
@@ -13,6 +15,9 @@ BOX_HALF_HEIGHT = 0.05  # robots/box.urdf [m]
 STICK_SPEED = 1e-6  # [m/s]
 RESTITUTION_RTOL = 1e-6  # the impulse is a QP's answer, to ProxQP's tolerance
 MOREAU_ATOL = 1e-6  # [m/s]
+COULOMB_RTOL = 1e-6  # f_t = mu f_n while sliding
+ROD_INERTIA = 0.08333  # [kg m^2], about the rod's centre, across it
+TIP_RADIUS = 0.01  # [m]
 # starting gaps [m] across one step's travel at 1 m/s and dt = 1 ms: finely where the contact becomes
 # active (1 mm, within Options.active_tolerance), and at random around it
 GAPS = np.r_[np.linspace(0.999e-3, 1.002e-3, 31), np.random.default_rng(4).uniform(0.9e-3, 1.1e-3, 20)]
@@ -105,3 +110,75 @@ def test_a_sliding_block_stops_at_the_closed_form_time(box, dt):
     for _ in range(10):
         state = sim.step(state)
         assert np.linalg.norm(state.v) < STICK_SPEED
+
+
+_ROD = f"""<?xml version="1.0"?>
+<robot name="rod"><link name="world"/>
+  <joint name="rod_joint" type="floating"><parent link="world"/><child link="rod"/></joint>
+  <link name="rod">
+    <inertial><mass value="1"/>
+      <inertia ixx="1e-4" ixy="0" ixz="0" iyy="{ROD_INERTIA}" iyz="0" izz="{ROD_INERTIA}"/></inertial>
+    <collision><origin xyz="0.5 0 0"/><geometry><sphere radius="{TIP_RADIUS}"/></geometry></collision>
+  </link>
+</robot>
+"""
+
+
+@pytest.fixture(scope="module")
+def rod(tmp_path_factory) -> gaussim.Robot:
+    """A free 1 kg, 1 m rod along its x axis with a small ball at its +x tip."""
+    path = tmp_path_factory.mktemp("rod") / "rod.urdf"
+    path.write_text(_ROD)
+    return gaussim.load_robot(path)
+
+
+def _sliding_rod(rod, slip, iterations=10):
+    """The rod at 45 degrees, its tip on a mu = 1 ground, translating at ``slip`` m/s along x."""
+    mu, theta = 1.0, np.pi / 4
+    options = gaussim.Options(scheme="acceleration", friction_iterations=iterations)
+    sim = gaussim.Simulator(gaussim.Scene(rod, ground=gaussim.Ground(friction=mu)), options)
+    R = pin.rpy.rpyToMatrix(0, theta, 0)  # the tip down, at 0.5 (cos, 0, -sin) theta from the centre
+    q = rod.neutral()
+    q[2], q[3:7] = 0.5 * np.sin(theta) + TIP_RADIUS, pin.Quaternion(R).coeffs()
+    v = np.zeros(6)
+    v[:3] = R.T @ np.array([slip, 0.0, 0.0])  # the free flyer's velocity is in its own frame
+    return sim, sim.reset(q, v), mu, theta
+
+
+@pytest.mark.parametrize("slip", [1.0, -1.0])
+def test_a_sliding_rod_meets_coulombs_law(rod, slip):
+    """A rod at 45 degrees sliding on its tip with mu = 1 (the friction's moment loads the normal
+    row: the lagged iteration's slope is 0.6, it stopped at f_t / f_n = 0.9955 after its 10 QPs):
+    every step has f_t = mu f_n, against the slip, and the first (at rest in rotation: no drift) the
+    normal force of the rigid rod, m g / (1 + m r_x^2 / I + sign(slip) mu m r_x r_z / I) for the
+    contact point r from the centre."""
+    sim, state, mu, theta = _sliding_rod(rod, slip)
+    r_x, r_z = 0.5 * np.cos(theta), -0.5 * np.sin(theta) - TIP_RADIUS
+    normal = G / (1 + r_x**2 / ROD_INERTIA + np.sign(slip) * mu * r_x * r_z / ROD_INERTIA)
+    for k in range(20):
+        state = sim.step(state)
+        report = sim.last_step
+        assert report.converged and not report.friction_unsettled
+        (contact,) = report.contacts
+        friction = contact.tangential_force
+        assert np.linalg.norm(friction) == pytest.approx(mu * contact.normal_force, rel=COULOMB_RTOL)
+        assert friction[0] * slip < 0 and abs(contact.gap) < 1e-6
+        if k == 0:
+            assert contact.normal_force == pytest.approx(normal, rel=COULOMB_RTOL)
+
+
+def test_an_unsettled_sliding_friction_is_reported_and_counted(rod):
+    """Two QPs are too few for the sliding rod's normal force: each step says so, is not converged,
+    and the benchmark's recorder and a run log's summary count it."""
+    sim, state, _, _ = _sliding_rod(rod, 1.0, iterations=2)
+    recorder = Recorder(sim)
+    log = gaussim.RunLog("rod", "", sim.options)
+    log.start(state)
+    for _ in range(3):
+        state = recorder.step(state)
+        report = sim.last_step
+        assert report.friction_unsettled and not report.converged
+        assert all(c.converged for c in report.certificates)  # each QP did
+        log.record(state, np.zeros(6), report)
+    assert recorder.unconverged == 3
+    assert "steps not converged: 3" in log.summary()

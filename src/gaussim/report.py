@@ -115,9 +115,17 @@ class StepReport:
         return any(m.name == "contact" and rows.data.relaxed for m, rows, _ in self.blocks)  # type: ignore[attr-defined]
 
     @property
+    def friction_unsettled(self) -> bool:
+        """True when the acceleration-level sliding friction had not reached its fixed point (its
+        normal forces still moving, f_t = mu f_n not met) when ``Options.friction_iterations`` QPs were
+        spent (see gaussim.constraints.contact); the step is then not ``converged``."""
+        return any(m.name == "contact" and rows.data.unsettled for m, rows, _ in self.blocks)  # type: ignore[attr-defined]
+
+    @property
     def converged(self) -> bool:
-        """True when every QP of the step converged (vacuously true when none was needed)."""
-        return all(c.converged for c in self.certificates)
+        """True when every QP of the step converged (vacuously true when none was needed) and so did
+        its friction fixed point (``friction_unsettled``)."""
+        return all(c.converged for c in self.certificates) and not self.friction_unsettled
 
     @property
     def iterations(self) -> int:

@@ -24,6 +24,8 @@ from .solver import CONVERGED
 from .state import State
 
 FORMAT_VERSION = 1
+# The status of a step whose QPs converged and friction fixed point did not (friction_unsettled).
+FRICTION_UNSETTLED = "FRICTION_UNSETTLED"
 
 
 class RunLogError(GaussimError):
@@ -71,6 +73,8 @@ class RunLog:
         self._tau.append(np.asarray(tau, dtype=float))
         statuses = [c.status for c in report.certificates]
         worst = next((s for s in statuses if s not in CONVERGED), statuses[0] if statuses else "NO_QP")
+        if worst in CONVERGED and report.friction_unsettled:
+            worst = FRICTION_UNSETTLED
         self._solver.append((len(statuses), report.iterations, report.max_residual, worst))
         for c in report.contacts:
             if c.name not in self._ids:
