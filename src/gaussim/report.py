@@ -38,7 +38,8 @@ class StepReport:
         limits: joint-limit torques [N m] (forces [N] for prismatic joints).
         bilaterals: bilateral reaction wrenches.
         impact: the reactions of an impact resolved at the start of the step, as impulses
-            ([N s], [N m s]) (acceleration scheme only), or None.
+            ([N s], [N m s]) (acceleration scheme only), or None; its own ``impact`` holds the next
+            projection, when that one left a contact approaching.
         certificates: one per QP solved this step (fixed-point iterations and impacts add QPs).
         timings: wall time per stage [s]: dynamics, collision, assembly, solve, integrate, when the
             step was timed (``Options.timings``), else empty (from ``marks``: (stage,
