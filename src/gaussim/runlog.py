@@ -24,7 +24,7 @@ from .solver import CONVERGED
 from .state import State
 
 FORMAT_VERSION = 1
-# The status of a step whose QPs converged and friction fixed point did not (friction_unsettled).
+# A step's status when its QPs converged but its friction fixed point did not (friction_unsettled).
 FRICTION_UNSETTLED = "FRICTION_UNSETTLED"
 
 

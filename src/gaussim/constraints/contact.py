@@ -27,8 +27,8 @@ the normal row and receives the friction force -mu lambda_n u_t/|u_t| outside th
 iterated to a fixed point with Anderson mixing (:func:`_anderson`) in at most
 ``Options.friction_iterations`` QPs (a step that spends them unsettled says so:
 ``StepReport.friction_unsettled``); a contact whose slip that force would reverse within the step
-sticks instead. A sticking contact's rows stop its slip within the step (the Baumgarte rate on it let
-a stopping block creep, its slip shrinking by 1 - 2 stabilisation a step).
+sticks instead. A sticking contact's rows stop its slip within the step (a Baumgarte rate on it
+would let a stopping block creep, its slip shrinking by 1 - 2 stabilisation a step).
 
 All contacts of a step are handled at once, as arrays; ``Context.lagged`` holds the fixed-point
 values ("slip", "normal", "stops", and the mixing's "history") aligned with the contacts that produced
@@ -447,8 +447,9 @@ def _anderson(history: tuple[list, list], x: np.ndarray, y: np.ndarray) -> np.nd
     """The next normal forces of the iteration x -> y = G(x) (the sliding friction lagged on x, the
     normal forces y of its QP): Anderson's mixing of the last ANDERSON_MEMORY passes, which ``history``
     (inputs, outputs) keeps. G is affine while the QP's active set stays (its slope, the friction's
-    pull on the normal row, is 0.6 for a rod at 45 degrees and mu = 1: plain passes lagged 0.5 % after
-    ten), and the mixing then reaches its fixed point in one pass per sliding contact, plus one."""
+    pull on the normal row, is 0.6 for a rod at 45 degrees and mu = 1, which plain passes divide the
+    error by), and the mixing then reaches its fixed point in one pass per sliding contact, plus one
+    (for fewer than ANDERSON_MEMORY of them)."""
     inputs, outputs = history
     inputs.append(x)
     outputs.append(y)
