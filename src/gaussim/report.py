@@ -38,7 +38,8 @@ class StepReport:
         limits: joint-limit torques [N m] (forces [N] for prismatic joints).
         bilaterals: bilateral reaction wrenches.
         impact: the reactions of an impact resolved at the start of the step, as impulses
-            ([N s], [N m s]) (acceleration scheme only), or None.
+            ([N s], [N m s]) (acceleration scheme only), or None; its own ``impact`` holds the next
+            projection, when that one left a contact approaching.
         certificates: one per QP solved this step (fixed-point iterations and impacts add QPs).
         timings: wall time per stage [s]: dynamics, collision, assembly, solve, integrate, when the
             step was timed (``Options.timings``), else empty (from ``marks``: (stage,
@@ -115,9 +116,17 @@ class StepReport:
         return any(m.name == "contact" and rows.data.relaxed for m, rows, _ in self.blocks)  # type: ignore[attr-defined]
 
     @property
+    def friction_unsettled(self) -> bool:
+        """True when the acceleration-level sliding friction had not reached its fixed point (its
+        normal forces still moving, f_t = mu f_n not met) when ``Options.friction_iterations`` QPs were
+        spent (see gaussim.constraints.contact); the step is then not ``converged``."""
+        return any(m.name == "contact" and rows.data.unsettled for m, rows, _ in self.blocks)  # type: ignore[attr-defined]
+
+    @property
     def converged(self) -> bool:
-        """True when every QP of the step converged (vacuously true when none was needed)."""
-        return all(c.converged for c in self.certificates)
+        """True when every QP of the step converged (vacuously true when none was needed) and so did
+        its friction fixed point (``friction_unsettled``)."""
+        return all(c.converged for c in self.certificates) and not self.friction_unsettled
 
     @property
     def iterations(self) -> int:

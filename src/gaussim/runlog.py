@@ -60,6 +60,8 @@ LAYOUT: dict[str, tuple[str, tuple[str, ...]]] = {
     "solver_kkt_residual": ("f", ("N",)),
     "solver_status": ("U", ("N",)),
 }
+# A step's status when its QPs converged but its friction fixed point did not (friction_unsettled).
+FRICTION_UNSETTLED = "FRICTION_UNSETTLED"
 
 
 class RunLogError(GaussimError):
@@ -107,6 +109,8 @@ class RunLog:
         self._tau.append(np.asarray(tau, dtype=float))
         statuses = [c.status for c in report.certificates]
         worst = next((s for s in statuses if s not in CONVERGED), statuses[0] if statuses else "NO_QP")
+        if worst in CONVERGED and report.friction_unsettled:
+            worst = FRICTION_UNSETTLED
         self._solver.append((len(statuses), report.iterations, report.max_residual, worst))
         for c in report.contacts:
             if c.name not in self._ids:

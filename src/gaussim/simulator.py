@@ -270,16 +270,24 @@ class Simulator:
         return dyn
 
     def _impact(self, state: State, M: np.ndarray, contacts: Contacts, report: StepReport) -> np.ndarray:
-        """The impulsive Gauss projection of v when v violates an impulse-level row, else v itself."""
-        ctx = self._context("impulse", state.q, state.v, state.v, contacts)
-        parts = self._rows(ctx)
-        if not any(
-            np.any(rows.J @ state.v < rows.bound - IMPACT_TOLERANCE) for _, rows in parts if not rows.equality
-        ):
-            return state.v
-        report.impact = StepReport(state.t, report.timed)
-        v = self._solve(ctx, M, -(M @ state.v), parts, report.impact, 1.0)
-        report.certificates += report.impact.certificates
+        """The impulsive Gauss projection of v while v violates an impulse-level row, else v itself.
+
+        A projection can set a contact it did not hold approaching (a ball struck towards the next one,
+        within a step): it is projected again, so no approach faster than ``restitution_threshold`` is
+        left to the acceleration level's Baumgarte rows, which stopped it plastically (slower ones are
+        inelastic, and a projection's own rows are met only to the QP's tolerance). Each projection's
+        impulses are in ``report.impact``, the next ones in its own ``impact``."""
+        v, last, tolerance = state.v, report, IMPACT_TOLERANCE
+        for _ in range(len(contacts.gap) + 1):  # each projection makes a contact separate, or ends
+            ctx = self._context("impulse", state.q, v, v, contacts)
+            parts = self._rows(ctx)
+            if not any(np.any(rows.J @ v < rows.bound - tolerance) for _, rows in parts if not rows.equality):
+                break
+            tolerance = max(IMPACT_TOLERANCE, self.options.restitution_threshold)
+            last.impact = StepReport(state.t, report.timed)
+            last = last.impact
+            v = self._solve(ctx, M, -(M @ v), parts, last, 1.0)
+            report.certificates += last.certificates
         return v
 
     def _gauss(
