@@ -10,6 +10,9 @@ from .exceptions import InvalidOptions
 SCHEMES = ("velocity", "acceleration")
 FRICTION_MODES = ("pyramid", "accurate", "exact")
 ON_FAILURE = ("raise", "report")
+# Beyond this the pyramid is within 1 - cos(pi / k) = 0.12 % of the cone, and a QP of thousands of rows per
+# contact makes ProxQP abort the process (8000 facets: SIGABRT).
+MAX_FRICTION_FACETS = 64
 
 
 @dataclass(frozen=True)
@@ -21,7 +24,8 @@ class Options:
         scheme: ``"velocity"`` (discrete Gauss principle on v+, Moreau-Jean time stepping; default)
             or ``"acceleration"`` (the paper's scheme: Gauss principle on a over the active set,
             impulsive projection at impacts, Baumgarte stabilisation).
-        friction_facets: number k of facets of the pyramid approximating the Coulomb cone (>= 3).
+        friction_facets: number k of facets of the pyramid approximating the Coulomb cone (3 to
+            MAX_FRICTION_FACETS).
         friction_mode: ``"pyramid"`` (Anitescu's convex relaxation: one QP, sliding contacts lift off
             by mu*|slip|*dt per step), ``"accurate"`` (default: the pyramid is turned against the free
             tangential velocity and its normal bound shifted by mu*|slip| of the current velocity, the
@@ -71,7 +75,7 @@ class Options:
         _choice("scheme", self.scheme, SCHEMES)
         _choice("friction_mode", self.friction_mode, FRICTION_MODES)
         _choice("on_failure", self.on_failure, ON_FAILURE)
-        _integer("friction_facets", self.friction_facets, minimum=3)
+        _integer("friction_facets", self.friction_facets, minimum=3, maximum=MAX_FRICTION_FACETS)
         _integer("friction_iterations", self.friction_iterations, minimum=1)
         _integer("max_iter", self.max_iter, minimum=1)
         _positive("eps_abs", self.eps_abs)
@@ -110,9 +114,11 @@ def _non_negative(field: str, value: object) -> None:
         raise InvalidOptions(field, f"must be a finite number >= 0, got {value!r}")
 
 
-def _integer(field: str, value: object, minimum: int) -> None:
+def _integer(field: str, value: object, minimum: int, maximum: int | None = None) -> None:
     if not (isinstance(value, int) and not isinstance(value, bool) and value >= minimum):
         raise InvalidOptions(field, f"must be an integer >= {minimum}, got {value!r}")
+    if maximum is not None and value > maximum:
+        raise InvalidOptions(field, f"must be at most {maximum}, got {value!r}")
 
 
 def _choice(field: str, value: object, choices: tuple[str, ...]) -> None:
