@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from .files import atomic_path
 from .runlog import RunLog
 from .scene import Scene
 
@@ -95,11 +96,12 @@ def save_plot(log: RunLog, scene: Scene, path: str | Path, what: str = "forces")
     if what not in WHATS:
         raise ValueError(f"what must be one of {', '.join(WHATS)}, got {what!r}")
     figure = (force_figure if what == "forces" else energy_figure)(log, scene)
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    figure.savefig(path, dpi=110)
-    _pyplot().close(figure)
-    return path
+    try:
+        with atomic_path(path) as tmp:  # a failed write leaves any previous image
+            figure.savefig(tmp, dpi=110)
+    finally:
+        _pyplot().close(figure)
+    return Path(path)
 
 
 def pareto_figure(records: list[dict], title: str) -> Any:

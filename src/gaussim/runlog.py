@@ -1,15 +1,25 @@
-"""Run logs: everything a run produced, saved atomically as a compressed ``.npz`` (no pickle).
+"""Run logs: everything a run produced, no pickle.
 
 A log holds t, q, v (N + 1 states), tau (N steps), the per-contact forces, points, normals and gaps
 of each step, the limit reactions, the solver certificate of each step, the scene text and the
-options: a run can be reproduced and analysed from its log alone. A run that stops early (Ctrl-C,
-a solver failure) still writes a valid log of the steps it made, marked incomplete with the reason.
+options: a run can be reproduced and analysed from its log alone.
+
+Two forms, both read by :meth:`RunLog.load`: one compressed ``.npz`` (:meth:`RunLog.save`, written
+atomically), and the directory a run writes as it goes (:class:`RunLogWriter`): ``header.json`` and
+numbered chunks ``chunk-000000.npz``, ``chunk-000001.npz``, ... of the steps since the last one, each
+written atomically and never rewritten. Logging a run thus costs O(new steps) and bounded memory, and
+at any instant (a SIGKILL, a full disk) the directory is a valid log of a prefix of the run: the
+header says complete only once the last chunk is in. A directory is the simplest such format that
+keeps the dependencies to numpy (HDF5 or Zarr would add one, and an appended zip is invalid while
+its end is being written).
 """
 
 from __future__ import annotations
 
 import json
 import os
+import re
+import shutil
 import tempfile
 from dataclasses import asdict
 from pathlib import Path
@@ -18,12 +28,18 @@ from typing import Any
 import numpy as np
 
 from .exceptions import GaussimError
+from .files import OutputError, atomic_path, umask, write_atomic
 from .options import Options
 from .report import StepReport
 from .solver import CONVERGED
 from .state import State
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 1  # the single .npz
+DIRECTORY_VERSION = 2  # the directory of chunks
+HEADER = "header.json"
+CHUNK = re.compile(r"chunk-(\d{6})\.npz")
+# the header of a run still going, or ended without a word (SIGKILL, power cut)
+RUNNING = "still running, or stopped by a kill: the log holds the steps of its chunks"
 
 
 class RunLogError(GaussimError):
@@ -58,6 +74,8 @@ class RunLog:
         self.limit_names: list[str] = []
         self._ids: dict[str, int] = {}
         self._limit_ids: dict[str, int] = {}
+        self._drained = 0  # steps already handed to a RunLogWriter (dropped from memory)
+        self._names_drained = self._limit_names_drained = 0
 
     # -- recording ---------------------------------------------------------------------------------
 
@@ -66,7 +84,7 @@ class RunLog:
 
     def record(self, state: State, tau: np.ndarray, report: StepReport) -> None:
         """Add the step that led to ``state`` under torque ``tau`` (nv,) and its report."""
-        step = len(self._tau)
+        step = self.steps
         self._append_state(state)
         self._tau.append(np.asarray(tau, dtype=float))
         statuses = [c.status for c in report.certificates]
@@ -98,6 +116,11 @@ class RunLog:
 
     @property
     def steps(self) -> int:
+        return self._drained + len(self._tau)
+
+    @property
+    def buffered(self) -> int:
+        """Steps held in memory, not yet handed to a writer."""
         return len(self._tau)
 
     @property
@@ -138,64 +161,85 @@ class RunLog:
 
     # -- files -----------------------------------------------------------------------------------------
 
-    def save(self, path: str | Path) -> Path:
-        """Write the log atomically: a half-written file never replaces a good one."""
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
+    def _rows(self) -> dict[str, np.ndarray]:
+        """The per-state, per-step and per-row arrays held in memory, with the names first seen in them."""
         contacts, solver = self.contact_arrays(), self.solver_arrays()
-        arrays: dict[str, Any] = {
-            "format_version": np.array(FORMAT_VERSION),
-            "robot": np.array(self.robot),
-            "scene_text": np.array(self.scene_text),
-            "scene_path": np.array(self.scene_path),
-            "options": np.array(json.dumps(asdict(self.options))),
-            "complete": np.array(self.complete),
-            "reason": np.array(self.reason),
-            "wall_time": np.array(np.nan if self.wall_time is None else self.wall_time),
+        return {
             "t": self.t,
             "q": self.q,
             "v": self.v,
             "tau": self.tau,
-            "contact_names": np.array(self.contact_names, dtype=str),
-            "contact_geometry": np.array(self.contact_geometry, dtype=str),
-            "contact_obstacle": np.array(self.contact_obstacle, dtype=str),
-            "limit_names": np.array(self.limit_names, dtype=str),
+            "contact_names": np.array(self.contact_names[self._names_drained :], dtype=str),
+            "contact_geometry": np.array(self.contact_geometry[self._names_drained :], dtype=str),
+            "contact_obstacle": np.array(self.contact_obstacle[self._names_drained :], dtype=str),
+            "limit_names": np.array(self.limit_names[self._limit_names_drained :], dtype=str),
             "limit_step": np.array([r[0] for r in self._limits], dtype=int),
             "limit_id": np.array([r[1] for r in self._limits], dtype=int),
             "limit_torque": np.array([r[2] for r in self._limits], dtype=float),
             **{f"contact_{k}": v for k, v in contacts.items()},
             **{f"solver_{k}": v for k, v in solver.items()},
         }
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-        try:
-            with os.fdopen(fd, "wb") as f:
-                np.savez_compressed(f, **arrays)
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
-        return path
+
+    def _forget(self) -> None:
+        """Drop the rows held in memory (a writer has them on disk): a long run's memory stays bounded."""
+        self._drained += len(self._tau)
+        self._names_drained, self._limit_names_drained = len(self.contact_names), len(self.limit_names)
+        for buffer in (self._t, self._q, self._v, self._tau, self._solver, self._contacts, self._limits):
+            buffer.clear()
+
+    def _header(self) -> dict[str, Any]:
+        return {
+            "robot": self.robot,
+            "scene_text": self.scene_text,
+            "scene_path": self.scene_path,
+            "options": asdict(self.options),
+            "complete": self.complete,
+            "reason": self.reason,
+            "wall_time": self.wall_time,
+        }
+
+    def save(self, path: str | Path) -> Path:
+        """Write the whole log as one ``.npz``, atomically: a half-written file never replaces a good one."""
+        if self._drained:
+            raise RunLogError("this log was written by a RunLogWriter: load it from its directory")
+        header = self._header()
+        arrays: dict[str, Any] = {
+            "format_version": np.array(FORMAT_VERSION),
+            **{k: np.array(v) for k, v in header.items() if k not in ("options", "wall_time")},
+            "options": np.array(json.dumps(header["options"])),
+            "wall_time": np.array(np.nan if self.wall_time is None else self.wall_time),
+            **self._rows(),
+        }
+        with atomic_path(path) as tmp, tmp.open("wb") as f:
+            np.savez_compressed(f, **arrays)
+        return Path(path)
 
     @classmethod
     def load(cls, path: str | Path) -> RunLog:
-        """Read a log written by :meth:`save`."""
-        try:
-            with np.load(path, allow_pickle=False) as f:
-                data = {k: f[k] for k in f.files}
-        except (OSError, ValueError) as err:
-            raise RunLogError(f"{path}: not a readable .npz run log ({err})") from err
-        if "format_version" not in data:
-            raise RunLogError(f"{path}: not a gaussim run log (no format_version)")
-        log = cls(str(data["robot"]), str(data["scene_text"]), Options(**json.loads(str(data["options"]))))
-        log.scene_path = str(data["scene_path"])
-        log.complete, log.reason = bool(data["complete"]), str(data["reason"])
-        log.wall_time = None if np.isnan(data["wall_time"]) else float(data["wall_time"])
+        """Read a log: a ``.npz`` written by :meth:`save`, or a directory written by :class:`RunLogWriter`
+        (all its chunks, up to the first one missing)."""
+        path = Path(path)
+        if path.is_dir():
+            header, data = _read_directory(path)
+        else:
+            data = _read_npz(path)
+            if "format_version" not in data:
+                raise RunLogError(f"{path}: not a gaussim run log (no format_version)")
+            header = {k: data[k].item() for k in ("robot", "scene_text", "scene_path", "complete", "reason")}
+            header["options"] = json.loads(str(data["options"]))
+            header["wall_time"] = None if np.isnan(data["wall_time"]) else float(data["wall_time"])
+        log = cls(str(header["robot"]), str(header["scene_text"]), Options(**header["options"]))
+        log.scene_path = str(header["scene_path"])
+        log.complete, log.reason = bool(header["complete"]), str(header["reason"])
+        log.wall_time = header["wall_time"]
         log._t, log._q, log._v = list(data["t"]), list(data["q"]), list(data["v"])
         log._tau = list(data["tau"])
         log.contact_names = list(map(str, data["contact_names"]))
         log.contact_geometry = list(map(str, data["contact_geometry"]))
         log.contact_obstacle = list(map(str, data["contact_obstacle"]))
         log.limit_names = list(map(str, data["limit_names"]))
+        log._ids = {name: i for i, name in enumerate(log.contact_names)}
+        log._limit_ids = {name: i for i, name in enumerate(log.limit_names)}
         log._contacts = list(
             zip(
                 data["contact_step"].tolist(),
@@ -276,3 +320,122 @@ class RunLog:
                     f" {1e3 * c['gap'][mine].min():>13.4f}"
                 )
         return "\n".join(lines)
+
+
+class RunLogWriter:
+    """Writes the log of a run as it goes, into a directory (see the module docstring).
+
+    Made after the log's first state and before the first step, so that a path that cannot be written
+    is reported before the run. A log already at ``path`` (a directory or an ``.npz``) is moved to
+    ``path.prev`` (an older ``.prev`` log is removed); anything else there is refused, never deleted.
+
+    Attributes:
+        path: the directory.
+        previous: where the log that was at ``path`` went, or None.
+        steps: the steps on disk.
+    """
+
+    def __init__(self, path: str | Path, log: RunLog) -> None:
+        self.path, self.log, self.steps, self._chunks = Path(path), log, 0, 0
+        _check_replaceable(self.path)
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            # made under a temporary name, so that a failure here leaves what was at path as it was
+            new = Path(tempfile.mkdtemp(prefix=f".{self.path.name}.", suffix=".new", dir=self.path.parent))
+            new.chmod(0o777 & ~umask())
+        except OSError as err:
+            raise OutputError(f"run log {self.path}: cannot be written ({err.strerror or err})") from err
+        try:
+            self.path, final = new, self.path
+            self._write_header()
+            self.append()  # the initial state: from here on the directory is a valid log
+            self.previous = _set_aside(final)
+            os.replace(new, final)
+            self.path = final
+        except OSError as err:
+            shutil.rmtree(new, ignore_errors=True)
+            raise OutputError(f"run log {final}: cannot be written ({err.strerror or err})") from err
+
+    def append(self) -> None:
+        """Write the steps recorded since the last chunk as the next chunk (nothing when there is none)."""
+        if self.log.buffered == 0 and self._chunks > 0:
+            return
+        with atomic_path(self.path / f"chunk-{self._chunks:06d}.npz") as tmp, tmp.open("wb") as f:
+            np.savez_compressed(f, **self.log._rows())  # type: ignore[arg-type]
+        self.log._forget()
+        self._chunks += 1
+        self.steps = self.log.steps
+
+    def close(self) -> None:
+        """Write the last chunk, then the header with the log's outcome (complete or why not; the header
+        also when the chunk cannot be written)."""
+        try:
+            self.append()
+        finally:
+            self._write_header()
+
+    def _write_header(self) -> None:
+        header = {"format_version": DIRECTORY_VERSION, **self.log._header()}
+        if self._chunks == 0 or not header["complete"] and header["reason"] == "not finished":
+            header["reason"] = RUNNING
+        write_atomic(self.path / HEADER, json.dumps(header, indent=1).encode())
+
+
+def is_run_log(path: Path) -> bool:
+    """True for a run log file or directory (checked from its header, not its name)."""
+    if path.is_dir():
+        return (path / HEADER).is_file()
+    try:
+        with np.load(path, allow_pickle=False) as f:
+            return "format_version" in f.files
+    except (OSError, ValueError):
+        return False
+
+
+def _check_replaceable(path: Path) -> None:
+    """Raise OutputError when ``path`` or ``path.prev`` holds something that is not a run log."""
+    for p in (path, _previous(path)):
+        if p.exists() and not is_run_log(p):
+            raise OutputError(f"run log {path}: {p} exists and is not a run log; it is left alone")
+
+
+def _previous(path: Path) -> Path:
+    return path.with_name(path.name + ".prev")
+
+
+def _set_aside(path: Path) -> Path | None:
+    """Move the run log at ``path`` to ``path.prev`` (replacing an older one); None when there is none."""
+    if not path.exists():
+        return None
+    previous = _previous(path)
+    if previous.is_dir():
+        shutil.rmtree(previous)
+    elif previous.exists():
+        previous.unlink()
+    os.replace(path, previous)
+    return previous
+
+
+def _read_npz(path: Path) -> dict[str, np.ndarray]:
+    try:
+        with np.load(path, allow_pickle=False) as f:
+            return {k: f[k] for k in f.files}
+    except (OSError, ValueError, EOFError) as err:
+        raise RunLogError(f"{path}: not a readable .npz run log ({err})") from err
+
+
+def _read_directory(path: Path) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """The header and the chunks of a log directory, concatenated (up to the first chunk missing)."""
+    try:
+        header = json.loads((path / HEADER).read_text())
+    except (OSError, ValueError) as err:
+        raise RunLogError(f"{path}: not a gaussim run log directory (no readable {HEADER}: {err})") from err
+    numbers = sorted(int(m.group(1)) for p in path.iterdir() if (m := CHUNK.fullmatch(p.name)))
+    contiguous = next((k for k, n in enumerate(numbers) if n != k), len(numbers))
+    chunks = [_read_npz(path / f"chunk-{k:06d}.npz") for k in range(contiguous)]
+    if not chunks:
+        raise RunLogError(f"{path}: the run log holds no chunk (the run stopped before its first state)")
+    data = {key: np.concatenate([c[key] for c in chunks]) for key in chunks[0]}
+    if not header["complete"] and contiguous < len(numbers):
+        header["reason"] += f" (chunk {contiguous} is missing: the later ones are left out)"
+    return header, data
