@@ -78,7 +78,6 @@ def run(
     writer = RunLogWriter(out, log) if out is not None else None
     steps = max(1, round(spec.duration / spec.options.dt))
     start = last_shown = last_saved = time.perf_counter()
-    step = 0
     with _stop_signals() as stop:
         try:
             for step in range(steps):
@@ -111,6 +110,8 @@ def run(
             interruption = _interruption(err, stop.signal or _signal_name(signal.SIGINT))
             if interruption is not None:
                 log.finish(False, f"interrupted ({interruption}) at step {log.steps}, t = {state.t:.6g} s")
+                if progress is not None and writer is not None:
+                    print(f"\n{interruption}: stopping, writing the log to {writer.path}", end="", file=progress)
             else:  # a GaussimError, or a bug: either way the steps made are kept
                 log.finish(False, f"{type(err).__name__} at step {log.steps}, t = {state.t:.6g} s: {err}")
             _close(writer, log, progress)
