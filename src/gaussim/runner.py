@@ -111,7 +111,7 @@ def run(
             if interruption is not None:
                 log.finish(False, f"interrupted ({interruption}) at step {log.steps}, t = {state.t:.6g} s")
                 if progress is not None and writer is not None:
-                    print(f"\n{interruption}: stopping, writing the log to {writer.path}", end="", file=progress)
+                    print(f"\n{interruption}: stopping, writing the log {writer.path}", end="", file=progress)
             else:  # a GaussimError, or a bug: either way the steps made are kept
                 log.finish(False, f"{type(err).__name__} at step {log.steps}, t = {state.t:.6g} s: {err}")
             _close(writer, log, progress)
