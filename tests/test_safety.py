@@ -62,8 +62,8 @@ def _start(*args: str) -> subprocess.Popen:
     return process
 
 
-def _long_run(out: Path, checkpoint_steps: int, scene: str = "fourbar") -> subprocess.Popen:
-    return _start("run", str(SCENES / f"{scene}.toml"), "--out", str(out), "--duration", "1000",
+def _long_run(out: Path, checkpoint_steps: int) -> subprocess.Popen:
+    return _start("run", str(SCENES / "fourbar.toml"), "--out", str(out), "--duration", "1000",
                   "--checkpoint-steps", str(checkpoint_steps))  # fmt: skip
 
 
@@ -112,12 +112,15 @@ def test_a_stop_signal_ends_the_run_at_the_end_of_its_step(tmp_path, stop):
     assert log.steps == 6 and not log.complete and log.reason.startswith(f"interrupted ({name}) at step 6")
 
 
-def test_sigterm_ends_the_command_at_a_step_and_keeps_the_log(tmp_path):
+def test_sigterm_ends_the_command_at_a_step_keeps_the_log_and_stops_the_viewer(tmp_path):
     out = tmp_path / "r"
-    process = _long_run(out, 50)
+    process = _start("run", str(SCENES / "fourbar.toml"), "--out", str(out), "--duration", "1000",
+                     "--checkpoint-steps", "50", "--view", "--speed", "1000")  # fmt: skip
     _wait_for_chunks(out, 3, process)
+    (server,) = psutil.Process(process.pid).children()
     process.terminate()
     _, stderr = process.communicate(timeout=30)
+    assert not psutil.wait_procs([server], timeout=SERVER_GONE)[1], "the live view's server outlived the run"
     assert process.returncode == 1, stderr
     assert "stopped by SIGTERM at step" in stderr and str(out) in stderr and "Traceback" not in stderr
     log = gaussim.RunLog.load(out)
