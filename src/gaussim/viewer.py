@@ -161,12 +161,12 @@ class Viewer:
         # the contacts of state k (k >= 1) are those of the step that led to it, step k - 1
         first = np.searchsorted(contacts["step"], states - 1, side="left")
         last = np.searchsorted(contacts["step"], states - 1, side="right")
-        model = self._robot.model
+        model, q = self._robot.model, log.q
         nodes = [
             self._robot.getViewerNodeName(g, pin.GeometryType.VISUAL) for g in self.visual.geometryObjects
         ]
         for frame, (k, lo, hi) in enumerate(zip(states.tolist(), first.tolist(), last.tolist())):
-            pin.forwardKinematics(model, self.data, log.q[k])
+            pin.forwardKinematics(model, self.data, q[k])
             pin.updateGeometryPlacements(model, self.data, self.visual, self.visual_data)
             with animation.at_frame(self.meshcat, frame) as f:
                 for node, placement in zip(nodes, self.visual_data.oMg):
