@@ -112,6 +112,33 @@ def test_a_stop_signal_ends_the_run_at_the_end_of_its_step(tmp_path, stop):
     assert log.steps == 6 and not log.complete and log.reason.startswith(f"interrupted ({name}) at step 6")
 
 
+def test_a_second_ctrl_c_stops_a_step_that_hangs_and_the_log_holds_whole_steps(tmp_path):
+    """Step 4's controller hangs: the first Ctrl-C waits for the step's end, the second stops it at once;
+    the log holds the 3 whole steps before it."""
+    calls: list[float] = []
+
+    def controller(state):
+        calls.append(state.t)
+        if len(calls) == 4:
+            os.kill(os.getpid(), signal.SIGINT)
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(30)  # a hung step (the KeyboardInterrupt ends the sleep)
+
+    spec = gaussim.load_scene(SCENES / "fourbar.toml")
+    spec.controller, spec.duration = controller, 20 * spec.options.dt
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    started = time.perf_counter()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            gaussim.run(spec, tmp_path / "r")
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    assert time.perf_counter() - started < 20, "the second Ctrl-C did not stop the hung step"
+    log = gaussim.RunLog.load(tmp_path / "r")
+    assert log.steps == 3 and len(log.t) == 4 and len(log.solver_arrays()["qps"]) == 3
+    assert log.reason.startswith("interrupted (Ctrl-C) at step 3")
+
+
 def test_sigterm_ends_the_command_at_a_step_keeps_the_log_and_stops_the_viewer(tmp_path):
     out = tmp_path / "r"
     process = _start("run", str(SCENES / "fourbar.toml"), "--out", str(out), "--duration", "1000",
