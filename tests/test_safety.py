@@ -14,6 +14,7 @@ import psutil
 import pytest
 
 import gaussim
+import gaussim.viewer
 from gaussim.cli import main
 from gaussim.files import OutputError
 from gaussim.runlog import RUNNING, RunLogWriter
@@ -147,7 +148,7 @@ def test_sigterm_ends_the_command_at_a_step_keeps_the_log_and_stops_the_viewer(t
     (server,) = psutil.Process(process.pid).children()
     process.terminate()
     _, stderr = process.communicate(timeout=30)
-    assert not psutil.wait_procs([server], timeout=SERVER_GONE)[1], "the live view's server outlived the run"
+    assert _gone(server), "the live view's server outlived the run"
     assert process.returncode == 1, stderr
     assert "stopped by SIGTERM at step" in stderr and str(out) in stderr and "Traceback" not in stderr
     log = gaussim.RunLog.load(out)
@@ -336,33 +337,36 @@ def test_sizes_out_of_bounds_exit_2_naming_the_field(tmp_path, capsys):
 
 # -- the viewer ------------------------------------------------------------------------------------------
 
-VIEWER_SCRIPT = """
-import sys, time, gaussim
-from gaussim.viewer import Viewer
-viewer = Viewer(gaussim.load_scene(sys.argv[1]).scene)
-print(viewer.meshcat.window.server_proc.pid, flush=True)
-time.sleep(600)
-"""
+# a parent that starts a live viewer's server as Viewer does (by path, its own pid as the argument), then
+# waits: no import of gaussim, so that the test is quick
+PARENT = f"{sys.executable} -u {Path(gaussim.viewer.__file__).with_name('viewer_server.py')} $$ & wait"
+
+
+def _gone(server: psutil.Process) -> bool:
+    """True when the server exits within SERVER_GONE; otherwise it is killed (no test leaves one)."""
+    _, alive = psutil.wait_procs([server], timeout=SERVER_GONE)
+    for process in alive:
+        process.kill()
+    return not alive
 
 
 def _listening(pid: int) -> set[str]:
     return {c.laddr.ip for c in psutil.Process(pid).net_connections("inet") if c.status == psutil.CONN_LISTEN}
 
 
-def test_the_viewer_listens_on_loopback_only_and_dies_with_its_parent(tmp_path):
-    parent = subprocess.Popen(
-        [sys.executable, "-c", VIEWER_SCRIPT, str(SCENES / "box_incline.toml")],
-        stdout=subprocess.PIPE, text=True, env=ENV,
-    )  # fmt: skip
+def test_the_viewer_listens_on_loopback_only_and_dies_with_its_parent():
+    parent = subprocess.Popen(["bash", "-c", PARENT], stdout=subprocess.PIPE, text=True, env=ENV)
     try:
-        server = int(parent.stdout.readline())
-        assert _listening(server) == {"127.0.0.1"}, "its web server and its ZMQ socket, on 127.0.0.1 only"
-        assert len(psutil.Process(server).net_connections("inet")) >= 2
+        assert parent.stdout.readline().startswith("zmq_url=tcp://127.0.0.1:")
+        assert parent.stdout.readline().startswith("web_url=http://127.0.0.1:")
+        (server,) = psutil.Process(parent.pid).children()
+        assert _listening(server.pid) == {"127.0.0.1"}, "its web server and its ZMQ socket, on 127.0.0.1 only"
+        assert len(psutil.Process(server.pid).net_connections("inet")) >= 2
     finally:
         parent.kill()  # SIGKILL: no handler, no atexit runs
         parent.wait()
-    _, alive = psutil.wait_procs([psutil.Process(server)], timeout=SERVER_GONE)
-    assert not alive, "the server outlived its parent"
+        parent.stdout.close()
+    assert _gone(server), "the server outlived its parent"
 
 
 def test_replay_ended_by_sigterm_stops_its_server(tmp_path):
@@ -378,8 +382,7 @@ def test_replay_ended_by_sigterm_stops_its_server(tmp_path):
         process.terminate()
         process.communicate(timeout=30)
     assert process.returncode == 0
-    _, alive = psutil.wait_procs([server], timeout=SERVER_GONE)
-    assert not alive
+    assert _gone(server)
 
 
 def test_a_page_needs_no_server_and_is_the_page_a_server_makes():
