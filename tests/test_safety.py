@@ -306,7 +306,7 @@ def test_a_failed_run_keeps_the_previous_log_and_says_so(tmp_path, capsys):
     failing.write_text((SCENES / "box_incline.toml").read_text() + "\n[options]\nmax_iter = 1\n")
     capsys.readouterr()
     assert main(["run", str(failing), "--out", str(out), "--quiet"]) == 1
-    assert f"it is kept as {out}.prev" in capsys.readouterr().err
+    assert f"it will be kept as {out}.prev" in capsys.readouterr().err
     previous = gaussim.RunLog.load(tmp_path / "r.prev")
     assert previous.complete and previous.steps == 200
     assert not gaussim.RunLog.load(out).complete

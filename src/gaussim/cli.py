@@ -106,7 +106,8 @@ def main(argv: list[str] | None = None) -> int:
         print("gaussim: interrupted", file=sys.stderr)
         return EXIT_FAILURE
     except OSError as err:  # a write that failed midway (a full disk): the message names the file
-        print(f"gaussim: {err.filename or ''}: {err.strerror or err}", file=sys.stderr)
+        where = f"{err.filename}: " if err.filename else ""
+        print(f"gaussim: {where}{err.strerror or err}", file=sys.stderr)
         return EXIT_FAILURE
     except SIMULATION_FAILURES as err:
         print(f"gaussim: simulation failed: {err}", file=sys.stderr)
@@ -182,7 +183,7 @@ def _run(args: argparse.Namespace) -> int:
         if path is not None:
             check_writable(path, flag)  # before the run, not after it
     if is_run_log(out):
-        print(f"gaussim: {out} holds a run log: it is kept as {out}.prev", file=sys.stderr)
+        print(f"gaussim: {out} holds a run log: it will be kept as {out}.prev", file=sys.stderr)
     viewer = None
     if args.view:
         from .viewer import Viewer, follow
