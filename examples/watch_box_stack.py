@@ -25,10 +25,11 @@ def main() -> None:
 
     spec = gaussim.load_scene(SCENE)
     spec.duration = args.duration
-    with Viewer(spec.scene) as viewer:
+    with Viewer(spec.scene, live=args.live) as viewer:  # a page alone needs no server
         if args.live:
             print(f"watch at {viewer.url}")
-        log = gaussim.run(spec, args.out.with_suffix(".npz"), observer=follow(viewer) if args.live else None)
+        observer = follow(viewer) if args.live else None
+        log = gaussim.run(spec, args.out.with_suffix(".runlog"), observer=observer)
         viewer.replay(log)
         page = viewer.save_html(args.out.with_suffix(".html"))
     plot = save_plot(log, spec.scene, args.out.with_suffix(".png"))

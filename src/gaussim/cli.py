@@ -10,12 +10,14 @@ import argparse
 import csv
 import math
 import re
+import signal
 import sys
 import time
 from pathlib import Path
 from typing import TextIO
 
 from .exceptions import ContactError, GaussimError, InvalidOptions, InvalidRobot, InvalidState, SolverError
+from .files import atomic_path, check_writable
 from .options import FRICTION_MODES, SCHEMES
 
 EXIT_OK, EXIT_FAILURE, EXIT_BAD_INPUT = 0, 1, 2
@@ -40,7 +42,11 @@ def main(argv: list[str] | None = None) -> int:
 
     run = commands.add_parser("run", help="simulate a scene file, write its log and print a summary")
     run.add_argument("scene", type=Path)
-    run.add_argument("--out", type=Path, help="run log (.npz); default out/<scene>.npz")
+    run.add_argument(
+        "--out",
+        type=Path,
+        help="run log directory (one already there is kept as OUT.prev); default out/<scene>.runlog",
+    )
     run.add_argument("--dt", type=float, help="time step [s] (overrides the scene's)")
     run.add_argument("--scheme", choices=SCHEMES)
     run.add_argument("--friction-mode", choices=FRICTION_MODES)
@@ -50,6 +56,11 @@ def main(argv: list[str] | None = None) -> int:
     run.add_argument("--speed", type=float, default=1.0, help="with --view: times real time (default 1)")
     run.add_argument("--html", type=Path, help="also write the replay page (self-contained HTML)")
     run.add_argument("--plot", type=Path, help="also write the contact-force plot (PNG, PDF or SVG)")
+    run.add_argument(
+        "--checkpoint-steps",
+        type=int,
+        help="write the log's next chunk after this many steps (default 10000) or 5 s of wall time",
+    )
     _arrow_option(run)
 
     replay = commands.add_parser("replay", help="replay a run log in the browser, live or as an HTML page")
@@ -92,6 +103,9 @@ def main(argv: list[str] | None = None) -> int:
     stability.add_argument("--report", type=Path, default=Path("out/stability.md"), help="markdown table")
 
     args = parser.parse_args(argv)
+    for stop in (signal.SIGTERM, signal.SIGHUP):  # stop as a Ctrl-C does: the viewers' servers stopped
+        if signal.getsignal(stop) == signal.SIG_DFL:
+            signal.signal(stop, signal.default_int_handler)
     try:
         commands_ = {
             "run": _run,
@@ -106,15 +120,15 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("gaussim: interrupted", file=sys.stderr)
         return EXIT_FAILURE
+    except OSError as err:  # a write that failed midway (a full disk): the message names the file
+        where = f"{err.filename}: " if err.filename else ""
+        print(f"gaussim: {where}{err.strerror or err}", file=sys.stderr)
+        return EXIT_FAILURE
     except SIMULATION_FAILURES as err:
         _say(f"gaussim: simulation failed: {err}", sys.stderr)
         return EXIT_FAILURE
     except (InvalidOptions, InvalidRobot, InvalidState, GaussimError) as err:
         _say(f"gaussim: {err}", sys.stderr)
-        return EXIT_BAD_INPUT
-    except OSError as err:  # an output that cannot be written (a folder, no permission, a full disk)
-        where = f"{err.filename}: " if err.filename else ""
-        _say(f"gaussim: {where}cannot write it: {err.strerror or err}", sys.stderr)
         return EXIT_BAD_INPUT
 
 
@@ -159,15 +173,16 @@ def _stability(args: argparse.Namespace) -> int:
         rows.append(row)
         print(f"{'pass' if row.passed else 'FAIL'}  {row.case}, {row.setting}: {row.result}", file=sys.stderr)
     command = "gaussim stability" + (" --long" if args.long else "") + f" --report {args.report}"
-    args.report.parent.mkdir(parents=True, exist_ok=True)
-    args.report.write_text(markdown(rows, command))
+    with atomic_path(args.report) as tmp:
+        tmp.write_text(markdown(rows, command))
     failed = sum(not row.passed for row in rows)
     print(f"{len(rows)} cases, {failed} failed; table: {args.report}")
     return EXIT_FAILURE if failed else 0
 
 
 def _run(args: argparse.Namespace) -> int:
-    from .runner import run
+    from .runlog import is_run_log
+    from .runner import CHECKPOINT_STEPS, STOP_SIGNALS, Interrupted, LogWriteError, run
     from .scenefile import load_scene
 
     if args.plot:
@@ -179,8 +194,16 @@ def _run(args: argparse.Namespace) -> int:
         if not (math.isfinite(args.duration) and args.duration > 0):
             raise InvalidOptions("--duration", f"must be a finite number > 0, got {args.duration}")
         spec.duration = args.duration
-    out = args.out or Path("out") / f"{args.scene.stem}.npz"
+    out = args.out or Path("out") / f"{args.scene.stem}.runlog"
     started = time.time()
+    checkpoint_steps = CHECKPOINT_STEPS if args.checkpoint_steps is None else args.checkpoint_steps
+    if checkpoint_steps < 1:
+        raise InvalidOptions("--checkpoint-steps", f"must be >= 1, got {args.checkpoint_steps}")
+    for flag, path in (("--html", args.html), ("--plot", args.plot)):
+        if path is not None:
+            check_writable(path, flag)  # before the run, not after it
+    if is_run_log(out):
+        print(f"gaussim: {out} holds a run log: it will be kept as {out}.prev", file=sys.stderr)
     viewer = None
     if args.view:
         from .viewer import Viewer, follow
@@ -193,15 +216,24 @@ def _run(args: argparse.Namespace) -> int:
             spec,
             out,
             progress=None if args.quiet else sys.stderr,
+            checkpoint_steps=checkpoint_steps,
             observer=follow(viewer, args.speed) if viewer else None,
         )
+    except Interrupted as stop:
+        for repeated in STOP_SIGNALS:  # more Ctrl-Cs while we report change nothing: the log is written
+            signal.signal(repeated, signal.SIG_IGN)
+        print(f"gaussim: {stop}; the log of the steps made is in {out}", file=sys.stderr)
+        return EXIT_FAILURE
+    except LogWriteError as err:
+        print(f"gaussim: {err}", file=sys.stderr)
+        return EXIT_FAILURE
     except SIMULATION_FAILURES as err:
         _say(f"gaussim: simulation failed: {err}\ngaussim: the steps made are in {out}", sys.stderr)
         return EXIT_FAILURE
     except InvalidState as err:  # the scene's initial state or its controller's torques
         raise InvalidState(f"{args.scene}: {err}") from err
     except KeyboardInterrupt:
-        written = out.is_file() and out.stat().st_mtime >= started - 1.0  # (a coarse clock's second)
+        written = is_run_log(out) and out.stat().st_mtime >= started - 1.0  # (a coarse clock's second)
         print(
             "gaussim: interrupted; " + (f"the steps made are in {out}" if written else "no log written"),
             file=sys.stderr,
@@ -251,9 +283,9 @@ def _write_replay(
 ) -> Path:  # type: ignore[no-untyped-def]
     from .viewer import Viewer
 
-    with Viewer(scene, force_scale=force_scale) as viewer:
-        viewer.replay(log, fps=fps, speed=speed)
-        return viewer.save_html(html)
+    viewer = Viewer(scene, force_scale=force_scale, live=False)  # a page needs no server
+    viewer.replay(log, fps=fps, speed=speed)
+    return viewer.save_html(html)
 
 
 def _replay(args: argparse.Namespace) -> int:
@@ -263,6 +295,8 @@ def _replay(args: argparse.Namespace) -> int:
 
     _positive("--fps", args.fps)
     _positive("--speed", args.speed)
+    if args.html:
+        check_writable(args.html, "--html")
     log, scene = _log_and_scene(args.log)
     if args.html:
         print(f"replay page: {_write_replay(log, scene, args.html, args.force_scale, args.fps, args.speed)}")
@@ -282,6 +316,7 @@ def _plot(args: argparse.Namespace) -> int:
     from .plots import plot_path, save_plot
 
     plot_path(args.output)
+    check_writable(args.output, "--output")
     log, scene = _log_and_scene(args.log)
     print(f"{args.what} plot: {save_plot(log, scene, args.output, args.what)}")
     return EXIT_OK
@@ -332,11 +367,11 @@ def _inspect(args: argparse.Namespace) -> int:
 def _forces(args: argparse.Namespace) -> int:
     from .runlog import RunLog
 
+    check_writable(args.csv or args.parquet, "--csv" if args.csv else "--parquet")
     log = RunLog.load(args.log)
     if args.csv:
         columns = log.contact_records()
-        args.csv.parent.mkdir(parents=True, exist_ok=True)
-        with args.csv.open("w", newline="") as f:
+        with atomic_path(args.csv) as tmp, tmp.open("w", newline="") as f:
             writer = csv.writer(f)
             writer.writerow(columns)
             writer.writerows(zip(*columns.values()))
@@ -344,7 +379,8 @@ def _forces(args: argparse.Namespace) -> int:
     else:
         frame = log.contact_forces()
         try:
-            frame.to_parquet(args.parquet)
+            with atomic_path(args.parquet) as tmp:
+                frame.to_parquet(tmp)
         except ImportError as err:
             raise GaussimError(f"--parquet needs pyarrow: pip install pyarrow ({err})") from err
         print(f"{len(frame)} rows written to {args.parquet}")

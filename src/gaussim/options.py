@@ -25,7 +25,7 @@ class Options:
         scheme: ``"velocity"`` (discrete Gauss principle on v+, Moreau-Jean time stepping; default)
             or ``"acceleration"`` (the paper's scheme: Gauss principle on a over the active set,
             impulsive projection at impacts, Baumgarte stabilisation).
-        friction_facets: number k of facets of the pyramid approximating the Coulomb cone (>= 3).
+        friction_facets: number k of facets of the pyramid approximating the Coulomb cone (3 to 64).
         friction_mode: ``"pyramid"`` (Anitescu's convex relaxation, MuJoCo's: one QP whose contact
             velocity lies in the dual of the pyramid, so a sliding contact leaves the ground at the
             normal speed mu*|slip| (on a facet direction; down to cos(pi/k) of that between facets) and

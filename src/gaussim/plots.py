@@ -10,6 +10,7 @@ import numpy as np
 import pinocchio as pin
 
 from .exceptions import InvalidOptions
+from .files import atomic_path
 from .runlog import RunLog
 from .scene import Scene
 
@@ -107,9 +108,11 @@ def save_plot(log: RunLog, scene: Scene, path: str | Path, what: str = "forces")
         raise InvalidOptions("what", f"must be one of {', '.join(WHATS)}, got {what!r}")
     path = plot_path(path)
     figure = (force_figure if what == "forces" else energy_figure)(log, scene)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    figure.savefig(path, dpi=110)
-    _pyplot().close(figure)
+    try:
+        with atomic_path(path) as tmp:  # a failed write leaves any previous image
+            figure.savefig(tmp, dpi=110)
+    finally:
+        _pyplot().close(figure)
     return path
 
 

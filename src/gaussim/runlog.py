@@ -1,15 +1,25 @@
-"""Run logs: everything a run produced, saved atomically as a compressed ``.npz`` (no pickle).
+"""Run logs: everything a run produced, no pickle.
 
 A log holds t, q, v (N + 1 states), tau (N steps), the per-contact forces, points, normals and gaps
 of each step, the limit reactions, the solver certificate of each step, the scene text and the
-options: a run can be reproduced and analysed from its log alone. A run that stops early (Ctrl-C,
-a solver failure) still writes a valid log of the steps it made, marked incomplete with the reason.
+options: a run can be reproduced and analysed from its log alone.
+
+Two forms, both read by :meth:`RunLog.load`: one compressed ``.npz`` (:meth:`RunLog.save`, written
+atomically), and the directory a run writes as it goes (:class:`RunLogWriter`): ``header.json`` and
+numbered chunks ``chunk-000000.npz``, ``chunk-000001.npz``, ... of the steps since the last one, each
+written atomically and never rewritten. Logging a run thus costs O(new steps) and bounded memory, and
+at any instant (a SIGKILL, a full disk) the directory is a valid log of a prefix of the run: the
+header says complete only once the last chunk is in. A directory is the simplest such format that
+keeps the dependencies to numpy (HDF5 or Zarr would add one, and an appended zip is invalid while
+its end is being written).
 """
 
 from __future__ import annotations
 
 import json
 import os
+import re
+import shutil
 import tempfile
 from dataclasses import asdict, fields
 from pathlib import Path
@@ -18,12 +28,29 @@ from typing import Any
 import numpy as np
 
 from .exceptions import GaussimError, InvalidOptions, shown
+from .files import OutputError, atomic_path, umask, write_atomic
 from .options import Options
 from .report import StepReport
 from .solver import CONVERGED
 from .state import State
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 1  # the single .npz
+DIRECTORY_VERSION = 2  # the directory of chunks
+HEADER = "header.json"
+# the entries of a single-file log that are its header, not its columns
+NPZ_HEADER = (
+    "format_version",
+    "robot",
+    "scene_text",
+    "scene_path",
+    "options",
+    "complete",
+    "reason",
+    "wall_time",
+)
+CHUNK = re.compile(r"chunk-(\d{6})\.npz")
+# the header of a run still going, or ended without a word (SIGKILL, power cut)
+RUNNING = "still running, or stopped by a kill: the log holds the steps of its chunks"
 # A run whose contacts sink deeper than this is flagged by its summary [m] (the velocity scheme closes an
 # approach exactly and rests within g dt^2 of the surface: a deeper penetration is lost accuracy)
 PENETRATION_TOLERANCE = 1e-3
@@ -96,6 +123,9 @@ class RunLog:
         self.limit_names: list[str] = []
         self._ids: dict[str, int] = {}
         self._limit_ids: dict[str, int] = {}
+        self._drained = 0  # steps already handed to a RunLogWriter (dropped from memory)
+        self._names_drained = self._limit_names_drained = 0
+        self._stored: dict[str, np.ndarray] | None = None  # a loaded log's columns (read-only)
 
     # -- recording ---------------------------------------------------------------------------------
 
@@ -104,7 +134,7 @@ class RunLog:
 
     def record(self, state: State, tau: np.ndarray, report: StepReport) -> None:
         """Add the step that led to ``state`` under torque ``tau`` (nv,) and its report."""
-        step = len(self._tau)
+        step = self.steps
         self._append_state(state)
         self._tau.append(np.asarray(tau, dtype=float))
         statuses = [c.status for c in report.certificates]
@@ -138,26 +168,36 @@ class RunLog:
 
     @property
     def steps(self) -> int:
+        return self._drained + len(self._tau)
+
+    @property
+    def buffered(self) -> int:
+        """Steps held in memory, not yet handed to a writer."""
         return len(self._tau)
 
     @property
     def t(self) -> np.ndarray:
-        return np.array(self._t)
+        return self._stored["t"] if self._stored is not None else np.array(self._t)
 
     @property
     def q(self) -> np.ndarray:
-        return np.array(self._q)
+        return self._stored["q"] if self._stored is not None else np.array(self._q)
 
     @property
     def v(self) -> np.ndarray:
-        return np.array(self._v)
+        return self._stored["v"] if self._stored is not None else np.array(self._v)
 
     @property
     def tau(self) -> np.ndarray:
+        if self._stored is not None:
+            return self._stored["tau"]
         return np.array(self._tau).reshape(len(self._tau), len(self._v[0]) if self._v else 0)
 
     def contact_arrays(self) -> dict[str, np.ndarray]:
         """Per (step, contact) rows: step, contact id, point (3), normal (3), force (3), gap."""
+        if self._stored is not None:
+            keys = ("step", "id", "point", "normal", "force", "gap")
+            return {k: self._stored[f"contact_{k}"] for k in keys}
         rows = self._contacts
         return {
             "step": np.array([r[0] for r in rows], dtype=int),
@@ -169,6 +209,8 @@ class RunLog:
         }
 
     def solver_arrays(self) -> dict[str, np.ndarray]:
+        if self._stored is not None:
+            return {k: self._stored[f"solver_{k}"] for k in ("qps", "iterations", "kkt_residual", "status")}
         return {
             "qps": np.array([s[0] for s in self._solver], dtype=int),
             "iterations": np.array([s[1] for s in self._solver], dtype=int),
@@ -178,97 +220,91 @@ class RunLog:
 
     # -- files -----------------------------------------------------------------------------------------
 
-    def save(self, path: str | Path) -> Path:
-        """Write the log atomically: a half-written file never replaces a good one."""
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
+    def _rows(self) -> dict[str, np.ndarray]:
+        """The per-state, per-step and per-row arrays held in memory, with the names first seen in them."""
+        if self._stored is not None:
+            return self._stored
         contacts, solver = self.contact_arrays(), self.solver_arrays()
-        arrays: dict[str, Any] = {
-            "format_version": np.array(FORMAT_VERSION),
-            "robot": np.array(self.robot),
-            "scene_text": np.array(self.scene_text),
-            "scene_path": np.array(self.scene_path),
-            "options": np.array(json.dumps(asdict(self.options))),
-            "complete": np.array(self.complete),
-            "reason": np.array(self.reason),
-            "wall_time": np.array(np.nan if self.wall_time is None else self.wall_time),
+        return {
             "t": self.t,
             "q": self.q,
             "v": self.v,
             "tau": self.tau,
-            "contact_names": np.array(self.contact_names, dtype=str),
-            "contact_geometry": np.array(self.contact_geometry, dtype=str),
-            "contact_obstacle": np.array(self.contact_obstacle, dtype=str),
-            "limit_names": np.array(self.limit_names, dtype=str),
+            "contact_names": np.array(self.contact_names[self._names_drained :], dtype=str),
+            "contact_geometry": np.array(self.contact_geometry[self._names_drained :], dtype=str),
+            "contact_obstacle": np.array(self.contact_obstacle[self._names_drained :], dtype=str),
+            "limit_names": np.array(self.limit_names[self._limit_names_drained :], dtype=str),
             "limit_step": np.array([r[0] for r in self._limits], dtype=int),
             "limit_id": np.array([r[1] for r in self._limits], dtype=int),
             "limit_torque": np.array([r[2] for r in self._limits], dtype=float),
             **{f"contact_{k}": v for k, v in contacts.items()},
             **{f"solver_{k}": v for k, v in solver.items()},
         }
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-        try:
-            os.chmod(fd, 0o666 & ~_umask())  # mkstemp's 0600, where every other output follows the umask
-            with os.fdopen(fd, "wb") as f:
-                np.savez_compressed(f, **arrays)
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
-        return path
+
+    def _forget(self) -> None:
+        """Drop the rows held in memory (a writer has them on disk): a long run's memory stays bounded."""
+        self._drained += len(self._tau)
+        self._names_drained, self._limit_names_drained = len(self.contact_names), len(self.limit_names)
+        for buffer in (self._t, self._q, self._v, self._tau, self._solver, self._contacts, self._limits):
+            buffer.clear()
+
+    def _header(self) -> dict[str, Any]:
+        return {
+            "robot": self.robot,
+            "scene_text": self.scene_text,
+            "scene_path": self.scene_path,
+            "options": asdict(self.options),
+            "complete": self.complete,
+            "reason": self.reason,
+            "wall_time": self.wall_time,
+        }
+
+    def save(self, path: str | Path) -> Path:
+        """Write the whole log as one ``.npz``, atomically: a half-written file never replaces a good one."""
+        if self._drained and self._stored is None:
+            raise RunLogError("this log was written by a RunLogWriter: load it from its directory")
+        header = self._header()
+        arrays: dict[str, Any] = {
+            "format_version": np.array(FORMAT_VERSION),
+            **{k: np.array(v) for k, v in header.items() if k not in ("options", "wall_time")},
+            "options": np.array(json.dumps(header["options"])),
+            "wall_time": np.array(np.nan if self.wall_time is None else self.wall_time),
+            **self._rows(),
+        }
+        with atomic_path(path) as tmp, tmp.open("wb") as f:
+            np.savez_compressed(f, **arrays)
+        return Path(path)
 
     @classmethod
     def load(cls, path: str | Path) -> RunLog:
-        """Read a log written by :meth:`save`.
-
-        Raises:
-            RunLogError: the file is not a run log, a damaged or tampered one (the message names the
-                file and the array), or one of a newer format.
-        """
-        data = _read(Path(path))
-        try:
-            options = Options(**json.loads(str(data["options"])))
-        except json.JSONDecodeError as err:
-            raise RunLogError(f"{path}: options: not JSON ({err})") from err
-        except TypeError as err:  # not a dict, or an option this gaussim does not have
-            known = ", ".join(f.name for f in fields(Options))
-            raise RunLogError(
-                f"{path}: options: must be a JSON object of Options fields ({known}), "
-                f"got {shown(str(data['options']))}"
-            ) from err
-        except InvalidOptions as err:
-            raise RunLogError(f"{path}: options.{err}") from err
-        log = cls(str(data["robot"]), str(data["scene_text"]), options)
-        log.scene_path = str(data["scene_path"])
-        log.complete, log.reason = bool(data["complete"]), str(data["reason"])
-        log.wall_time = None if np.isnan(data["wall_time"]) else float(data["wall_time"])
-        log._t, log._q, log._v = list(data["t"]), list(data["q"]), list(data["v"])
-        log._tau = list(data["tau"])
+        """Read a log: a ``.npz`` written by :meth:`save`, or a directory written by :class:`RunLogWriter`
+        (all its chunks, up to the first one missing). The log read is read-only: its columns are the
+        arrays read, with no per-step Python object (a 236k-step Solo-12 log: 1.2 GB of them)."""
+        path = Path(path)
+        if path.is_dir():
+            header, data = _read_directory(path)
+        else:
+            data = _read_npz(path)
+            _check_version(path, data.get("format_version"), FORMAT_VERSION)
+            _check_layout(path, data, NPZ_HEADER)
+            header = {k: data[k].item() for k in ("robot", "scene_text", "scene_path", "complete", "reason")}
+            try:
+                header["options"] = json.loads(str(data["options"]))
+            except json.JSONDecodeError as err:
+                raise RunLogError(f"{path}: options: not JSON ({err})") from err
+            header["wall_time"] = None if np.isnan(data["wall_time"]) else float(data["wall_time"])
+        _check_layout(path, data, tuple(k for k in LAYOUT if k not in NPZ_HEADER))
+        log = cls(str(header["robot"]), str(header["scene_text"]), _options(path, header["options"]))
+        log.scene_path = str(header["scene_path"])
+        log.complete, log.reason = bool(header["complete"]), str(header["reason"])
+        log.wall_time = header["wall_time"]
+        log._stored = {k: v for k, v in data.items() if k not in NPZ_HEADER}
+        log._drained = len(data["tau"])
         log.contact_names = list(map(str, data["contact_names"]))
         log.contact_geometry = list(map(str, data["contact_geometry"]))
         log.contact_obstacle = list(map(str, data["contact_obstacle"]))
         log.limit_names = list(map(str, data["limit_names"]))
-        log._contacts = list(
-            zip(
-                data["contact_step"].tolist(),
-                data["contact_id"].tolist(),
-                data["contact_point"],
-                data["contact_normal"],
-                data["contact_force"],
-                data["contact_gap"].tolist(),
-            )
-        )
-        log._limits = list(
-            zip(data["limit_step"].tolist(), data["limit_id"].tolist(), data["limit_torque"].tolist())
-        )
-        log._solver = list(
-            zip(
-                data["solver_qps"].tolist(),
-                data["solver_iterations"].tolist(),
-                data["solver_kkt_residual"].tolist(),
-                data["solver_status"].tolist(),
-            )
-        )
+        log._names_drained, log._limit_names_drained = len(log.contact_names), len(log.limit_names)
         return log
 
     # -- analysis --------------------------------------------------------------------------------------
@@ -356,20 +392,108 @@ class RunLog:
         return "\n".join(lines)
 
 
-def _umask() -> int:
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return mask
+class RunLogWriter:
+    """Writes the log of a run as it goes, into a directory (see the module docstring).
+
+    Made after the log's first state and before the first step, so that a path that cannot be written
+    is reported before the run. A log already at ``path`` (a directory or an ``.npz``) is moved to
+    ``path.prev`` (an older ``.prev`` log is removed); anything else there is refused, never deleted.
+
+    Attributes:
+        path: the directory.
+        previous: where the log that was at ``path`` went, or None.
+        steps: the steps on disk.
+    """
+
+    def __init__(self, path: str | Path, log: RunLog) -> None:
+        self.path, self.log, self.steps, self._chunks = Path(path), log, 0, 0
+        _check_replaceable(self.path)
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            # made under a temporary name, so that a failure here leaves what was at path as it was
+            new = Path(tempfile.mkdtemp(prefix=f".{self.path.name}.", suffix=".new", dir=self.path.parent))
+            new.chmod(0o777 & ~umask())
+        except OSError as err:
+            raise OutputError(f"run log {self.path}: cannot be written ({err.strerror or err})") from err
+        try:
+            self.path, final = new, self.path
+            self._write_header()
+            self.append()  # the initial state: from here on the directory is a valid log
+            self.previous = _set_aside(final)
+            os.replace(new, final)
+            self.path = final
+        except OSError as err:
+            shutil.rmtree(new, ignore_errors=True)
+            raise OutputError(f"run log {final}: cannot be written ({err.strerror or err})") from err
+
+    def append(self) -> None:
+        """Write the steps recorded since the last chunk as the next chunk (nothing when there is none)."""
+        if self.log.buffered == 0 and self._chunks > 0:
+            return
+        with atomic_path(self.path / f"chunk-{self._chunks:06d}.npz") as tmp, tmp.open("wb") as f:
+            np.savez_compressed(f, **self.log._rows())  # type: ignore[arg-type]
+        self.log._forget()
+        self._chunks += 1
+        self.steps = self.log.steps
+
+    def close(self) -> None:
+        """Write the last chunk, then the header with the log's outcome (complete or why not; the header
+        also when the chunk cannot be written)."""
+        try:
+            self.append()
+        finally:
+            self._write_header()
+
+    def _write_header(self) -> None:
+        header = {"format_version": DIRECTORY_VERSION, **self.log._header()}
+        if self._chunks == 0 or not header["complete"] and header["reason"] == "not finished":
+            header["reason"] = RUNNING
+        write_atomic(self.path / HEADER, json.dumps(header, indent=1).encode())
 
 
-def _read(path: Path) -> dict[str, np.ndarray]:
-    """The arrays of the run log at ``path``, each checked against LAYOUT and the others' sizes."""
+def is_run_log(path: Path) -> bool:
+    """True for a run log file or directory (checked from its header, not its name)."""
+    if path.is_dir():
+        return (path / HEADER).is_file()
+    try:
+        with np.load(path, allow_pickle=False) as f:
+            return "format_version" in f.files
+    except (OSError, ValueError):
+        return False
+
+
+def _check_replaceable(path: Path) -> None:
+    """Raise OutputError when ``path`` or ``path.prev`` holds something that is not a run log."""
+    for p in (path, _previous(path)):
+        if p.exists() and not is_run_log(p):
+            raise OutputError(f"run log {path}: {p} exists and is not a run log; it is left alone")
+
+
+def _previous(path: Path) -> Path:
+    return path.with_name(path.name + ".prev")
+
+
+def _set_aside(path: Path) -> Path | None:
+    """Move the run log at ``path`` to ``path.prev`` (replacing an older one); None when there is none."""
+    if not path.exists():
+        return None
+    previous = _previous(path)
+    if previous.is_dir():
+        shutil.rmtree(previous)
+    elif previous.exists():
+        previous.unlink()
+    os.replace(path, previous)
+    return previous
+
+
+def _read_npz(path: Path) -> dict[str, np.ndarray]:
+    """The arrays of the .npz at ``path`` (a single-file log or a chunk)."""
     try:
         archive = np.load(path, allow_pickle=False)
         if not isinstance(archive, np.lib.npyio.NpzFile):
             raise RunLogError(f"{path}: not a gaussim run log (a single .npy array, not a .npz archive)")
         with archive as f:
-            data = {k: f[k] for k in f.files}
+            return {k: f[k] for k in f.files}
     except RunLogError:
         raise
     except OSError as err:
@@ -381,20 +505,44 @@ def _read(path: Path) -> dict[str, np.ndarray]:
     except Exception as err:  # zipfile reads a damaged archive's bytes as anything: encryption, a method
         what = f"{type(err).__name__}: {err}"
         raise RunLogError(f"{path}: a truncated or damaged .npz archive ({what})") from err
-    if "format_version" not in data:
-        raise RunLogError(f"{path}: not a gaussim run log (no format_version)")
-    version = data["format_version"]
-    if version.shape != () or version.dtype.kind != "i" or not 1 <= int(version) <= FORMAT_VERSION:
-        newer = version.shape == () and version.dtype.kind == "i" and int(version) > FORMAT_VERSION
+
+
+def _options(path: Path, options: object) -> Options:
+    """The Options a log's header holds, or a RunLogError naming the file."""
+    try:
+        return Options(**options)  # type: ignore[arg-type]
+    except TypeError as err:  # not a dict, or an option this gaussim does not have
+        known = ", ".join(f.name for f in fields(Options))
         raise RunLogError(
-            f"{path}: format_version {shown(version.tolist())} is "
+            f"{path}: options: must be a JSON object of Options fields ({known}), got {shown(str(options))}"
+        ) from err
+    except InvalidOptions as err:
+        raise RunLogError(f"{path}: options.{err}") from err
+
+
+def _check_version(path: Path, version: object, supported: int) -> None:
+    """Raise RunLogError unless ``version`` (an array or a number) is a format this gaussim reads."""
+    if version is None:
+        raise RunLogError(f"{path}: not a gaussim run log (no format_version)")
+    value = np.asarray(version)
+    number = value.shape == () and value.dtype.kind == "i"
+    if not (number and 1 <= int(value) <= supported):
+        newer = number and int(value) > supported
+        raise RunLogError(
+            f"{path}: format_version {shown(value.tolist())} is "
             + ("newer than this gaussim reads" if newer else "unknown")
-            + f" (it reads format {FORMAT_VERSION})"
+            + f" (it reads format {supported})"
             + ("; upgrade gaussim" if newer else "")
         )
+
+
+def _check_layout(path: Path, data: dict[str, np.ndarray], keys: tuple[str, ...]) -> None:
+    """Raise RunLogError naming the array when one of ``keys`` is missing from ``data`` or not as LAYOUT
+    says (kind, dimensions, sizes agreeing across arrays), or an index points outside its table."""
     sizes: dict[str, int] = {"3": 3}
     origin = {"3": "a point"}  # the array each size was read from
-    for key, (kind, shape) in LAYOUT.items():
+    for key in keys:
+        kind, shape = LAYOUT[key]
         if key not in data:
             raise RunLogError(f"{path}: damaged run log: no array '{key}'")
         arr = data[key]
@@ -411,10 +559,44 @@ def _read(path: Path) -> dict[str, np.ndarray]:
                     f"{path}: damaged run log: '{key}' has shape {arr.shape}, where {origin[n]} has "
                     f"{n} = {sizes[n]}"
                 )
+    if "N" not in sizes:
+        return
     for ids, names in (("contact_id", "contact_names"), ("limit_id", "limit_names")):
         if len(data[ids]) and not (0 <= data[ids].min() and data[ids].max() < len(data[names])):
             raise RunLogError(f"{path}: damaged run log: '{ids}' refers to entries not in '{names}'")
     for steps in ("contact_step", "limit_step"):
         if len(data[steps]) and not (0 <= data[steps].min() and data[steps].max() < sizes["N"]):
             raise RunLogError(f"{path}: damaged run log: '{steps}' refers to steps the log does not hold")
-    return data
+
+
+def _read_directory(path: Path) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """The header and the chunks of a log directory, concatenated (up to the first chunk missing)."""
+    try:
+        header = json.loads((path / HEADER).read_text())
+    except (OSError, ValueError) as err:
+        raise RunLogError(f"{path}: not a gaussim run log directory (no readable {HEADER}: {err})") from err
+    if not isinstance(header, dict):
+        raise RunLogError(f"{path}: {HEADER}: not a JSON object")
+    _check_version(path / HEADER, header.get("format_version"), DIRECTORY_VERSION)
+    for key, kind in (
+        ("robot", str),
+        ("scene_text", str),
+        ("scene_path", str),
+        ("complete", bool),
+        ("reason", str),
+    ):
+        if not isinstance(header.get(key), kind):
+            raise RunLogError(
+                f"{path / HEADER}: '{key}' must be a {kind.__name__}, got {shown(header.get(key))}"
+            )
+    if not (header.get("wall_time") is None or isinstance(header["wall_time"], (int, float))):
+        raise RunLogError(f"{path / HEADER}: 'wall_time' must be a number or null")
+    numbers = sorted(int(m.group(1)) for p in path.iterdir() if (m := CHUNK.fullmatch(p.name)))
+    contiguous = next((k for k, n in enumerate(numbers) if n != k), len(numbers))
+    chunks = [_read_npz(path / f"chunk-{k:06d}.npz") for k in range(contiguous)]
+    if not chunks:
+        raise RunLogError(f"{path}: the run log holds no chunk (the run stopped before its first state)")
+    data = {key: np.concatenate([c[key] for c in chunks]) for key in chunks[0]}
+    if not header["complete"] and contiguous < len(numbers):
+        header["reason"] += f" (chunk {contiguous} is missing: the later ones are left out)"
+    return header, data

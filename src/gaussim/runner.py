@@ -12,16 +12,35 @@ from types import FrameType
 from typing import TextIO
 
 from .control import command
+from .exceptions import GaussimError
 from .report import StepReport
-from .runlog import RunLog
+from .runlog import RunLog, RunLogWriter
 from .scenefile import SceneSpec
 from .simulator import Simulator
 from .state import State
 
-# While a run goes on, its log is rewritten (atomically) this often [s of wall time].
-CHECKPOINT_SECONDS = 30.0
+# While a run goes on, the steps recorded are written as a new chunk of its log this often [s of wall
+# time], and whenever this many are held in memory.
+CHECKPOINT_SECONDS = 5.0
+CHECKPOINT_STEPS = 10_000
 # The progress line is redrawn this often [s]: on a terminal, and when written to a file or pipe.
 PROGRESS_SECONDS = {True: 0.2, False: 5.0}
+# The signals that stop a run at the end of its step, its log kept: Ctrl-C, kill / timeout, a closed terminal.
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+class Interrupted(KeyboardInterrupt):
+    """A run stopped by a signal (a KeyboardInterrupt, as a Ctrl-C is). ``signal`` names it; the log of
+    the steps made was written (to ``run``'s ``out``) before this was raised."""
+
+    def __init__(self, signal_name: str, step: int) -> None:
+        super().__init__(f"stopped by {signal_name} at step {step}")
+        self.signal, self.step = signal_name, step
+
+
+class LogWriteError(GaussimError):
+    """The run log could not be written midway (a full disk): the run stopped; the message says which
+    steps are on disk and where."""
 
 
 def run(
@@ -30,17 +49,25 @@ def run(
     *,
     progress: TextIO | None = None,
     checkpoint_seconds: float = CHECKPOINT_SECONDS,
+    checkpoint_steps: int = CHECKPOINT_STEPS,
     observer: Callable[[State, StepReport], None] | None = None,
 ) -> RunLog:
     """Simulate ``spec`` for its duration and return the log (also written to ``out`` when given).
 
-    A Ctrl-C or a simulation error stops the run: the log of the steps made so far is written,
-    marked incomplete with the reason, and the exception propagates (KeyboardInterrupt for a Ctrl-C,
-    which stops the run at the end of its step; a second one stops it at once).
+    ``out`` is a log directory (:class:`gaussim.runlog.RunLogWriter`), made before the first step: a path
+    that cannot be written raises :class:`gaussim.files.OutputError` before any work, and a log already
+    there is moved to ``out.prev``. The steps are written in chunks as the run goes, so that whatever
+    stops it, a valid log of the steps made is on disk.
+
+    A signal (SIGINT = Ctrl-C, SIGTERM, SIGHUP) or a simulation error stops the run: the log of the steps
+    made so far is written, marked incomplete with the reason, and the exception propagates
+    (:class:`Interrupted`, a KeyboardInterrupt, for a signal, which stops the run at the end of its step;
+    a second one stops a step that hangs at once; while the log is being written, signals wait).
 
     Args:
         progress: a stream for a progress line (steps/s, simulated time, active contacts), or None.
-        checkpoint_seconds: rewrite ``out`` this often during long runs.
+        checkpoint_seconds, checkpoint_steps: write a chunk this often [s], and when this many steps
+            are held.
         observer: called with the state and the report after every step (e.g. a live viewer,
             :func:`gaussim.viewer.follow`).
     """
@@ -48,19 +75,21 @@ def run(
     state = sim.reset(spec.initial.q, spec.initial.v)
     log = RunLog(spec.robot.name, spec.text, spec.options, str(spec.path))
     log.start(state)
+    writer = RunLogWriter(out, log) if out is not None else None
     steps = max(1, round(spec.duration / spec.options.dt))
     start = last_shown = last_saved = time.perf_counter()
-    step = 0
-    try:
-        with _ctrl_c() as pressed:
+    with _stop_signals() as stop:
+        try:
             for step in range(steps):
-                if pressed[0]:
-                    raise KeyboardInterrupt
+                if stop.signal is not None:
+                    raise Interrupted(stop.signal, step)
                 tau, damping = command(spec.controller(state))
                 state = sim.step(state, tau, damping)
                 report = sim.last_step
                 assert report is not None  # set by every step
+                stop.protected = True  # a step is recorded whole or not at all
                 log.record(state, sim.full_torque(tau, damping, state.v), report)
+                stop.protected = False
                 if observer is not None:
                     observer(state, report)
                 now = time.perf_counter()
@@ -69,73 +98,112 @@ def run(
                 ):
                     last_shown = now
                     _show(progress, step + 1, steps, state.t, len(report.contacts), now - start)
-                if out is not None and now - last_saved > checkpoint_seconds:
+                if writer is not None and (
+                    log.buffered >= checkpoint_steps or now - last_saved > checkpoint_seconds
+                ):
                     last_saved = now
-                    log.finish(False, f"checkpoint at step {step + 1} (the run was still going)")
-                    log.save(out)
-    except KeyboardInterrupt:
-        log.finish(False, f"interrupted (Ctrl-C) at step {step}, t = {state.t:.6g} s")
-        _save_and_close(log, out, progress)
-        raise
-    except Exception as err:  # a GaussimError, or a bug: either way the steps made are kept
-        if _interrupted(err):  # a Ctrl-C that arrived inside a compiled call comes out as its SystemError
-            log.finish(False, f"interrupted (Ctrl-C) at step {step}, t = {state.t:.6g} s")
-            _save_and_close(log, out, progress)
-            raise KeyboardInterrupt from err
-        log.finish(False, f"{type(err).__name__} at step {step}, t = {state.t:.6g} s: {err}")
-        _save_and_close(log, out, progress)
-        raise
-    log.finish(True)
-    log.wall_time = time.perf_counter() - start
-    _save_and_close(log, out, progress)
-    return log
+                    stop.protected = True
+                    _append(writer, log.steps)
+                    stop.protected = False
+        except BaseException as err:
+            stop.protected = True
+            interruption = _interruption(err, stop.signal or _signal_name(signal.SIGINT))
+            if interruption is not None:
+                log.finish(False, f"interrupted ({interruption}) at step {log.steps}, t = {state.t:.6g} s")
+                if progress is not None and writer is not None:
+                    print(f"\n{interruption}: stopping, writing the log {writer.path}", end="", file=progress)
+            else:  # a GaussimError, or a bug: either way the steps made are kept
+                log.finish(False, f"{type(err).__name__} at step {log.steps}, t = {state.t:.6g} s: {err}")
+            _close(writer, log, progress)
+            if interruption is not None and not isinstance(err, Interrupted):
+                raise Interrupted(interruption, log.steps) from err
+            raise
+        stop.protected = True
+        log.finish(True)
+        log.wall_time = time.perf_counter() - start
+        _close(writer, log, progress)
+    return log if writer is None else RunLog.load(writer.path)
+
+
+class _Stop:
+    """What the signal handler shares with the run: the first stop signal's name, and whether the run is
+    recording a step or writing its log (then no signal interrupts it)."""
+
+    def __init__(self) -> None:
+        self.signal: str | None = None
+        self.protected = False
 
 
 @contextmanager
-def _ctrl_c() -> Iterator[list[bool]]:
-    """A flag that a Ctrl-C (SIGINT) sets while the run goes on, for the loop to stop at the end of the
-    step: the interrupt never surfaces from inside numba, Pinocchio or ProxQP (numba turns one raised
-    while it converts a result into a SystemError). A second Ctrl-C raises KeyboardInterrupt at once
-    (a step that hangs). A process that ignores SIGINT (started with nohup or in the background of a
-    script) keeps ignoring it; outside the main thread, where Python delivers no signal, Python's own
-    handling applies."""
-    pressed = [False]
+def _stop_signals() -> Iterator[_Stop]:
+    """Catch the STOP_SIGNALS while the run goes on, for the loop to stop at the end of the step: the
+    interrupt never surfaces from inside numba, Pinocchio or ProxQP (numba turns one raised while it
+    converts a result into a SystemError). A second one raises KeyboardInterrupt at once (a step that
+    hangs), except while a step is recorded or the log written. A signal the process ignores (nohup,
+    the background of a script) stays ignored; outside the main thread, where Python delivers no
+    signal, Python's own handling applies."""
+    stop = _Stop()
     if threading.current_thread() is not threading.main_thread():
-        yield pressed
-        return
-    previous = signal.getsignal(signal.SIGINT)
-    if previous == signal.SIG_IGN:
-        yield pressed
+        yield stop
         return
 
     def handler(signum: int, frame: FrameType | None) -> None:
-        if pressed[0]:
-            signal.default_int_handler(signum, frame)
-        pressed[0] = True
+        if stop.signal is not None and not stop.protected:
+            stop.protected = True  # from here on the run only writes its log: no signal may stop that
+            raise KeyboardInterrupt
+        stop.signal = stop.signal or _signal_name(signum)
 
-    signal.signal(signal.SIGINT, handler)
+    previous = {s: signal.getsignal(s) for s in STOP_SIGNALS}
+    for s, handling in previous.items():
+        if handling != signal.SIG_IGN:
+            signal.signal(s, handler)
     try:
-        yield pressed
+        yield stop
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for s, handling in previous.items():
+            signal.signal(s, handling)
 
 
-def _interrupted(err: BaseException) -> bool:
-    """True when a KeyboardInterrupt caused ``err`` (numba turns one raised while it converts a
-    result into "SystemError: ... returned a result with an exception set")."""
+def _signal_name(signum: int) -> str:
+    return "Ctrl-C" if signum == signal.SIGINT else signal.Signals(signum).name
+
+
+def _interruption(err: BaseException, name: str) -> str | None:
+    """The signal's name when ``err`` is a stop by signal: an Interrupted, a KeyboardInterrupt, or an error
+    a KeyboardInterrupt caused (numba turns one raised while it converts a result into "SystemError: ...
+    returned a result with an exception set"); None otherwise."""
     cause: BaseException | None = err
     while cause is not None:
+        if isinstance(cause, Interrupted):
+            return cause.signal
         if isinstance(cause, KeyboardInterrupt):
-            return True
+            return name
         cause = cause.__cause__ or cause.__context__
-    return False
+    return None
 
 
-def _save_and_close(log: RunLog, out: str | Path | None, progress: TextIO | None) -> None:
+def _append(writer: RunLogWriter, step: int) -> None:
+    try:
+        writer.append()
+    except OSError as err:
+        raise LogWriteError(
+            f"writing the run log {writer.path} failed at step {step} ({err.strerror or err}); "
+            f"the log of the first {writer.steps} steps is there"
+        ) from err
+
+
+def _close(writer: RunLogWriter | None, log: RunLog, progress: TextIO | None) -> None:
     if progress is not None:
         print(file=progress)
-    if out is not None:
-        log.save(out)
+    if writer is None:
+        return
+    try:
+        writer.close()
+    except OSError as err:
+        raise LogWriteError(
+            f"writing the end of the run log {writer.path} failed ({err.strerror or err}): the log of the "
+            f"first {writer.steps} steps is there, its header says it is incomplete; the run: {log.reason}"
+        ) from err
 
 
 def _show(stream: TextIO, done: int, total: int, t: float, contacts: int, elapsed: float) -> None:

@@ -6,14 +6,19 @@ component (blue) and its friction component (orange), ``force_scale`` metres lon
 default scale draws the robot's weight m g as DEFAULT_WEIGHT_LENGTH metres, so the arrows of a
 standing robot add up to about that length. Contact points are red dots.
 
-meshcat is imported here only, when a viewer is made; its server binds to 127.0.0.1.
+meshcat is imported here only, when a viewer is made. A live viewer starts its own meshcat server
+(``viewer_server.py``) with both sockets on 127.0.0.1, which exits with the process that started it; a
+viewer made for a page only (``live=False``) keeps the scene in-process and starts no server.
 """
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import io
+import os
 import subprocess
+import sys
 import tempfile
 import time
 import warnings
@@ -25,7 +30,8 @@ import numpy as np
 import pinocchio as pin
 
 from .constraints import ContactForce
-from .exceptions import GaussimError
+from .exceptions import GaussimError, InvalidOptions
+from .files import write_atomic
 from .report import StepReport
 from .runlog import RunLog
 from .scene import Box, Ground, Scene, Sphere
@@ -38,6 +44,8 @@ GROUND_COLOR, OBSTACLE_COLOR = 0xB0B0B0, 0x8FBC8F
 ARROW_RADIUS = 0.004  # [m]
 POINT_RADIUS = 0.008  # [m]
 GROUND_SIZE = 4.0  # side of the drawn ground square [m]
+# A replay holds at most this many frames (each is a full set of transforms in the page).
+MAX_FRAMES = 100_000
 # Arrows shorter than this are hidden [m].
 MIN_ARROW = 1e-4
 # Node names: the robot, the world and the contacts (one folder per contact, by name).
@@ -51,18 +59,37 @@ class Viewer:
         scene: the scene to draw (robot, ground, obstacles).
         force_scale: arrow length per force [m/N]; default: the robot's weight is DEFAULT_WEIGHT_LENGTH.
         zmq_url: an already running meshcat server; by default a new one is started on 127.0.0.1.
+        live: False for a viewer that only makes pages (:meth:`static_html`): no server, no socket.
 
     In Jupyter, ``viewer.meshcat.jupyter_cell()`` embeds the live view.
     """
 
-    def __init__(self, scene: Scene, *, force_scale: float | None = None, zmq_url: str | None = None) -> None:
+    def __init__(
+        self,
+        scene: Scene,
+        *,
+        force_scale: float | None = None,
+        zmq_url: str | None = None,
+        live: bool = True,
+    ) -> None:
         import meshcat
         from pinocchio.visualize import MeshcatVisualizer
 
         robot = scene.robot
         self.scene = scene
-        with contextlib.redirect_stdout(io.StringIO()):  # meshcat prints its URL; we print it when useful
-            self.meshcat = meshcat.Visualizer(zmq_url=zmq_url)
+        if not live:
+            self.meshcat = meshcat.Visualizer(window=_PageWindow())
+        else:
+            server = None if zmq_url is not None else _start_server()
+            try:
+                # meshcat prints its URL; we print it when useful
+                with contextlib.redirect_stdout(io.StringIO()):
+                    self.meshcat = meshcat.Visualizer(zmq_url=zmq_url or server[1])  # type: ignore[index]
+            except BaseException:
+                if server is not None:
+                    _stop(server[0])
+                raise
+            self.meshcat.window.server_proc = server[0] if server else None
         visual = _visual_model(robot.visual_model, robot.collision_model)
         self._robot = MeshcatVisualizer(robot.model, robot.collision_model, visual)
         self._robot.initViewer(viewer=self.meshcat)
@@ -117,9 +144,14 @@ class Viewer:
 
         if not (fps > 0 and speed > 0):
             raise GaussimError(f"fps and speed must be > 0, got {fps} and {speed}")
+        t = log.t
+        count = (t[-1] - t[0]) * fps / speed
+        if not count <= MAX_FRAMES:
+            raise InvalidOptions(
+                "fps", f"{fps:g} frames/s at speed {speed:g} make {count:.3g} frames, more than {MAX_FRAMES}"
+            )
         animation = Animation(default_framerate=fps)
         self._aim(log.q[0])
-        t = log.t
         frames = np.arange(0.0, t[-1] - t[0] + 1e-12, speed / fps)
         states = np.minimum(np.searchsorted(t - t[0], frames - 1e-12), len(t) - 1)
         contacts = log.contact_arrays()
@@ -129,12 +161,12 @@ class Viewer:
         # the contacts of state k (k >= 1) are those of the step that led to it, step k - 1
         first = np.searchsorted(contacts["step"], states - 1, side="left")
         last = np.searchsorted(contacts["step"], states - 1, side="right")
-        model = self._robot.model
+        model, q = self._robot.model, log.q
         nodes = [
             self._robot.getViewerNodeName(g, pin.GeometryType.VISUAL) for g in self.visual.geometryObjects
         ]
         for frame, (k, lo, hi) in enumerate(zip(states.tolist(), first.tolist(), last.tolist())):
-            pin.forwardKinematics(model, self.data, log.q[k])
+            pin.forwardKinematics(model, self.data, q[k])
             pin.updateGeometryPlacements(model, self.data, self.visual, self.visual_data)
             with animation.at_frame(self.meshcat, frame) as f:
                 for node, placement in zip(nodes, self.visual_data.oMg):
@@ -164,18 +196,17 @@ class Viewer:
         return str(self.meshcat.static_html())
 
     def save_html(self, path: str | Path) -> Path:
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(self.static_html())
-        return path
+        """Write :meth:`static_html` to ``path`` atomically (a failed write leaves any previous page)."""
+        return write_atomic(path, self.static_html().encode())
 
     def close(self) -> None:
         """Stop the meshcat server this viewer started (an external one, given by zmq_url, keeps running)."""
         window = self.meshcat.window
+        if isinstance(window, _PageWindow):
+            return
         window.zmq_socket.close(linger=0)
-        if window.server_proc is not None and window.server_proc.poll() is None:
-            window.server_proc.terminate()
-            window.server_proc.communicate(timeout=10)
+        if window.server_proc is not None:
+            _stop(window.server_proc)
 
     def __enter__(self) -> Viewer:
         return self
@@ -236,6 +267,76 @@ class Viewer:
             self.meshcat[node]["point"].set_object(mg.Sphere(POINT_RADIUS), _material(POINT_COLOR))
             self._contacts.add(name)
         return node
+
+
+def _start_server() -> tuple[subprocess.Popen, str]:
+    """Start ``viewer_server.py`` (both sockets on 127.0.0.1, gone when this process is); the process and
+    its ZMQ address."""
+    errors = tempfile.TemporaryFile()
+    server = subprocess.Popen(
+        [sys.executable, "-u", str(Path(__file__).with_name("viewer_server.py")), str(os.getpid())],
+        stdout=subprocess.PIPE,
+        stderr=errors,
+        stdin=subprocess.DEVNULL,
+        start_new_session=True,  # a Ctrl-C in the terminal is ours to handle: we stop the server after it
+    )
+    atexit.register(_stop, server)
+    assert server.stdout is not None
+    line = server.stdout.readline().decode()
+    if not line.startswith("zmq_url="):
+        server.wait()
+        errors.seek(0)
+        message = errors.read().decode(errors="replace").strip()[-2000:]
+        raise GaussimError(f"the meshcat server did not start (exit code {server.returncode}): {message}")
+    return server, line.removeprefix("zmq_url=").strip()
+
+
+def _stop(server: subprocess.Popen) -> None:
+    if server.poll() is None:
+        server.terminate()
+        try:
+            server.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            server.kill()
+            server.wait()
+    if server.stdout is not None:
+        server.stdout.close()
+
+
+class _PageWindow:
+    """A meshcat window with no server: the scene tree is kept in-process by meshcat's own bridge code
+    (its ``handle_zmq``, with no socket), so that its page (``get_scene``) is the one a server makes."""
+
+    server_proc = None
+    web_url = ""
+
+    def __init__(self) -> None:
+        from meshcat.servers.tree import SceneTree
+        from meshcat.servers.zmqserver import ZMQWebSocketBridge
+
+        self._reply = _Reply()
+        self._bridge = ZMQWebSocketBridge.__new__(ZMQWebSocketBridge)  # no sockets, no web server
+        self._bridge.tree, self._bridge.websocket_pool = SceneTree(), set()
+        self._bridge.zmq_socket = self._reply
+
+    def send(self, command: Any) -> None:
+        import umsgpack
+
+        data = command.lower()
+        self._bridge.handle_zmq([data["type"].encode(), data["path"].encode(), umsgpack.packb(data)])
+
+    def get_scene(self) -> str:
+        self._bridge.handle_zmq([b"get_scene"])
+        return self._reply.data.decode()
+
+
+class _Reply:
+    """Where meshcat's bridge sends its answer, in place of its ZMQ socket."""
+
+    data = b""
+
+    def send(self, data: bytes) -> None:
+        self.data = data
 
 
 def _node_name(contact: str) -> str:

@@ -12,6 +12,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from ..files import atomic_path
 from .cases import CASES, QUICK_CASES
 from .sweep import MATCHED, matched_table, points, sweep, table
 
@@ -91,7 +92,8 @@ def report(
         if not mine:
             continue
         image = out / f"pareto_{case}.png"
-        pareto_figure(mine, f"{case}: {CASES[case].error}").savefig(image, dpi=90)
+        with atomic_path(image) as tmp:
+            pareto_figure(mine, f"{case}: {CASES[case].error}").savefig(tmp, dpi=90)
         link = os.path.relpath(image, path.parent)
         lines += [
             f"## {case}",
@@ -105,6 +107,6 @@ def report(
         if matched is not None:
             lines += [MATCHED_HEADER, "", matched, ""]
         lines += [f"![{case}]({link})", ""]
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("\n".join(lines))
+    with atomic_path(path) as tmp:
+        tmp.write_text("\n".join(lines))
     return path

@@ -1,0 +1,7 @@
+"""``python -m gaussim``: the ``gaussim`` command."""
+
+import sys
+
+from .cli import main
+
+sys.exit(main())

@@ -1,0 +1,51 @@
+"""The meshcat server of a live viewer, run as a script by :class:`gaussim.viewer.Viewer`.
+
+Usage: ``python viewer_server.py PARENT_PID``. Unlike ``python -m meshcat.servers.zmqserver``, whose web
+server listens on every address (tornado's ``listen(port)``; only its ZMQ socket honours ``host``), both of
+its sockets are bound to 127.0.0.1, and it exits when the process that started it is gone (killed by
+SIGKILL included), so no server outlives its run. Run by path, not as a module: it needs meshcat only,
+not gaussim's import.
+"""
+
+import functools
+import os
+import sys
+
+from meshcat.servers.zmqserver import ZMQWebSocketBridge
+from tornado.ioloop import PeriodicCallback
+
+HOST = "127.0.0.1"
+# How often the server checks that its parent is alive [ms].
+WATCH_MS = 250
+
+
+class LocalBridge(ZMQWebSocketBridge):
+    """meshcat's bridge with its web server bound to HOST, like its ZMQ socket."""
+
+    def make_app(self):  # type: ignore[no-untyped-def]
+        app = super().make_app()
+        app.listen = functools.partial(app.listen, address=HOST)
+        return app
+
+
+def main() -> None:
+    parent = int(sys.argv[1])
+    bridge = LocalBridge(host=HOST)
+
+    def watch() -> None:
+        if os.getppid() != parent:  # reparented: the parent died without stopping us
+            bridge.ioloop.stop()
+
+    if os.getppid() != parent:
+        return
+    PeriodicCallback(watch, WATCH_MS).start()
+    print(f"zmq_url={bridge.zmq_url}", flush=True)
+    print(f"web_url={bridge.web_url}", flush=True)
+    try:
+        bridge.run()
+    except KeyboardInterrupt:
+        pass
+
+
+if __name__ == "__main__":
+    main()
