@@ -539,7 +539,7 @@ def small_log(tmp_path_factory):
     """A 3-step run log of a falling ball, and its arrays."""
     folder = tmp_path_factory.mktemp("log")
     (folder / "scene.toml").write_text(BALL_SCENE + "[ground]\n[simulation]\nduration = 0.003\n")
-    path = gaussim.run(gaussim.load_scene(folder / "scene.toml"), folder / "log.npz") and folder / "log.npz"
+    path = gaussim.run(gaussim.load_scene(folder / "scene.toml"), folder / "run").save(folder / "log.npz")
     with np.load(path) as f:
         return path, {k: f[k] for k in f.files}
 
@@ -612,11 +612,11 @@ def test_unwritable_outputs_exit_2_naming_the_path(tmp_path, capsys, small_log):
     log = small_log[0]
     (tmp_path / "folder.png").mkdir()
     code, err = _cli(capsys, "forces", log, "--csv", tmp_path)
-    assert code == 2 and f"gaussim: {tmp_path}: cannot write it: Is a directory" in err, err
+    assert code == 2 and f"--csv {tmp_path}: is a directory" in err, err
     code, err = _cli(capsys, "plot", log, "-o", tmp_path / "folder.png")
-    assert code == 2 and f"gaussim: {tmp_path / 'folder.png'}: cannot write it" in err, err
+    assert code == 2 and f"--output {tmp_path / 'folder.png'}: is a directory" in err, err
     code, err = _cli(capsys, "replay", log, "--html", tmp_path)
-    assert code == 2 and f"gaussim: {tmp_path}: cannot write it: Is a directory" in err, err
+    assert code == 2 and f"--html {tmp_path}: is a directory" in err, err
     code, err = _cli(capsys, "plot", log, "-o", tmp_path / "forces")
     assert code == 2 and f"{tmp_path / 'forces'}: the image's suffix must be one of .png, .pdf, .svg" in err
     scene = tmp_path / "scene.toml"
@@ -674,3 +674,38 @@ def test_ctrl_c_before_the_first_step_writes_no_log(tmp_path, capsys, monkeypatc
     monkeypatch.setattr(gaussim.runner, "run", interrupted)
     code, err = _cli(capsys, "run", path, "--out", tmp_path / "log.npz")
     assert code == 1 and "interrupted; no log written" in err and not (tmp_path / "log.npz").exists()
+
+
+DIRECTORY_FAULTS = {  # the run log directory (header.json and its chunks), as LOG_FAULTS for the .npz
+    "newer": (
+        lambda h, c: {**h, "format_version": 3},
+        None,
+        "format_version 3 is newer than this gaussim reads",
+    ),
+    "robot": (lambda h, c: {**h, "robot": 12}, None, "'robot' must be a str, got 12"),
+    "options": (lambda h, c: {**h, "options": {"timestep": 1}}, None, "options: must be a JSON object"),
+    "shape": (None, {"v": np.zeros((4, 2))}, "damaged run log: 'v' has shape (4, 2)"),
+    "missing": (None, {"q": None}, "damaged run log: no array 'q'"),
+}
+
+
+@pytest.mark.parametrize("fault", DIRECTORY_FAULTS)
+def test_a_tampered_log_directory_exits_2_naming_the_file(tmp_path, capsys, fault):
+    import json
+
+    header_change, chunk_change, message = DIRECTORY_FAULTS[fault]
+    (tmp_path / "scene.toml").write_text(BALL_SCENE + "[ground]\n[simulation]\nduration = 0.003\n")
+    path = tmp_path / "run"
+    gaussim.run(gaussim.load_scene(tmp_path / "scene.toml"), path)
+    if header_change is not None:
+        header = json.loads((path / "header.json").read_text())
+        (path / "header.json").write_text(json.dumps(header_change(header, None)))
+    if chunk_change is not None:
+        for chunk in sorted(path.glob("chunk-*.npz"))[1:]:
+            chunk.unlink()  # the log is then the first chunk's steps
+        with np.load(path / "chunk-000000.npz") as f:
+            arrays = {k: f[k] for k in f.files}
+        arrays = {k: v for k, v in {**arrays, **chunk_change}.items() if v is not None}
+        np.savez(path / "chunk-000000.npz", **arrays)
+    code, err = _cli(capsys, "forces", path, "--csv", tmp_path / "f.csv")
+    assert code == 2 and f"gaussim: {path}" in err and message in err, err

@@ -344,14 +344,15 @@ def test_a_recorder_absorbs_another_runs_steps():
     """A case of several runs (tipping's bisection) reports all their steps: the counts add up, the
     residuals are the larger of the two."""
     from gaussim.bench.metrics import Recorder
+    from gaussim.options import Options
     from gaussim.robot import load_robot
     from gaussim.scene import Ground, Scene
     from gaussim.simulator import Simulator
 
     ball = load_robot("ball", floating_base=True)
     recorders = []
-    for height in (0.1, 0.095):  # resting, and dropped in 5 mm deep
-        sim = Simulator(Scene(ball, ground=Ground()))
+    for height in (0.1, 0.095):  # resting, and started 5 mm deep
+        sim = Simulator(Scene(ball, ground=Ground()), Options(start_penetration=1e-2))
         q = ball.neutral()
         q[2] = height
         rec = Recorder(sim)

@@ -248,8 +248,7 @@ def fuzz_log(tmp_path_factory):
     (folder / "scene.toml").write_text(SCENE.format(friction=0.8, restitution=0.0, dt=1e-3))
     spec = gaussim.load_scene(folder / "scene.toml")
     spec.duration = 0.005
-    path = folder / "log.npz"
-    gaussim.run(spec, path)
+    path = gaussim.run(spec, folder / "run").save(folder / "log.npz")
     with np.load(path) as f:
         return path.read_bytes(), {k: f[k] for k in f.files}
 

@@ -325,7 +325,7 @@ def test_sizes_out_of_bounds_exit_2_naming_the_field(tmp_path, capsys):
     scene = tmp_path / "facets.toml"
     scene.write_text((SCENES / "box_incline.toml").read_text() + "\n[options]\nfriction_facets = 8000\n")
     assert main(["run", str(scene), "--out", str(tmp_path / "r")]) == 2
-    assert "friction_facets: must be at most 64, got 8000" in capsys.readouterr().err
+    assert "friction_facets: must be an integer in [3, 64], got 8000" in capsys.readouterr().err
     assert not (tmp_path / "r").exists()
     spec = gaussim.load_scene(SCENES / "box_incline.toml")
     spec.duration = 10 * spec.options.dt
