@@ -75,23 +75,24 @@ def _midpoint_turns(v, v_next, dt, velocity, free, out):  # type: ignore[no-unty
 @njit(cache=True)
 def _move_bases(q, q_next, v, dt, configuration, velocity):  # type: ignore[no-untyped-def]
     """For each floating base: q_next's origin = q's + dt R v_l (R the frame of q), and v_l, in place,
-    re-expressed in q_next's frame (R_next^T R v_l)."""
+    re-expressed in q_next's frame (R_next^T R v_l). In scalars: this runs every step."""
     for k in range(len(configuration)):
         p, i = configuration[k], velocity[k]
-        R, R_next = _rotation(q[p + 3 : p + 7]), _rotation(q_next[p + 3 : p + 7])
-        world = R @ v[i : i + 3]
-        q_next[p : p + 3] = q[p : p + 3] + dt * world
-        v[i : i + 3] = R_next.T @ world
+        x, y, z = _turned(q[p + 3 : p + 7], v[i], v[i + 1], v[i + 2], 1.0)
+        q_next[p] = q[p] + dt * x
+        q_next[p + 1] = q[p + 1] + dt * y
+        q_next[p + 2] = q[p + 2] + dt * z
+        v[i], v[i + 1], v[i + 2] = _turned(q_next[p + 3 : p + 7], x, y, z, -1.0)
 
 
-@njit(cache=True)
-def _rotation(quaternion):  # type: ignore[no-untyped-def]
-    """The rotation matrix of a unit quaternion (x, y, z, w), Pinocchio's order."""
-    x, y, z, w = quaternion[0], quaternion[1], quaternion[2], quaternion[3]
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-        ]
+@njit(cache=True, inline="always")
+def _turned(quaternion, x, y, z, sign):  # type: ignore[no-untyped-def]
+    """The vector (x, y, z) turned by the unit quaternion (qx, qy, qz, qw) (Pinocchio's order), or by
+    its inverse for sign -1: v + 2 w (u x v) + 2 u x (u x v), u the quaternion's vector part."""
+    ux, uy, uz, w = sign * quaternion[0], sign * quaternion[1], sign * quaternion[2], quaternion[3]
+    cx, cy, cz = uy * z - uz * y, uz * x - ux * z, ux * y - uy * x
+    return (
+        x + 2.0 * (w * cx + uy * cz - uz * cy),
+        y + 2.0 * (w * cy + uz * cx - ux * cz),
+        z + 2.0 * (w * cz + ux * cy - uy * cx),
     )
