@@ -709,3 +709,16 @@ def test_a_tampered_log_directory_exits_2_naming_the_file(tmp_path, capsys, faul
         np.savez(path / "chunk-000000.npz", **arrays)
     code, err = _cli(capsys, "forces", path, "--csv", tmp_path / "f.csv")
     assert code == 2 and f"gaussim: {path}" in err and message in err, err
+
+
+def test_absurd_torques_are_named_as_the_cause_not_the_solver_settings(solo12):
+    """Item 16: tau = 1e12 on Solo-12's feet against the ground stopped ProxQP at its cap, and the error
+    advised raising max_iter, which cannot help."""
+    sim = gaussim.Simulator(gaussim.Scene(solo12, ground=gaussim.Ground()))
+    q = solo12.configuration("standing")
+    q[2] = 0.24
+    with pytest.raises(gaussim.SolverError) as info:
+        state = sim.reset(q)
+        for _ in range(5):
+            state = sim.step(state, np.full(12, 1e12))
+    assert "check the inputs" in str(info.value) and "max_iter" not in str(info.value)

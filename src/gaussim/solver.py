@@ -262,6 +262,17 @@ class Solution:
         return self.multipliers[self.n_eq :]
 
 
+# A free motion faster than this [m/s or rad/s] comes from absurd inputs, not from the solver's settings.
+EXTREME_REACH = 1e8
+
+
+def _reach(problem: GaussProblem) -> float:
+    """The size of the problem's free solution, |g| / max diag(H) (inf for non-finite data)."""
+    scale = float(np.abs(np.diagonal(problem.H)).max(initial=0.0))
+    size = float(np.abs(problem.g).max(initial=0.0))
+    return size / scale if scale > 0 and math.isfinite(size) else math.inf
+
+
 class GaussSolver:
     """Dense ProxQP, allocated once per problem size and warm-started from the previous result."""
 
@@ -436,14 +447,21 @@ class GaussSolver:
                 rows,
                 c,
             )
+        reach = _reach(problem)
+        extreme = (
+            f"; the free motion reaches |x| ~ {reach:.1e} (m/s or rad/s): a torque, gain or scene value far "
+            "beyond any robot's, no solver setting, is the cause; check the inputs"
+            if reach > EXTREME_REACH
+            else ""
+        )
         if not finite:
-            raise SolverError(f"ProxQP returned a non-finite solution ({c.status})", c)
+            raise SolverError(f"ProxQP returned a non-finite solution ({c.status}){extreme}", c)
         if not c.converged and self.options.on_failure == "raise":
             raise SolverError(
                 f"ProxQP did not converge: {c.status} after {c.outer_iterations} outer iterations, "
                 f"{c.iterations} in all (primal residual {c.primal_residual:.2e}, dual residual "
-                f"{c.dual_residual:.2e}, duality gap {c.duality_gap:.2e}); raise Options.max_iter or "
-                "eps_abs, or set on_failure='report'",
+                f"{c.dual_residual:.2e}, duality gap {c.duality_gap:.2e})"
+                + (extreme or "; raise Options.max_iter or eps_abs, or set on_failure='report'"),
                 c,
             )
         if not c.converged and not self._warned:
