@@ -116,6 +116,11 @@ def save_plot(log: RunLog, scene: Scene, path: str | Path, what: str = "forces")
     return path
 
 
+def close_figure(figure: Any) -> None:
+    """Release a figure made here (pyplot keeps each until it is closed)."""
+    _pyplot().close(figure)
+
+
 def pareto_figure(records: list[dict], title: str) -> Any:
     """Error against wall time per simulated second, one curve per engine and knob (each knob's
     values joined through the default point), for the records of one benchmark case."""

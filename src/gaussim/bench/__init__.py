@@ -83,7 +83,7 @@ def report(
     plot (written to ``out`` and linked relative to the report)."""
     import os
 
-    from ..plots import pareto_figure
+    from ..plots import close_figure, pareto_figure
 
     out.mkdir(parents=True, exist_ok=True)
     lines = [HEADER.format(command=command)]
@@ -92,8 +92,12 @@ def report(
         if not mine:
             continue
         image = out / f"pareto_{case}.png"
-        with atomic_path(image) as tmp:
-            pareto_figure(mine, f"{case}: {CASES[case].error}").savefig(tmp, dpi=90)
+        figure = pareto_figure(mine, f"{case}: {CASES[case].error}")
+        try:
+            with atomic_path(image) as tmp:
+                figure.savefig(tmp, dpi=90)
+        finally:
+            close_figure(figure)  # 24 cases: pyplot keeps every figure it made until closed
         link = os.path.relpath(image, path.parent)
         lines += [
             f"## {case}",
