@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib.resources
 import os
 import warnings
 from dataclasses import dataclass, field
@@ -14,7 +15,15 @@ import pinocchio as pin
 from .exceptions import FrameNotFound, GaussimWarning, GeometryNotFound, InvalidRobot, RobotNotFound
 from .urdfcheck import check_urdf, mesh_fault, mimic_joints
 
-ROBOTS_DIR = Path(__file__).resolve().parents[2] / "robots"
+
+def _shipped() -> Path:
+    """The shipped robots and scenes: package data of an installed gaussim (``pip install .``), or the
+    repository's ``robots/`` for a source checkout (``pip install -e .``, whose package is src/gaussim)."""
+    installed = Path(str(importlib.resources.files("gaussim"))) / "robots"
+    return installed if installed.is_dir() else Path(__file__).resolve().parents[2] / "robots"
+
+
+ROBOTS_DIR = _shipped()
 # How far a body's principal moments may miss positivity and the triangle inequality I1 + I2 >= I3,
 # relative to its largest moment, plus an absolute floor [kg m^2] (URDFs round their inertias: an
 # iCub link's moments are +-2e-35)
@@ -98,7 +107,8 @@ def load_robot(
 
     Args:
         name: a URDF path, a robot of the project's ``robots/`` folder (``"ball"``), or an
-            example-robot-data name (``"solo12"``, ``"talos"``).
+            example-robot-data name (``"solo12"``, ``"talos"``); a name in both is the project's
+            robot, with a warning that names the other.
         package_dirs: where ``package://`` meshes of a URDF are looked up.
         floating_base: add a free-flyer root joint. Default: example-robot-data decides for its
             robots (mobile robots float); a URDF path is fixed-base unless told.
@@ -114,6 +124,13 @@ def load_robot(
             raise RobotNotFound(str(name), _known_names())
         return _from_urdf(path, package_dirs, bool(floating_base))
     if local.is_file():
+        if str(name) in example_robot_names():  # the shipped robot comes first: say so
+            warnings.warn(
+                f"robot '{name}' is gaussim's shipped {local.name}; load example-robot-data's robot of "
+                f"that name by its URDF path (example_robot_data.robots_loader.ROBOTS['{name}']().df_path)",
+                GaussimWarning,
+                stacklevel=2,
+            )
         return _from_urdf(local, (str(ROBOTS_DIR), *package_dirs), bool(floating_base))
     known = example_robot_names()
     if str(name) not in known:

@@ -18,7 +18,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..options import Options
-from ..robot import Robot, load_robot
+from ..robot import ROBOTS_DIR, Robot, load_robot
 from ..scene import Ground, Scene
 from ..scenefile import load_scene
 from ..simulator import Simulator
@@ -26,7 +26,7 @@ from ..state import State
 from .metrics import Recorder
 
 G = 9.81
-SCENES_DIR = Path(__file__).resolve().parents[3] / "robots" / "scenes"
+SCENES_DIR = ROBOTS_DIR / "scenes"
 BOX_HALF_HEIGHT = 0.05  # robots/box.urdf is 0.1 m high
 BOX_SIDE = 0.2  # [m], the cubes of two_boxes
 LANDING = 0.3  # [s] a standing robot's landing, before its measured window
