@@ -68,18 +68,7 @@ def test_newtons_cradle_gives_moreaus_answer(cradle_balls, gap):
     Gauss projection of both contacts at once (Moreau) gives (-1/3, 2/3, 2/3), momentum and energy
     kept, as the velocity scheme does (it gave the plastic (1/3, 1/3, 1/3) in the gap window)."""
     dt = 1e-3
-    scene = gaussim.Scene(
-        cradle_balls,
-        contacts=[("b0_0", "b1_0"), ("b1_0", "b2_0")],
-        gravity=(0, 0, 0),
-        self_contact=(0.0, 1.0),
-    )
-    sim = gaussim.Simulator(scene, gaussim.Options(scheme="acceleration", dt=dt))
-    q = cradle_balls.neutral()
-    q[[0, 7, 14]] = -2 * RADIUS - gap, 0.0, 2 * RADIUS
-    v = np.zeros(18)
-    v[0] = 1.0
-    state = sim.reset(q, v)
+    sim, state = _cradle(cradle_balls, dt, (-2 * RADIUS - gap, 0.0, 2 * RADIUS))
     for _ in range(int(gap / dt) + 10):
         state = sim.step(state)
     speeds = state.v[[0, 6, 12]]
@@ -96,18 +85,7 @@ def test_an_impact_that_sets_a_contact_approaching_is_projected_again(cradle_bal
     an impact too: elastic balls pass the whole velocity on, (0, 0, 1). (Left to the acceleration
     level's Baumgarte rows it ended (0, 0.19, 0.81), a third of the energy lost.)"""
     dt = 1e-3
-    scene = gaussim.Scene(
-        cradle_balls,
-        contacts=[("b0_0", "b1_0"), ("b1_0", "b2_0")],
-        gravity=(0, 0, 0),
-        self_contact=(0.0, 1.0),
-    )
-    sim = gaussim.Simulator(scene, gaussim.Options(scheme="acceleration", dt=dt))
-    q = cradle_balls.neutral()
-    q[[0, 7, 14]] = -2 * RADIUS - 0.3e-3, 0.0, 2 * RADIUS + gap
-    v = np.zeros(18)
-    v[0] = 1.0
-    state = sim.reset(q, v)
+    sim, state = _cradle(cradle_balls, dt, (-2 * RADIUS - 0.3e-3, 0.0, 2 * RADIUS + gap))
     for _ in range(10):
         state = sim.step(state)
     np.testing.assert_allclose(state.v[[0, 6, 12]], [0.0, 0.0, 1.0], atol=MOREAU_ATOL)
@@ -206,3 +184,17 @@ def test_an_unsettled_sliding_friction_is_reported_and_counted(rod):
         log.record(state, np.zeros(6), report)
     assert recorder.unconverged == 3
     assert "steps not converged: 3" in log.summary()
+
+
+def _cradle(balls: gaussim.Robot, dt: float, x: tuple[float, float, float]):
+    """The three elastic, frictionless balls at x [m] along the row, in zero gravity, in the acceleration
+    scheme, the first moving at 1 m/s toward the others: (simulator, state)."""
+    scene = gaussim.Scene(
+        balls, contacts=[("b0_0", "b1_0"), ("b1_0", "b2_0")], gravity=(0, 0, 0), self_contact=(0.0, 1.0)
+    )
+    sim = gaussim.Simulator(scene, gaussim.Options(scheme="acceleration", dt=dt))
+    q = balls.neutral()
+    q[[0, 7, 14]] = x
+    v = np.zeros(18)
+    v[0] = 1.0
+    return sim, sim.reset(q, v)

@@ -249,6 +249,7 @@ def test_old_npz_logs_and_new_directories_load_the_same_in_every_command(tmp_pat
 
 @contextmanager
 def _tmpfs(path: Path, options: str):
+    # a real size or write limit needs a mounted filesystem; where none can be made, the case says why
     if not ROOT:
         pytest.skip("mounting a tmpfs needs root (chmod does not stop root, so there is no other way)")
     path.mkdir()

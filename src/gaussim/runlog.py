@@ -37,17 +37,6 @@ from .state import State
 FORMAT_VERSION = 1  # the single .npz
 DIRECTORY_VERSION = 2  # the directory of chunks
 HEADER = "header.json"
-# the entries of a single-file log that are its header, not its columns
-NPZ_HEADER = (
-    "format_version",
-    "robot",
-    "scene_text",
-    "scene_path",
-    "options",
-    "complete",
-    "reason",
-    "wall_time",
-)
 CHUNK = re.compile(r"chunk-(\d{6})\.npz")
 # the header of a run still going, or ended without a word (SIGKILL, power cut)
 RUNNING = "still running, or stopped by a kill: the log holds the steps of its chunks"
@@ -87,6 +76,8 @@ LAYOUT: dict[str, tuple[str, tuple[str, ...]]] = {
     "solver_kkt_residual": ("f", ("N",)),
     "solver_status": ("U", ("N",)),
 }
+# the entries of a single-file log that are its header (its scalars), not its columns
+NPZ_HEADER = tuple(key for key, (_, shape) in LAYOUT.items() if not shape)
 # A step's status when its QPs converged but its friction fixed point did not (friction_unsettled).
 FRICTION_UNSETTLED = "FRICTION_UNSETTLED"
 
