@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 
 import gaussim
 from gaussim.options import MAXIMA, Options
-from gaussim.scene import MAX_FRICTION
+from gaussim.world import MAX_FRICTION
 
 from .conftest import at_height
 

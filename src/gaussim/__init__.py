@@ -27,23 +27,27 @@ from .exceptions import (
 )
 from .options import Options
 from .report import StepReport
-from .robot import Robot, load_robot
+from .robot import Robot, as_robot, load_robot
 from .runlog import RunLog
 from .runner import run
 from .scene import Anchor, Box, Ground, LoopClosure, Scene, Sphere
 from .scenefile import SceneSpec, load_scene
 from .simulator import Simulator
 from .solver import Certificate
-from .state import State
+from .state import BodyState, State
+from .world import Body, FreeBody, Material, pose
 
 __all__ = [
     "Anchor",
     "BilateralReaction",
+    "Body",
+    "BodyState",
     "Box",
     "Certificate",
     "ContactError",
     "ContactForce",
     "FrameNotFound",
+    "FreeBody",
     "GaussimError",
     "GaussimWarning",
     "GeometryNotFound",
@@ -54,10 +58,11 @@ __all__ = [
     "InvalidState",
     "LimitReaction",
     "LoopClosure",
+    "Material",
     "Options",
     "Robot",
-    "RunLog",
     "RobotNotFound",
+    "RunLog",
     "Scene",
     "SceneSpec",
     "Simulator",
@@ -65,7 +70,9 @@ __all__ = [
     "Sphere",
     "State",
     "StepReport",
+    "as_robot",
     "load_robot",
     "load_scene",
+    "pose",
     "run",
 ]

@@ -87,13 +87,13 @@ class _Pair:
         self.local = geometry.placement
         self.joint = int(geometry.parentJoint)
         self.name = pair.name
+        self.friction, self.restitution = pair.friction, pair.restitution
         self.geometry = geometry.name
         self.other_joint, self.other_local = 0, None
         if pair.other is not None:  # another robot geometry: it moves, so its placement is per step
             other = geometries[pair.other]
             self.obstacle: Ground | Box | Sphere | None = None
             self.obstacle_name = other.name
-            self.friction, self.restitution = scene.self_contact
             self.obstacle_shape = _convex(other.geometry)
             self.other_joint, self.other_local = int(other.parentJoint), other.placement
             self.obstacle_tf = coal.Transform3s()
@@ -101,7 +101,6 @@ class _Pair:
             obstacle = scene.obstacles[pair.obstacle]  # type: ignore[index]
             self.obstacle = obstacle
             self.obstacle_name = obstacle.name
-            self.friction, self.restitution = obstacle.friction, obstacle.restitution
             self.obstacle_shape = obstacle.shape()
             self.obstacle_tf = coal.Transform3s(obstacle.placement())
         if isinstance(self.obstacle, Ground):

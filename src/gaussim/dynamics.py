@@ -123,9 +123,6 @@ class DynamicsStage:
         self._dynamics: Dynamics | None = None
         self._pending: tuple[np.ndarray, np.ndarray] | None = None  # (q, x_free) of the ABA order
         self._nv = model.nv  # a plain int: the model's is a property
-        # the torque ABA reads; only actuated joints' torques are ever copied in, so a floating base's
-        # entries stay zero
-        self._padded = np.zeros(model.nv)
         # sum_i |v_i| + |x_free_i| with it (else None): the collision stage's coarse bound on how far the
         # step can move any point, per unit of lever (see ContactDetector.cover)
         self.reach: float | None = None
@@ -134,23 +131,20 @@ class DynamicsStage:
         self, q: np.ndarray, v: np.ndarray, tau: np.ndarray, dt: float, acceleration: bool = False
     ) -> np.ndarray:
         """The unconstrained solution x_free of the velocity level or, with ``acceleration``, of the
-        acceleration level, for a time step ``dt`` [s]; the joint placements data.oMi for detection on
-        the way.
+        acceleration level, for a time step ``dt`` [s] and joint torques ``tau`` (nv,); the joint
+        placements data.oMi for detection on the way.
 
-        ``tau`` has shape (nv,), or fewer entries: the torques of the last joints (a floating base's
-        actuated joints), the first ones unactuated. Raises :class:`InvalidState` when it is not
-        finite, :class:`SolverError` when ABA's answer is not at a finite tau."""
+        Raises :class:`InvalidState` when tau is not finite, :class:`SolverError` when ABA's answer is
+        not at a finite tau."""
+        if len(tau) != self._nv:  # the kernels read nv entries
+            raise InvalidState(f"tau must have shape ({self._nv},), got {np.shape(tau)}")
         if acceleration or self._posed:
             self._posed, self.reach = False, None
             self._dynamics = compute_dynamics(self.model, self.data, q, v, tau, dt, acceleration, self.bases)
             return self._dynamics.x_free
-        full, nv = tau, self._nv
-        if len(tau) < nv:  # ABA takes (nv,): the actuated joints' torques go to its end
-            full = self._padded
-            full[nv - len(tau) :] = tau
-        # the WORLD convention fills data.oMi, and costs less: 4.8 against 5.3 us on Solo-12
-        a_free = pin.aba(self.model, self.data, q, v, full, _WORLD)
-        x_free = np.empty(nv)  # filled by the kernel: cheaper than a kernel's new array
+        # the WORLD convention fills data.oMi, and costs less than LOCAL
+        a_free = pin.aba(self.model, self.data, q, v, tau, _WORLD)
+        x_free = np.empty(self._nv)  # filled by the kernel: cheaper than a kernel's new array
         # tau is checked only here, where a NaN in it shows
         reach = free_velocity(v, a_free, dt, x_free, *self._base_args)
         if not reach < np.inf:  # NaN: x_free is not finite
@@ -185,11 +179,12 @@ def compute_dynamics(
     coordinates that its constraint terms Jdot v read (see :func:`point_drifts`). Frame placements
     are left to the modules that use frames.
 
-    ``tau`` has shape (nv,), or fewer entries: the torques of the last joints (a floating base's
-    actuated joints), the first ones unactuated. Raises :class:`InvalidState` when it is not finite
-    (checked here, in the kernel that reads it). The ``bases`` (default: the model's) are posed as
+    ``tau`` (nv,) are the joint torques; raises :class:`InvalidState` when they are not finite
+    (checked here, in the kernel that reads them). The ``bases`` (default: the model's) are posed as
     :class:`FloatingBases` says.
     """
+    if len(tau) != model.nv:  # the kernel reads nv entries
+        raise InvalidState(f"tau must have shape ({model.nv},), got {np.shape(tau)}")
     bases = FloatingBases.of(model) if bases is None else bases
     M = pin.crba(model, data, q, _WORLD)  # a copy of data.M; the WORLD convention also fills data.oMi, data.J
     nle = pin.nonLinearEffects(model, data, q, v)
@@ -209,14 +204,11 @@ def compute_dynamics(
 @njit(cache=True)
 def _linear_term(M, v, tau, nle, dt, f, g):  # type: ignore[no-untyped-def]
     """Fill f = M v + dt F at the velocity level (dt > 0), F at the acceleration level (dt = 0), with
-    F = tau - b and tau's missing first entries zero, and g = -f; False when tau is not finite."""
-    head = len(nle) - len(tau)
+    F = tau - b, and g = -f; False when tau is not finite."""
     for i in range(len(nle)):
-        f[i] = -nle[i]
-    for i in range(len(tau)):  # padded_torque fused with the subtraction (this runs every step)
         if not np.isfinite(tau[i]):
             return False
-        f[head + i] += tau[i]
+        f[i] = tau[i] - nle[i]
     if dt > 0:
         for i in range(len(f)):
             f[i] = dot(M[i], v) + dt * f[i]
@@ -290,43 +282,6 @@ def _midpoint_turn(I, w, u, dt):  # type: ignore[no-untyped-def]
         if np.sqrt(step @ step) <= _MIDPOINT_TOLERANCE * (np.sqrt(u @ u) + np.sqrt(w @ w)):
             break
     return u
-
-
-@njit(cache=True)
-def padded_torque(tau, nv):  # type: ignore[no-untyped-def]
-    """tau with its missing first entries zero (a floating base's unactuated coordinates), shape (nv,);
-    None when it is not finite."""
-    full, head = np.zeros(nv), nv - len(tau)
-    for i in range(len(tau)):
-        if not np.isfinite(tau[i]):
-            return None
-        full[head + i] = tau[i]
-    return full
-
-
-@njit(cache=True)
-def damped_torque(tau, damping, v, previous):  # type: ignore[no-untyped-def]
-    """(code, tau - D v, D, D == previous) for an implicit damping D at velocity v, tau and D each
-    padded as :func:`padded_torque` pads them (their sizes may differ), shape (nv,); code 1 when tau
-    is not finite, 2 when D is not finite or negative (one kernel: this runs every damped step)."""
-    nv = len(v)
-    full, D = np.zeros(nv), np.zeros(nv)
-    code = 0
-    head = nv - len(tau)
-    for i in range(len(tau)):
-        if not np.isfinite(tau[i]):
-            code = 1
-        full[head + i] = tau[i]
-    head = nv - len(damping)
-    for i in range(len(damping)):
-        if not (damping[i] >= 0 and np.isfinite(damping[i])):
-            code = 2
-        D[head + i] = damping[i]
-    same = len(previous) == nv
-    for i in range(nv):
-        full[i] -= D[i] * v[i]
-        same = same and D[i] == previous[i]
-    return code, full, D, same
 
 
 @njit(cache=True)

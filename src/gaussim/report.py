@@ -6,11 +6,15 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property, partial
 from time import perf_counter as _clock
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .constraints import BilateralReaction, ConstraintModule, ContactForce, LimitReaction, Rows
 from .solver import Certificate
+
+if TYPE_CHECKING:
+    from .world import World
 
 # Relative singular-value threshold under which stacked contact Jacobians count as rank deficient.
 RANK_TOLERANCE = 1e-9
@@ -58,6 +62,8 @@ class StepReport:
     # from multipliers to reactions (1 / dt at the velocity level: impulses to forces)
     blocks: Sequence[tuple[ConstraintModule, Rows, np.ndarray]] = field(default=(), repr=False)
     scale: float = field(default=1.0, repr=False)
+    # the bodies of the stepped world (set by the Simulator), for the forces between bodies
+    world: World | None = field(default=None, repr=False, compare=False)
 
     def __init__(self, t: float, timed: bool = False) -> None:
         """The report of the step from time ``t``, whose stages start now; ``timed``: record their
@@ -146,6 +152,29 @@ class StepReport:
             return False
         s = np.linalg.svd(J, compute_uv=False)
         return int(np.sum(s > RANK_TOLERANCE * s[0])) < J.shape[0]
+
+    def body_of(self, contact: ContactForce) -> tuple[str, str]:
+        """(the body whose geometry a contact's force acts on, the body or obstacle pushing it)."""
+        world = self.world
+        if world is None:
+            raise ValueError("this report knows no bodies: take it from Simulator.last_step")
+        first = world.body_of(contact.geometry)
+        second = world.body_of(contact.obstacle)
+        return str(first), contact.obstacle if second is None else second
+
+    def forces_between(self, a: str, b: str) -> np.ndarray:
+        """The total contact force on body ``a`` from body or obstacle ``b``, world frame, shape (3,)
+        [N] (an impulse [N s] in an impact report); ``forces_between(b, a)`` is its opposite."""
+        if self.world is not None:
+            self.world.body(a)  # an unknown body raises, listing the bodies
+        total = np.zeros(3)
+        for c in self.contacts:
+            pair = self.body_of(c)
+            if pair == (a, b):
+                total += c.force
+            elif pair == (b, a):
+                total -= c.force
+        return total
 
     def total_contact_force(self) -> np.ndarray:
         """Sum of the contact forces, shape (3,) [N]."""

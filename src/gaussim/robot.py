@@ -157,6 +157,26 @@ def load_robot(
     )
 
 
+def as_robot(source: object, name: str | None = None) -> Robot:
+    """A :class:`Robot` from what a user holds: a Robot (as is), a URDF path or a robot name
+    (:func:`load_robot`), or a ``(model, collision_model, visual_model)`` tuple of Pinocchio models.
+
+    Raises:
+        InvalidRobot: ``source`` is none of these, or its model is not simulable.
+    """
+    if isinstance(source, Robot):
+        return source
+    if isinstance(source, (str, os.PathLike)):
+        return load_robot(source)
+    if isinstance(source, tuple) and len(source) == 3 and isinstance(source[0], pin.Model):
+        model, collision, visual = source
+        return _finish(name or model.name or "robot", model, collision, visual, "", (), {})
+    raise InvalidRobot(
+        f"cannot make a robot of {type(source).__name__} {name or ''}: give a gaussim.Robot, a URDF "
+        "path, a robot name, or a (pinocchio.Model, collision GeometryModel, visual GeometryModel) tuple"
+    )
+
+
 def _known_names() -> list[str]:
     local = [p.stem for p in ROBOTS_DIR.glob("*.urdf")] if ROBOTS_DIR.is_dir() else []
     return local + example_robot_names()

@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import fnmatch
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import coal
@@ -12,10 +13,7 @@ import pinocchio as pin
 from .exceptions import GeometryNotFound, InvalidOptions, shown
 from .options import is_real
 from .robot import Robot
-
-# The largest Coulomb coefficient a scene may declare: real materials stay below 2; a block sliding on
-# mu = 1000 is tested to stop without sinking, and Solo-12 standing on mu = 1e6 sinks 3.6 mm
-MAX_FRICTION = 1e3
+from .world import BodyLayout, FreeBody, Material, World, check_material, combined
 
 
 def _vector(field_name: str, value: object, size: int) -> np.ndarray:
@@ -27,17 +25,6 @@ def _vector(field_name: str, value: object, size: int) -> np.ndarray:
     if arr.shape != (size,) or not np.all(np.isfinite(arr)):
         raise InvalidOptions(field_name, f"must be {size} finite numbers, got {shown(value)}")
     return arr
-
-
-def _material(owner: str, friction: float, restitution: float) -> None:
-    if not (is_real(friction) and friction >= 0):
-        raise InvalidOptions(f"{owner}.friction", f"must be a finite number >= 0, got {shown(friction)}")
-    if friction > MAX_FRICTION:  # type: ignore[operator]
-        raise InvalidOptions(
-            f"{owner}.friction", f"{friction:g} is beyond any material (at most {MAX_FRICTION:g})"
-        )
-    if not (is_real(restitution) and 0 <= restitution <= 1):
-        raise InvalidOptions(f"{owner}.restitution", f"must be in [0, 1], got {shown(restitution)}")
 
 
 @dataclass(frozen=True)
@@ -59,7 +46,7 @@ class Ground:
     name: str = "ground"
 
     def __post_init__(self) -> None:
-        _material(self.name, self.friction, self.restitution)
+        check_material(self.name, self.friction, self.restitution)
         n = _vector(f"{self.name}.normal", self.normal, 3)
         if np.linalg.norm(n) < 1e-12:
             raise InvalidOptions(f"{self.name}.normal", "must be a non-zero vector")
@@ -92,7 +79,7 @@ class Box:
     restitution: float = 0.0
 
     def __post_init__(self) -> None:
-        _material(self.name, self.friction, self.restitution)
+        check_material(self.name, self.friction, self.restitution)
         if np.any(_vector(f"{self.name}.size", self.size, 3) <= 0):
             raise InvalidOptions(f"{self.name}.size", f"must be > 0, got {shown(self.size)}")
         _vector(f"{self.name}.position", self.position, 3)
@@ -118,7 +105,7 @@ class Sphere:
     restitution: float = 0.0
 
     def __post_init__(self) -> None:
-        _material(self.name, self.friction, self.restitution)
+        check_material(self.name, self.friction, self.restitution)
         if not (is_real(self.radius) and self.radius > 0):
             raise InvalidOptions(
                 f"{self.name}.radius", f"must be a finite number > 0, got {shown(self.radius)}"
@@ -175,27 +162,46 @@ Bilateral = Anchor | LoopClosure
 
 @dataclass(frozen=True)
 class ContactPair:
-    """A robot collision geometry that may touch an obstacle or another robot geometry (indices
-    resolved at scene build: exactly one of ``obstacle`` and ``other`` is set)."""
+    """A collision geometry of the world that may touch an obstacle or another geometry (indices
+    resolved at scene build: exactly one of ``obstacle`` and ``other`` is set), with the pair's
+    material (see :class:`~gaussim.world.Material` for how two sides combine).
+
+    Attributes:
+        geometry: index in the world's collision model.
+        obstacle: index in ``Scene.obstacles``, or None.
+        name: ``"geometry/obstacle"``.
+        other: index of the other geometry, or None.
+        friction, restitution: the pair's coefficients.
+    """
 
     geometry: int
     obstacle: int | None
     name: str
     other: int | None = None
+    friction: float = 0.8
+    restitution: float = 0.0
 
 
 class Scene:
-    """A robot, the world around it and the constraints declared on it.
+    """Bodies (robots and free objects), the world around them and the constraints declared on them.
 
     Only what is declared here becomes a constraint module (model only what the scene requires).
 
     Args:
-        robot: the robot.
+        robot: the one robot of a one-body scene (or give ``bodies``).
+        bodies: name -> a :class:`Robot`, a :class:`~gaussim.world.FreeBody`, what
+            :func:`~gaussim.robot.as_robot` accepts, or a :class:`~gaussim.world.Body` with per-body
+            settings; in a scene of several, names are qualified: ``"solo/FL_FOOT_0"``.
         ground: a ground plane, or None.
         obstacles: fixed boxes and spheres.
-        contacts: the (geometry name, obstacle or geometry name) pairs that may touch; default every
-            robot collision geometry against every obstacle and the ground (no self-contact).
-        self_contact: (friction, restitution) of contacts between two robot geometries.
+        contacts: ``"auto"`` (or None): every geometry against every obstacle, every pair of
+            geometries of two bodies whose masks allow it, and a body's own non-adjacent links when its
+            ``self_collision`` is on; or a list of (name, name) pairs, each name an obstacle, a
+            geometry (``"body/geometry"``, or bare when one body has it), a body (all its geometries)
+            or a wildcard pattern (``"solo/*_FOOT_0"``).
+        self_contact: (friction, restitution) of pairs where no side declares a material.
+        materials: name or pattern of a body or geometry -> :class:`~gaussim.world.Material`
+            (a geometry's entry overrides its body's).
         joint_limits: enforce the URDF position limits.
         bilaterals: anchors and loop closures.
         gravity: gravity vector [m/s^2], shape (3,).
@@ -203,22 +209,32 @@ class Scene:
 
     def __init__(
         self,
-        robot: Robot,
+        robot: Robot | None = None,
         *,
+        bodies: Mapping[str, object] | None = None,
         ground: Ground | None = None,
         obstacles: Sequence[Box | Sphere] = (),
-        contacts: Sequence[tuple[str, str]] | None = None,
+        contacts: str | Sequence[tuple[str, str]] | None = None,
         joint_limits: bool = False,
         bilaterals: Sequence[Bilateral] = (),
         gravity: Sequence[float] = (0.0, 0.0, -9.81),
         self_contact: tuple[float, float] = (0.8, 0.0),
+        materials: Mapping[str, Material] | None = None,
     ) -> None:
-        self.robot = robot
+        if (robot is None) == (bodies is None):
+            raise InvalidOptions("bodies", "give one robot, or bodies={name: robot or free body, ...}")
+        if robot is not None and not isinstance(robot, Robot):
+            raise InvalidOptions("robot", f"must be a gaussim.Robot (gaussim.load_robot), got {shown(robot)}")
+        self.world = World({robot.name: robot} if robot is not None else bodies)  # type: ignore[dict-item, arg-type]
+        self.robot = robot = self.world.robot
         self.obstacles: tuple[Obstacle, ...] = ((ground,) if ground else ()) + tuple(obstacles)
         names = [o.name for o in self.obstacles]
         if len(set(names)) != len(names):
             raise InvalidOptions("obstacles", f"names must be unique, got {names}")
-        _material("self_contact", *self_contact)
+        clash = set(names) & set(self.world.bodies)
+        if clash:
+            raise InvalidOptions("obstacles", f"{sorted(clash)} name both an obstacle and a body")
+        check_material("self_contact", *self_contact)
         self.self_contact = (float(self_contact[0]), float(self_contact[1]))
         self.joint_limits = bool(joint_limits)
         self.gravity = _vector("gravity", gravity, 3)
@@ -226,7 +242,9 @@ class Scene:
         for b in self.bilaterals:
             for frame in (b.frame,) if isinstance(b, Anchor) else (b.frame_a, b.frame_b):
                 robot.frame_id(frame)
-        self.pairs = tuple(self._pairs(contacts, names))
+        self._names = _Names(self.world, names)
+        self._materials = self._geometry_materials(materials or {})
+        self.pairs = tuple(self._pairs(contacts))
         if self.obstacles and not robot.collision_model.ngeoms:
             raise InvalidOptions(
                 "robot",
@@ -234,29 +252,193 @@ class Scene:
                 f"pass through {', '.join(names)}; give its links collision elements, or drop the obstacles",
             )
 
-    def _pairs(self, contacts: Sequence[tuple[str, str]] | None, names: list[str]) -> list[ContactPair]:
-        geometries = [g.name for g in self.robot.collision_model.geometryObjects]
-        if contacts is None:
-            contacts = [(g, o) for o in names for g in geometries]
-        pairs = []
-        seen: dict[frozenset[str], int] = {}
-        for k, pair in enumerate(contacts):
-            if len(pair) != 2:
-                raise InvalidOptions(f"contacts[{k}]", f"must be (geometry, obstacle), got {shown(pair)}")
-            geometry, obstacle = pair
-            key = frozenset(pair)
-            if key in seen:  # the same pair twice would double its rows and halve its reported forces
-                raise InvalidOptions(
-                    f"contacts[{k}]",
-                    f"({geometry}, {obstacle}) repeats contacts[{seen[key]}] {contacts[seen[key]]}",
-                )
-            seen[key] = k
-            first = self.robot.geometry_id(geometry)
-            name = f"{geometry}/{obstacle}"
-            if obstacle in names:
-                pairs.append(ContactPair(first, names.index(obstacle), name))
-            elif obstacle in geometries and obstacle != geometry:
-                pairs.append(ContactPair(first, None, name, self.robot.geometry_id(obstacle)))
-            else:
-                raise GeometryNotFound(obstacle, names + [g for g in geometries if g != geometry], "obstacle")
+    @property
+    def bodies(self) -> dict[str, BodyLayout]:
+        """Each body's layout in the world (its slices of q and v, its geometries)."""
+        return self.world.bodies
+
+    def _geometry_materials(self, materials: Mapping[str, Material]) -> list[Material | None]:
+        """Each world geometry's material: its own entry, its body's, or its free body's."""
+        if not isinstance(materials, Mapping):
+            raise InvalidOptions("materials", f"must map names to gaussim.Material, got {shown(materials)}")
+        chosen: list[Material | None] = []
+        for g in range(self.robot.collision_model.ngeoms):
+            body = self.world.owner(g)
+            source = body.body.source
+            chosen.append(body.body.material or (source.material if isinstance(source, FreeBody) else None))
+        for key, material in materials.items():
+            if not isinstance(material, Material):
+                raise InvalidOptions(f"materials.{key}", f"must be a gaussim.Material, got {shown(material)}")
+            geometries = self._names.geometries(key, "materials")
+            for g in geometries:
+                chosen[g] = material
+        return chosen
+
+    def _pairs(self, contacts: str | Sequence[tuple[str, str]] | None) -> list[ContactPair]:
+        if contacts is None or contacts == "auto":
+            candidates = self._automatic()
+        elif isinstance(contacts, str):
+            raise InvalidOptions(
+                "contacts", f"must be 'auto' or a list of (name, name) pairs, got {shown(contacts)}"
+            )
+        else:
+            candidates = self._listed(contacts)
+        return [self._pair(a, b) for a, b in candidates]
+
+    def _automatic(self) -> list[tuple[int, tuple[str, int]]]:
+        """The default pairs: geometries x obstacles, then geometries of two bodies, then a body's own."""
+        world, joints = self.world, self._names.joints
+        moving = [
+            g for g in range(len(joints)) if joints[g] != 0
+        ]  # one fixed in the world touches nothing fixed
+        pairs: list[tuple[int, tuple[str, int]]] = [
+            (g, ("obstacle", o)) for o in range(len(self.obstacles)) for g in moving
+        ]
+        layouts = list(world.bodies.values())
+        for i, a in enumerate(layouts):
+            for b in layouts[i + 1 :]:
+                if a.body.contype & b.body.conaffinity or b.body.contype & a.body.conaffinity:
+                    pairs += [
+                        (g, ("geometry", h))
+                        for g in a.geometries
+                        for h in b.geometries
+                        if joints[g] or joints[h]
+                    ]
+            if a.body.self_collision:
+                pairs += [
+                    (g, ("geometry", h))
+                    for g in a.geometries
+                    for h in a.geometries
+                    if g < h and (joints[g] or joints[h]) and not world.adjacent(joints[g], joints[h])
+                ]
         return pairs
+
+    def _listed(self, contacts: Sequence[tuple[str, str]]) -> list[tuple[int, tuple[str, int]]]:
+        """The pairs of a list: each entry's names expanded, adjacent links dropped from patterns."""
+        pairs: list[tuple[int, tuple[str, int]]] = []
+        seen: dict[frozenset, int] = {}
+        joints = self._names.joints
+        for k, pair in enumerate(contacts):
+            if isinstance(pair, str) or len(pair) != 2:
+                raise InvalidOptions(f"contacts[{k}]", f"must be (geometry, obstacle), got {shown(pair)}")
+            first, second = pair
+            if first in self._names.obstacles:  # (obstacle, geometry): the same pair
+                first, second = second, first
+            for g in self._names.geometries(first, f"contacts[{k}]"):
+                for other in self._names.sides(second, f"contacts[{k}]"):
+                    kind, h = other
+                    if kind == "geometry" and (h == g or self.world.adjacent(joints[g], joints[h])):
+                        if self._names.exact(first) and self._names.exact(second):
+                            raise InvalidOptions(
+                                f"contacts[{k}]",
+                                f"({first}, {second}): "
+                                + (
+                                    "a geometry cannot touch itself"
+                                    if h == g
+                                    else "adjacent links never touch (their joint holds them together)"
+                                ),
+                            )
+                        continue
+                    key = frozenset([("geometry", g), other])
+                    if key in seen:  # the same pair twice would double its rows and halve its forces
+                        if self._names.exact(first) and self._names.exact(second):
+                            raise InvalidOptions(
+                                f"contacts[{k}]",
+                                f"({pair[0]}, {pair[1]}) repeats contacts[{seen[key]}] {contacts[seen[key]]}",
+                            )
+                        continue
+                    seen[key] = k
+                    pairs.append((g, other))
+        return pairs
+
+    def _pair(self, g: int, other: tuple[str, int]) -> ContactPair:
+        kind, h = other
+        name = self._names.geometry_names[g]
+        if kind == "obstacle":
+            obstacle = self.obstacles[h]
+            friction, restitution = combined(self._materials[g], (obstacle.friction, obstacle.restitution))
+            return ContactPair(g, h, f"{name}/{obstacle.name}", None, friction, restitution)  # type: ignore[arg-type]
+        friction, restitution = combined(self._materials[g], self._materials[h])
+        default_friction, default_restitution = self.self_contact
+        return ContactPair(
+            g,
+            None,
+            f"{name}/{self._names.geometry_names[h]}",
+            h,
+            default_friction if friction is None else friction,
+            default_restitution if restitution is None else restitution,
+        )
+
+
+_WILDCARDS = set("*?[")
+
+
+class _Names:
+    """How a scene's names resolve: obstacles, world geometries (bare or body-qualified), bodies, and
+    wildcard patterns of those."""
+
+    def __init__(self, world: World, obstacles: list[str]) -> None:
+        collision = world.robot.collision_model
+        self.world, self.obstacles = world, obstacles
+        self.geometry_names = [g.name for g in collision.geometryObjects]
+        self.joints = [int(g.parentJoint) for g in collision.geometryObjects]
+        # every geometry by its world name and by "body/name" (the same in a world of several bodies)
+        self.qualified = [
+            f"{world.owner(g).name}/{name[len(world.owner(g).prefix) :]}"
+            for g, name in enumerate(self.geometry_names)
+        ]
+        self.index: dict[str, list[int]] = {}
+        for g, name in enumerate(self.geometry_names):
+            self.index.setdefault(name, []).append(g)
+            if self.qualified[g] != name:
+                self.index.setdefault(self.qualified[g], []).append(g)
+        for body in world.bodies.values():
+            self.index.setdefault(body.name, []).extend(body.geometries)
+        # a bare geometry name of a world of several bodies, where it is unambiguous
+        if len(world) > 1:
+            bare: dict[str, list[int]] = {}
+            for g, name in enumerate(self.qualified):
+                bare.setdefault(name.split("/", 1)[1], []).append(g)
+            for name, found in bare.items():
+                self.index.setdefault(name, found if len(found) == 1 else [])
+
+    def exact(self, name: str) -> bool:
+        return not (_WILDCARDS & set(name)) and name not in self.world.bodies
+
+    def geometries(self, name: object, where: str) -> list[int]:
+        """The world geometries ``name`` stands for (at least one)."""
+        if not isinstance(name, str):
+            raise InvalidOptions(where, f"names must be text, got {shown(name)}")
+        if _WILDCARDS & set(name):
+            found = [g for g, q in enumerate(self.qualified) if fnmatch.fnmatchcase(q, name)]
+            found += [
+                g
+                for g, n in enumerate(self.geometry_names)
+                if fnmatch.fnmatchcase(n, name) and g not in found
+            ]
+            if found:
+                return sorted(found)
+        elif self.index.get(name):
+            return self.index[name]
+        elif name in self.index:  # a bare name that several bodies have
+            owners = [self.qualified[g] for g, q in enumerate(self.qualified) if q.split("/", 1)[1] == name]
+            raise InvalidOptions(where, f"'{name}' is ambiguous: qualify it with its body, one of {owners}")
+        raise GeometryNotFound(name, self.geometry_names + list(self.world.bodies) * (len(self.world) > 1))
+
+    def sides(self, name: object, where: str) -> list[tuple[str, int]]:
+        """What the second name of a pair stands for: obstacles or geometries."""
+        if isinstance(name, str):
+            obstacles = [
+                ("obstacle", o)
+                for o, n in enumerate(self.obstacles)
+                if n == name or (_WILDCARDS & set(name) and fnmatch.fnmatchcase(n, name))
+            ]
+            if obstacles and not (_WILDCARDS & set(name)):
+                return obstacles
+            try:
+                return obstacles + [("geometry", g) for g in self.geometries(name, where)]
+            except GeometryNotFound:
+                if obstacles:
+                    return obstacles
+                raise GeometryNotFound(name, self.obstacles + self.geometry_names, "obstacle") from None
+        return [("geometry", g) for g in self.geometries(name, where)]

@@ -11,10 +11,7 @@ floating bases (dynamics.FloatingBases, integrator): the base's linear velocity 
     the base on R3 x SO(3) (MuJoCo's free joint); a free rigid body's gyroscopic term is taken at the
     step's midpoint (in free flight it keeps energy and angular momentum exactly)
 
-implicit damping D (``step(..., damping=D)``, e.g. a PD drive's kd + dt kp): the joints get tau - D v+,
-    which is M + dt D in place of M and tau - D v in place of tau (Pinocchio's armature carries dt D
-    through CRBA and ABA alike); stable at any dt, where explicit damping diverges once D dt exceeds
-    about twice a joint's inertia.
+actuation (actuation.py): the torques per body, padded to nv, and implicit damping D as M + dt D.
 
 acceleration scheme, the paper's:
     if v is not admissible (an impact): v = argmin 1/2 (w - v)^T M (w - v) over the impulse-level rows
@@ -24,14 +21,17 @@ acceleration scheme, the paper's:
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
 import pinocchio as pin
 
+from .actuation import Actuation
 from .assembly import assemble
 from .collision import NO_CONTACTS, ContactDetector, Contacts
 from .constraints import BilateralModule, ContactModule, LimitModule
 from .constraints.base import ConstraintModule, Context, Level, Rows
-from .dynamics import Dynamics, DynamicsStage, damped_torque, padded_torque
+from .dynamics import Dynamics, DynamicsStage
 from .exceptions import InvalidState, SolverError
 from .integrator import integrate
 from .options import Options
@@ -44,7 +44,6 @@ from .state import State, real_array
 IMPACT_TOLERANCE = 1e-9
 # How far from 1 the norm of a configuration's quaternion may be.
 UNIT_TOLERANCE = 1e-6
-_FLOAT = np.dtype(float)  # a torque of this dtype is read as given
 
 
 class Simulator:
@@ -53,9 +52,11 @@ class Simulator:
     def __init__(self, scene: Scene, options: Options | None = None) -> None:
         self.scene = scene
         self.options = options or Options()
+        self.world = scene.world
         self.model = scene.robot.model.copy()
         self.model.gravity.linear = scene.gravity
         self.data = self.model.createData()
+        self.actuation = Actuation(self.model, self.world, self.options.dt)
         self.dynamics = DynamicsStage(self.model, self.data)
         self.detector = ContactDetector(scene, self.options.contact_margin) if scene.pairs else None
         self.modules = self._modules(scene, self.options)
@@ -65,17 +66,11 @@ class Simulator:
             level: GaussSolver(self.options) for level in ("velocity", "impulse", "acceleration")
         }
         self.last_step: StepReport | None = None
-        self._floating = scene.robot.floating
         self._last_state: State | None = None  # the state the last step returned: already valid
         self._rigid_bases = bool(self.dynamics.bases.rigid.any())
-        self._nv = self.model.nv  # read each step: a plain int, not a property of the Pinocchio model
-        # the torque shapes a step takes: (nv,), and a floating robot's actuated joints' (nv - 6,)
-        self._torque_shapes = {(self._nv,), (self._nv - 6,)} if self._floating else {(self._nv,)}
-        self._no_torque = np.zeros(self._nv)
-        self._scratch = np.zeros(self._nv)  # the step's displacement dt v+, read by Pinocchio's integrate
-        self._no_torque.flags.writeable = False
-        self._armature = self.model.armature.copy()  # the robot's own (rotor inertias)
-        self._damping: np.ndarray | None = None  # the implicit damping D, (nv,), whose dt D is added to it
+        self._scratch = np.zeros(
+            self.model.nv
+        )  # the step's displacement dt v+, read by Pinocchio's integrate
         # (slice, what) of each joint whose configuration ends with a unit quaternion or (cos, sin)
         self._unit_parts = []
         for j in range(1, self.model.njoints):
@@ -110,15 +105,48 @@ class Simulator:
 
     # -- state handling ---------------------------------------------------------------------------
 
-    def reset(self, q: np.ndarray | None = None, v: np.ndarray | None = None, t: float = 0.0) -> State:
-        """A validated initial state (default: neutral configuration at rest)."""
+    def reset(
+        self,
+        q: np.ndarray | Mapping[str, object] | None = None,
+        v: np.ndarray | Mapping[str, object] | None = None,
+        t: float = 0.0,
+    ) -> State:
+        """A validated initial state (default: neutral configuration at rest).
+
+        ``q`` is the world's configuration (nq,) or a mapping of body name to its configuration
+        (nq_b,) or, for a floating body, its base placement (a pinocchio.SE3, e.g. ``gaussim.pose``,
+        its joints neutral); ``v`` the world's velocity (nv,) or a mapping of body name to its (nv_b,).
+        What a mapping leaves out is neutral and at rest.
+        """
         q = pin.neutral(self.model) if q is None else q
         v = np.zeros(self.model.nv) if v is None else v
-        state = State(t, q, v)
+        if isinstance(q, Mapping):
+            q = self._per_body(q, "q", pin.neutral(self.model))
+        if isinstance(v, Mapping):
+            v = self._per_body(v, "v", np.zeros(self.model.nv))
+        state = State(t, q, v, self.world)  # type: ignore[arg-type]
         self._check_state(state)
         self._check_overlap(state)
         self.last_step = None
         return state
+
+    def _per_body(self, given: Mapping[str, object], name: str, full: np.ndarray) -> np.ndarray:
+        """The world's ``full`` q or v with the bodies' given parts in place."""
+        for body, part in given.items():
+            layout = self.world.body(str(body))
+            where = layout.q if name == "q" else layout.v
+            if isinstance(part, pin.SE3):
+                if name != "q" or not layout.floating:
+                    raise InvalidState(
+                        f"{name}['{body}']: a placement (SE3) places a floating body's base only"
+                    )
+                part = np.concatenate([pin.SE3ToXYZQUAT(part), full[where][7:]])
+            arr = real_array(f"{name}['{body}']", part)
+            size = where.stop - where.start
+            if arr.shape != (size,):
+                raise InvalidState(f"{name}['{body}'] must have shape ({size},), got {arr.shape}")
+            full[where] = arr
+        return full
 
     def _check_overlap(self, state: State) -> None:
         """Refuse a start whose pairs overlap deeper than ``Options.start_penetration``."""
@@ -149,70 +177,22 @@ class Simulator:
             if abs(norm - 1.0) > UNIT_TOLERANCE:
                 raise InvalidState(f"{message}, got norm {norm:.9g}; normalize it (pinocchio.normalize)")
 
-    def full_torque(
-        self, tau: np.ndarray | None, damping: np.ndarray | None = None, v: np.ndarray | None = None
-    ) -> np.ndarray:
-        """The joint torques a step applies, shape (nv,): ``tau`` validated (zeros for None; a floating
-        robot's actuated-joint torques (nv - 6,) are padded with zeros on the base), minus D v for an
-        implicit damping D at the step's new velocity ``v``."""
-        return self._torques(tau, damping, v)[0]
-
-    def _torques(
-        self, tau: np.ndarray | None, damping: np.ndarray | None, v: np.ndarray | None
-    ) -> tuple[np.ndarray, np.ndarray | None, bool]:
-        """(tau - D v, D, whether D is the damping of the last step), validated and padded to (nv,);
-        D is None without damping."""
-        tau = self._shaped_torque(tau)
-        if damping is None:
-            full = padded_torque(tau, self._nv)
-            if full is None:
-                raise InvalidState.non_finite("tau", tau)
-            return full, None, self._damping is None
-        previous = self._no_torque[:0] if self._damping is None else self._damping
-        code, full, D, same = damped_torque(tau, self._shaped_torque(damping, "damping"), v, previous)
-        if code == 1:
-            raise InvalidState.non_finite("tau", tau)
-        if code == 2:
-            raise InvalidState(f"damping must be finite and >= 0 [N m s/rad], got {damping}")
-        return full, D, same
-
-    def _shaped_torque(self, tau: np.ndarray | None, name: str = "tau") -> np.ndarray:
-        """``tau`` as a float array of shape (nv,) or, for a floating robot, (nv - 6,) (zeros for None);
-        its entries are checked by the dynamics stage, which reads them."""
-        if tau is None:
-            return self._no_torque
-        tau = np.asarray(tau)
-        if tau.dtype is not _FLOAT:  # ints, float32, or what is no torque at all (complex, text)
-            tau = real_array(name, tau)
-        if tau.shape not in self._torque_shapes:
-            nv = self._nv
-            hint = f" or ({nv - 6},) for the actuated joints" if self._floating else ""
-            raise InvalidState(f"{name} must have shape ({nv},){hint}, got {tau.shape}")
-        return tau
-
-    def _damped_torque(self, tau: np.ndarray | None, damping: np.ndarray | None, v: np.ndarray) -> np.ndarray:
-        """tau - D v, with dt D added to the model's armature, for the implicit damping D (see the
-        module's docstring); without damping, ``tau`` shaped, and the robot's own armature."""
-        if damping is None:
-            if self._damping is not None:
-                self.model.armature = self._armature
-                self._damping = None
-            return self._shaped_torque(tau)
-        full, D, same = self._torques(tau, damping, v)
-        if not same:
-            assert D is not None
-            self.model.armature = self._armature + self.options.dt * D
-            self._damping = D
+    def full_torque(self, tau: object, damping: object = None, v: np.ndarray | None = None) -> np.ndarray:
+        """The joint torques a step applies, shape (nv,): ``tau`` validated and padded (see
+        :mod:`.actuation`), minus D v for an implicit damping D at the step's new velocity ``v``."""
+        full = self.actuation.torque(tau, damping, v).copy()
+        if not np.all(np.isfinite(full)):
+            raise InvalidState.non_finite("tau", full)
         return full
 
     # -- the step ---------------------------------------------------------------------------------
 
-    def step(self, state: State, tau: np.ndarray | None = None, damping: np.ndarray | None = None) -> State:
-        """Advance ``state`` by one time step under joint torques ``tau`` [N m], shape (nv,) (or, for a
-        floating robot, (nv - 6,): the actuated joints'); return the new state.
+    def step(self, state: State, tau: object = None, damping: object = None) -> State:
+        """Advance ``state`` by one time step under joint torques ``tau`` [N m] and return the new state.
 
-        ``damping`` D [N m s/rad], shaped as ``tau`` and >= 0, is velocity feedback applied implicitly:
-        the joints get tau - D v+, with v+ the new velocity (stable at any time step).
+        ``tau``: the world's (nv,), its actuated coordinates' (a floating robot's (nv - 6,)), or
+        ``{body: tau_b}`` (see :mod:`.actuation`); ``damping`` D [N m s/rad], shaped alike and >= 0,
+        is velocity feedback applied implicitly: the joints get tau - D v+ (stable at any time step).
 
         Raises:
             InvalidState: bad state or torque.
@@ -223,15 +203,15 @@ class Simulator:
             self._check_state(state)
             if self.detector:
                 self.detector.forget()
-        if damping is None and self._damping is None:  # the common case, one call
-            tau = self._shaped_torque(tau)
-        else:
-            tau = self._damped_torque(tau, damping, state.v)
         o = self.options
+        given, tau = tau, self.actuation.torque(tau, damping, state.v)
         report = StepReport(state.t, o.timings)
         mark = report.mark
         acceleration = o.scheme == "acceleration"
-        x_free = self.dynamics.free_motion(state.q, state.v, tau, o.dt, acceleration)
+        try:  # the dynamics check tau's entries, where they are read
+            x_free = self.dynamics.free_motion(state.q, state.v, tau, o.dt, acceleration)
+        except InvalidState:
+            raise self.actuation.non_finite(given) from None
         mark("dynamics")
         contacts = NO_CONTACTS
         if self.detector:  # it looks when the step's motion may have brought a pair within its margin
@@ -242,8 +222,9 @@ class Simulator:
             dyn = self.dynamics.problem()
             v = self._impact(state, dyn.M, contacts, report)
             if v is not state.v:  # the damping acts on the velocity after the impact
-                damped = tau if self._damping is None else tau - self._damping * (v - state.v)
-                self.dynamics.free_motion(state.q, v, damped, o.dt, True)
+                self.dynamics.free_motion(
+                    state.q, v, self.actuation.after_impact(tau, state.v, v), o.dt, True
+                )
                 dyn = self.dynamics.problem()
             v_next = v + o.dt * self._gauss("acceleration", state.q, v, dyn, contacts, report, 1.0)
         elif len(contacts.gap) or self._rows_without_contact:
@@ -258,8 +239,9 @@ class Simulator:
         mark("integrate")
         if moved is None:
             raise SolverError(f"step at t={state.t:.6g} s produced a non-finite velocity", report)
+        report.world = self.world
         self.last_step = report
-        self._last_state = State.adopt(state.t + o.dt, *moved)  # both arrays are this step's own
+        self._last_state = State.adopt(state.t + o.dt, *moved, self.world)  # both arrays are this step's own
         return self._last_state
 
     def _problem(self, report: StepReport) -> Dynamics:
