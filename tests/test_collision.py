@@ -230,8 +230,8 @@ def test_the_reach_of_the_free_motion_bounds_the_travel(solo12):
     rng, dt, q = np.random.default_rng(3), sim.options.dt, solo12.configuration("standing")
     for _ in range(50):
         v = rng.normal(size=solo12.model.nv)
-        sim.dynamics.free_motion(q, v, np.zeros(12), dt)  # the first call poses the problem; then ABA
-        x = sim.dynamics.free_motion(q, v, rng.normal(size=12), dt)
+        sim.dynamics.free_motion(q, v, np.zeros(18), dt)  # the first call poses the problem; then ABA
+        x = sim.dynamics.free_motion(q, v, np.r_[np.zeros(6), rng.normal(size=12)], dt)
         reach = sim.dynamics.reach
         assert reach == pytest.approx(np.abs(v).sum() + np.abs(x).sum(), rel=1e-12)
         for clearance, same in ((100.0, False), (coarse.base_margin + 1e-3, True)):

@@ -1,22 +1,16 @@
 """The simulator: a short ``step`` that reads as the algorithm.
 
-velocity scheme (default), the discrete Gauss principle (Moreau-Jean time stepping):
-    a_free = M^-1 (tau - b(q, v)) (ABA);  contacts = detect(q)
-    v+ = argmin 1/2 (w - v_free)^T M (w - v_free)  over the velocity-level rows,  v_free = v + dt a_free
-         (M from CRBA only when a module can produce rows; else v+ = v_free)
-    q+ = q (+) dt v+
+    tau    = actuation(tau, damping)                 the torques per body, padded to nv (actuation.py)
+    x_free = free motion(q, v, tau)                  ABA, or CRBA + RNEA when a QP follows (dynamics.py)
+    contacts = detect(q)                             when the step can bring a pair within its margin
+    v+     = scheme(x_free, contacts)                the rows of every module and the Gauss QP over them
+                                                     (schemes.py: the velocity or acceleration scheme)
+    q+     = q (+) dt v+                             on each joint's manifold (integrator.py)
 
 floating bases (dynamics.FloatingBases, integrator): the base's linear velocity is its origin's in the
     frame of the step's start, so a_free leaves out the frame's turn -w x v_l, and q+ = q (+) dt v+ moves
     the base on R3 x SO(3) (MuJoCo's free joint); a free rigid body's gyroscopic term is taken at the
     step's midpoint (in free flight it keeps energy and angular momentum exactly)
-
-actuation (actuation.py): the torques per body, padded to nv, and implicit damping D as M + dt D.
-
-acceleration scheme, the paper's:
-    if v is not admissible (an impact): v = argmin 1/2 (w - v)^T M (w - v) over the impulse-level rows
-    a  = argmin 1/2 a^T M a - a^T F  over the acceleration-level rows (second-order tangent sets)
-    v+ = v + dt a;  q+ = q (+) dt v+
 """
 
 from __future__ import annotations
@@ -27,21 +21,19 @@ import numpy as np
 import pinocchio as pin
 
 from .actuation import Actuation
-from .assembly import assemble
 from .collision import NO_CONTACTS, ContactDetector, Contacts
 from .constraints import BilateralModule, ContactModule, LimitModule
-from .constraints.base import ConstraintModule, Context, Level, Rows
-from .dynamics import Dynamics, DynamicsStage
+from .constraints.base import ConstraintModule
+from .dynamics import DynamicsStage
 from .exceptions import InvalidState, SolverError
+from .gauss import GaussStage
 from .integrator import integrate
 from .options import Options
 from .report import StepReport
 from .scene import Scene
-from .solver import GaussSolver
+from .schemes import SCHEMES, Scheme
 from .state import State, real_array
 
-# A velocity violating an impulse-level row by more than this is an impact [m/s or rad/s].
-IMPACT_TOLERANCE = 1e-9
 # How far from 1 the norm of a configuration's quaternion may be.
 UNIT_TOLERANCE = 1e-6
 
@@ -60,31 +52,15 @@ class Simulator:
         self.dynamics = DynamicsStage(self.model, self.data)
         self.detector = ContactDetector(scene, self.options.contact_margin) if scene.pairs else None
         self.modules = self._modules(scene, self.options)
-        # modules whose rows do not come from detected contacts: with one, every step poses the QP
-        self._rows_without_contact = any(not isinstance(m, ContactModule) for m in self.modules)
-        self.solvers: dict[Level, GaussSolver] = {
-            level: GaussSolver(self.options) for level in ("velocity", "impulse", "acceleration")
-        }
+        self.gauss = GaussStage(self.model, self.data, self.modules, self.options)
+        # a module whose rows do not come from detected contacts makes every step pose the QP
+        always = any(not isinstance(m, ContactModule) for m in self.modules)
+        self.scheme: Scheme = SCHEMES[self.options.scheme](self.dynamics, self.gauss, self.actuation, always)
         self.last_step: StepReport | None = None
         self._last_state: State | None = None  # the state the last step returned: already valid
         self._rigid_bases = bool(self.dynamics.bases.rigid.any())
-        self._scratch = np.zeros(
-            self.model.nv
-        )  # the step's displacement dt v+, read by Pinocchio's integrate
-        # (slice, what) of each joint whose configuration ends with a unit quaternion or (cos, sin)
-        self._unit_parts = []
-        for j in range(1, self.model.njoints):
-            joint = self.model.joints[j]
-            if joint.nq > joint.nv:
-                planar = any(k in joint.shortname() for k in ("RUB", "Planar"))
-                what, size = ("(cos, sin) pair", 2) if planar else ("quaternion (x, y, z, w)", 4)
-                part = slice(joint.idx_q + joint.nq - size, joint.idx_q + joint.nq)
-                self._unit_parts.append(
-                    (
-                        part,
-                        f"q[{part.start}:{part.stop}] of joint '{self.model.names[j]}' must be a unit {what}",
-                    )
-                )
+        self._scratch = np.zeros(self.model.nv)  # the step's dt v+, read by Pinocchio's integrate
+        self._unit_parts = _unit_parts(self.model)
 
     @staticmethod
     def _modules(scene: Scene, options: Options) -> list[ConstraintModule]:
@@ -199,133 +175,65 @@ class Simulator:
             InfeasibleConstraints: the constraints admit no motion (the rows involved are named).
             SolverError: ProxQP failed (see ``Options.on_failure``) or the result is not finite.
         """
+        self._admit(state)
+        report = StepReport(state.t, self.options.timings)
+        torque = self.actuation.torque(tau, damping, state.v)
+        x_free = self._free_motion(state, torque, tau, report)
+        contacts = self._detect(state.v, x_free, report)
+        v_next = self.scheme.next_velocity(state, torque, x_free, contacts, report)
+        return self._advance(state, v_next, report)
+
+    def _admit(self, state: State) -> None:
+        """Check a state that is not the one the last step returned (and detect afresh from it)."""
         if state is not self._last_state:
             self._check_state(state)
             if self.detector:
                 self.detector.forget()
-        o = self.options
-        given, tau = tau, self.actuation.torque(tau, damping, state.v)
-        report = StepReport(state.t, o.timings)
-        mark = report.mark
-        acceleration = o.scheme == "acceleration"
-        try:  # the dynamics check tau's entries, where they are read
-            x_free = self.dynamics.free_motion(state.q, state.v, tau, o.dt, acceleration)
+
+    def _free_motion(self, state: State, torque: np.ndarray, given: object, report: StepReport) -> np.ndarray:
+        try:  # the dynamics check the torque's entries, where they are read
+            x_free = self.dynamics.free_motion(
+                state.q, state.v, torque, self.options.dt, self.scheme.acceleration
+            )
         except InvalidState:
             raise self.actuation.non_finite(given) from None
-        mark("dynamics")
+        report.mark("dynamics")
+        return x_free
+
+    def _detect(self, v: np.ndarray, x_free: np.ndarray, report: StepReport) -> Contacts:
+        """The contacts, when the step's motion may have brought a pair within its margin."""
+        if not self.detector:
+            return NO_CONTACTS
+        dt = self.options.dt
         contacts = NO_CONTACTS
-        if self.detector:  # it looks when the step's motion may have brought a pair within its margin
-            if self.detector.cover(state.v, x_free, o.dt, o.dt if acceleration else 1.0, self.dynamics.reach):
-                contacts = self.detector.detect(self.data)
-            mark("collision")
-        if acceleration:
-            dyn = self.dynamics.problem()
-            v = self._impact(state, dyn.M, contacts, report)
-            if v is not state.v:  # the damping acts on the velocity after the impact
-                self.dynamics.free_motion(
-                    state.q, v, self.actuation.after_impact(tau, state.v, v), o.dt, True
-                )
-                dyn = self.dynamics.problem()
-            v_next = v + o.dt * self._gauss("acceleration", state.q, v, dyn, contacts, report, 1.0)
-        elif len(contacts.gap) or self._rows_without_contact:
-            v_next = self._gauss(
-                "velocity", state.q, state.v, self._problem(report), contacts, report, 1 / o.dt
-            )
-        else:  # nothing can restrict the motion: no Gauss problem to pose
-            v_next = x_free
-        bases = self.dynamics.bases
+        if self.detector.cover(v, x_free, dt, dt if self.scheme.acceleration else 1.0, self.dynamics.reach):
+            contacts = self.detector.detect(self.data)
+        report.mark("collision")
+        return contacts
+
+    def _advance(self, state: State, v_next: np.ndarray, report: StepReport) -> State:
+        """The next state: q moved by dt v+ on each joint's manifold."""
+        dt, bases = self.options.dt, self.dynamics.bases
         free = bases.untouched(report, report.impact) if self._rigid_bases else None
-        moved = integrate(self.model, state.q, state.v, v_next, o.dt, self._scratch, bases, free)
-        mark("integrate")
+        moved = integrate(self.model, state.q, state.v, v_next, dt, self._scratch, bases, free)
+        report.mark("integrate")
         if moved is None:
             raise SolverError(f"step at t={state.t:.6g} s produced a non-finite velocity", report)
         report.world = self.world
         self.last_step = report
-        self._last_state = State.adopt(state.t + o.dt, *moved, self.world)  # both arrays are this step's own
+        self._last_state = State.adopt(state.t + dt, *moved, self.world)  # both arrays are this step's own
         return self._last_state
 
-    def _problem(self, report: StepReport) -> Dynamics:
-        """The step's free Gauss problem (its CRBA, when the free motion skipped it, timed as dynamics)."""
-        report.mark("")
-        dyn = self.dynamics.problem()
-        report.mark("dynamics")
-        return dyn
 
-    def _impact(self, state: State, M: np.ndarray, contacts: Contacts, report: StepReport) -> np.ndarray:
-        """The impulsive Gauss projection of v while v violates an impulse-level row, else v itself.
-
-        A projection can set a contact it did not hold approaching (a ball struck towards the next one,
-        within a step): it is projected again, so no approach faster than ``restitution_threshold`` is
-        left to the acceleration level's Baumgarte rows, which stopped it plastically (slower ones are
-        inelastic, and a projection's own rows are met only to the QP's tolerance). Each projection's
-        impulses are in ``report.impact``, the next ones in its own ``impact``."""
-        v, last, tolerance = state.v, report, IMPACT_TOLERANCE
-        for _ in range(len(contacts.gap) + 1):  # each projection makes a contact separate, or ends
-            ctx = self._context("impulse", state.q, v, v, contacts)
-            parts = self._rows(ctx)
-            if not any(np.any(rows.J @ v < rows.bound - tolerance) for _, rows in parts if not rows.equality):
-                break
-            tolerance = max(IMPACT_TOLERANCE, self.options.restitution_threshold)
-            last.impact = StepReport(state.t, report.timed)
-            last = last.impact
-            v = self._solve(ctx, M, -(M @ v), parts, last, 1.0)
-            report.certificates += last.certificates
-        return v
-
-    def _gauss(
-        self,
-        level: Level,
-        q: np.ndarray,
-        v: np.ndarray,
-        dyn: Dynamics,
-        contacts: Contacts,
-        report: StepReport,
-        scale: float,
-    ) -> np.ndarray:
-        """Minimise the Gauss functional of ``level`` (``dyn``'s free problem over the constraints' rows);
-        record the reactions in ``report``."""
-        ctx = self._context(level, q, v, dyn.x_free, contacts)
-        return self._solve(ctx, dyn.M, dyn.g, None, report, scale)
-
-    def _context(
-        self, level: Level, q: np.ndarray, v: np.ndarray, x_free: np.ndarray, contacts: Contacts
-    ) -> Context:
-        return Context(self.model, self.data, q, v, x_free, contacts, self.options, level)
-
-    def _rows(self, ctx: Context) -> list[tuple[ConstraintModule, Rows]]:
-        parts = [(module, module.rows(ctx)) for module in self.modules]
-        return [(module, rows) for module, rows in parts if rows is not None]
-
-    def _solve(
-        self,
-        ctx: Context,
-        M: np.ndarray,
-        g: np.ndarray,
-        parts: list[tuple[ConstraintModule, Rows]] | None,
-        report: StepReport,
-        scale: float,
-    ) -> np.ndarray:
-        """Solve, re-posing the rows while a module's fixed-point iteration asks for it."""
-        mark = report.mark
-        for _ in range(self.options.friction_iterations):
-            mark("")
-            parts = self._rows(ctx) if parts is None else parts
-            if not parts:
-                mark("assembly")
-                return ctx.x_free
-            problem = assemble(M, g, parts)
-            mark("assembly")
-            solution = self.solvers[ctx.level].solve(problem)
-            mark("solve")
-            report.certificates += (solution.certificate,)
-            x, lam = solution.x, solution.multipliers
-            blocks = [(module, rows, lam[part]) for module, rows, part in problem.blocks]
-            refine = False
-            for module, rows, multipliers in blocks:
-                refine |= module.refine(ctx, rows, x, multipliers)
-            if not refine:
-                break
-            parts = None
-        report.blocks, report.scale = blocks, scale
-        mark("")
-        return x
+def _unit_parts(model: pin.Model) -> list[tuple[slice, str]]:
+    """(slice, what) of each joint whose configuration ends with a unit quaternion or (cos, sin)."""
+    parts = []
+    for j in range(1, model.njoints):
+        joint = model.joints[j]
+        if joint.nq > joint.nv:
+            planar = any(k in joint.shortname() for k in ("RUB", "Planar"))
+            what, size = ("(cos, sin) pair", 2) if planar else ("quaternion (x, y, z, w)", 4)
+            part = slice(joint.idx_q + joint.nq - size, joint.idx_q + joint.nq)
+            message = f"q[{part.start}:{part.stop}] of joint '{model.names[j]}' must be a unit {what}"
+            parts.append((part, message))
+    return parts

@@ -1,0 +1,90 @@
+"""Stages 3 and 4, the constraint rows and the Gauss solve: every module's rows at one level, the QP
+over them (ProxQP, certified), and the multipliers that are the reactions."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+
+from .assembly import assemble
+from .collision import Contacts
+from .constraints.base import ConstraintModule, Context, Level, Rows
+from .dynamics import Dynamics
+from .options import Options
+from .report import StepReport
+from .solver import GaussSolver
+
+Parts = list[tuple[ConstraintModule, Rows]]
+
+
+class GaussStage:
+    """The constrained minimum of a step's Gauss functional, for one model and its modules."""
+
+    def __init__(
+        self, model: pin.Model, data: pin.Data, modules: list[ConstraintModule], options: Options
+    ) -> None:
+        self.model, self.data, self.modules, self.options = model, data, modules, options
+        self.solvers: dict[Level, GaussSolver] = {
+            level: GaussSolver(options) for level in ("velocity", "impulse", "acceleration")
+        }
+
+    def context(
+        self, level: Level, q: np.ndarray, v: np.ndarray, x_free: np.ndarray, contacts: Contacts
+    ) -> Context:
+        """What the modules read to pose their rows at ``level``."""
+        return Context(self.model, self.data, q, v, x_free, contacts, self.options, level)
+
+    def rows(self, ctx: Context) -> Parts:
+        """The rows of every module that restricts x at ``ctx.level``."""
+        parts = [(module, module.rows(ctx)) for module in self.modules]
+        return [(module, rows) for module, rows in parts if rows is not None]
+
+    def minimise(
+        self,
+        level: Level,
+        q: np.ndarray,
+        v: np.ndarray,
+        dyn: Dynamics,
+        contacts: Contacts,
+        report: StepReport,
+        scale: float,
+    ) -> np.ndarray:
+        """Minimise the Gauss functional of ``level`` (``dyn``'s free problem over the modules' rows);
+        record the reactions (multipliers times ``scale``) in ``report``."""
+        ctx = self.context(level, q, v, dyn.x_free, contacts)
+        return self.solve(ctx, dyn.M, dyn.g, None, report, scale)
+
+    def solve(
+        self,
+        ctx: Context,
+        M: np.ndarray,
+        g: np.ndarray,
+        parts: Parts | None,
+        report: StepReport,
+        scale: float,
+    ) -> np.ndarray:
+        """min 1/2 x^T M x + g^T x over the rows ``parts`` (posed from ``ctx`` when None), posed again
+        while a module's fixed-point iteration asks for it."""
+        mark = report.mark
+        for _ in range(self.options.friction_iterations):
+            mark("")
+            parts = self.rows(ctx) if parts is None else parts
+            if not parts:
+                mark("assembly")
+                return ctx.x_free
+            problem = assemble(M, g, parts)
+            mark("assembly")
+            solution = self.solvers[ctx.level].solve(problem)
+            mark("solve")
+            report.certificates += (solution.certificate,)
+            x, lam = solution.x, solution.multipliers
+            blocks = [(module, rows, lam[part]) for module, rows, part in problem.blocks]
+            refine = False
+            for module, rows, multipliers in blocks:
+                refine |= module.refine(ctx, rows, x, multipliers)
+            if not refine:
+                break
+            parts = None
+        report.blocks, report.scale = blocks, scale
+        mark("")
+        return x
