@@ -1,10 +1,16 @@
-"""Robots: a Pinocchio model with its collision and visual geometry, loaded from a URDF."""
+"""Robots: a Pinocchio model with its collision and visual geometry, read from a URDF, MJCF or SDF
+file or a robot name (:func:`load_robot`), or made of the Pinocchio objects a user already holds
+(:func:`as_robot`). A :class:`Robot` is checked when made, whatever it was made from: masses,
+inertias, limits, a positive definite mass matrix, and geometry attached to its own model's joints."""
 
 from __future__ import annotations
 
+import dataclasses
 import importlib.resources
 import os
+import re
 import warnings
+import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -12,7 +18,8 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from .exceptions import FrameNotFound, GaussimWarning, GeometryNotFound, InvalidRobot, RobotNotFound
+from . import mjcf, sdf
+from .exceptions import FrameNotFound, GaussimWarning, GeometryNotFound, InvalidRobot, RobotNotFound, shown
 from .urdfcheck import check_urdf, mesh_fault, mimic_joints
 
 
@@ -28,18 +35,29 @@ ROBOTS_DIR = _shipped()
 # relative to its largest moment, plus an absolute floor [kg m^2] (URDFs round their inertias: an
 # iCub link's moments are +-2e-35)
 INERTIA_RTOL, INERTIA_ATOL = 1e-6, 1e-12
+# a robot file's format, told by its root element
+FORMATS = {"robot": "URDF", "mujoco": "MJCF", "sdf": "SDF"}
+SUFFIXES = (".urdf", ".xml", ".mjcf", ".sdf")
+# shapes no body has: a ground is a Scene's gaussim.Ground
+UNBOUNDED = (coal.Halfspace, coal.Plane)
+ACCEPTED = (
+    "a gaussim.Robot, a pinocchio.RobotWrapper (example_robot_data.load(...) returns one), a "
+    "pinocchio.Model, a tuple (model, collision_model) or (model, collision_model, visual_model), a URDF, "
+    "MJCF or SDF path, or a robot name"
+)
 
 
 @dataclass(frozen=True)
 class Robot:
-    """An immutable robot model.
+    """An immutable robot model, checked when made (:class:`InvalidRobot` says what is wrong); the
+    meshes of its collision model get their convex hulls, which contacts are computed on.
 
     Attributes:
         name: the name it was loaded by.
         model: Pinocchio kinematic/dynamic model.
         collision_model: Pinocchio geometry model used for contacts.
         visual_model: Pinocchio geometry model used for display.
-        urdf: path of the URDF file.
+        urdf: the file it was read from (a URDF, MJCF or SDF file); "" for a model made in memory.
         package_dirs: directories where ``package://`` meshes are resolved.
         reference_configurations: named configurations (e.g. ``standing``), shape (nq,) each.
     """
@@ -51,6 +69,19 @@ class Robot:
     urdf: str
     package_dirs: tuple[str, ...] = ()
     reference_configurations: dict[str, np.ndarray] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        _check(self)
+        for geometry in self.collision_model.geometryObjects:
+            if isinstance(geometry.geometry, coal.BVHModelBase) and geometry.geometry.convex is None:
+                # Contacts are detected on the convex hull of a mesh (coal's GJK/EPA needs convex shapes
+                # to give signed distances and contact patches); built once here.
+                geometry.geometry.buildConvexHull(True, "Qt")
+
+    @property
+    def source(self) -> str:
+        """What the robot was made from, for messages: its file, or its in-memory model."""
+        return self.urdf or f"the in-memory model '{self.name}'"
 
     @property
     def floating(self) -> bool:
@@ -106,23 +137,27 @@ def load_robot(
     """Load a robot.
 
     Args:
-        name: a URDF path, a robot of the project's ``robots/`` folder (``"ball"``), or an
+        name: a URDF, MJCF or SDF path (told apart by the root element: ``<robot>``, ``<mujoco>``,
+            ``<sdf>``), a robot of the project's ``robots/`` folder (``"ball"``), or an
             example-robot-data name (``"solo12"``, ``"talos"``); a name in both is the project's
             robot, with a warning that names the other.
-        package_dirs: where ``package://`` meshes of a URDF are looked up.
-        floating_base: add a free-flyer root joint. Default: example-robot-data decides for its
-            robots (mobile robots float); a URDF path is fixed-base unless told.
+        package_dirs: where ``package://`` meshes of a URDF, and ``package://`` and ``model://``
+            meshes of an SDF, are looked up.
+        floating_base: give the robot a free-flyer root joint. Default: as the file says, where it
+            can: an MJCF whose first body has a ``<freejoint>`` floats, an SDF model floats unless a
+            joint attaches it to the world; a URDF is fixed-base; example-robot-data decides for its
+            robots (mobile robots float). A file that says the opposite of the value given is refused.
 
     Raises:
         RobotNotFound: the name is none of the above (the message lists the known names).
-        InvalidRobot: the URDF could not be parsed or describes an unusable model.
+        InvalidRobot: the file could not be read or describes an unusable model.
     """
     path = Path(name)
     local = ROBOTS_DIR / f"{name}.urdf"
-    if path.suffix == ".urdf" or path.exists():
+    if path.suffix in SUFFIXES or path.exists():
         if not path.is_file():
             raise RobotNotFound(str(name), _known_names())
-        return _from_urdf(path, package_dirs, bool(floating_base))
+        return _from_file(path, tuple(package_dirs), floating_base)
     if local.is_file():
         if str(name) in example_robot_names():  # the shipped robot comes first: say so
             warnings.warn(
@@ -138,43 +173,94 @@ def load_robot(
     from example_robot_data.robots_loader import ROBOTS
 
     loader = ROBOTS[str(name)]()
-    model = loader.robot.model
     if floating_base is not None and floating_base != loader.free_flyer:
         base = "floating" if loader.free_flyer else "fixed"
         raise InvalidRobot(
             f"robot '{name}' has a {base} base in example-robot-data; to change it, load its "
             f"URDF by path: load_robot('{loader.df_path}', floating_base={floating_base})"
         )
-    configurations = {e.key(): np.array(e.data()) for e in model.referenceConfigurations}
-    return _finish(
+    model = loader.robot.model
+    _warn_mimics(Path(loader.df_path), model)
+    return Robot(
         str(name),
         model,
-        loader.robot.collision_model,
-        loader.robot.visual_model,
+        _own_geometry(str(name), model, loader.robot.collision_model),
+        _own_geometry(str(name), model, loader.robot.visual_model),
         str(loader.df_path),
         (str(loader.model_path),),
-        configurations,
+        _configurations(model),
     )
 
 
-def as_robot(source: object, name: str | None = None) -> Robot:
-    """A :class:`Robot` from what a user holds: a Robot (as is), a URDF path or a robot name
-    (:func:`load_robot`), or a ``(model, collision_model, visual_model)`` tuple of Pinocchio models.
+def _own_geometry(name: str, model: pin.Model, geometry: pin.GeometryModel) -> pin.GeometryModel:
+    """The geometry of an example-robot-data robot attached to joints of its model: a loader that
+    reduces a model may keep the geometry of the joints it removed (talos_legs keeps the collision
+    geometry of Talos's torso and arms), which is left out, with a warning."""
+    stray = [g.name for g in geometry.geometryObjects if g.parentJoint >= model.njoints]
+    for geometry_name in stray:
+        geometry.removeGeometryObject(geometry_name)
+    if stray:
+        warnings.warn(
+            f"example-robot-data's '{name}' holds {len(stray)} geometries of joints its model does not have "
+            f"({shown(stray)}): left out",
+            GaussimWarning,
+            stacklevel=3,
+        )
+    return geometry
+
+
+def as_robot(obj: object, name: str | None = None) -> Robot:
+    """A :class:`Robot` of what a user holds, passed as it is.
+
+    Args:
+        obj: a :class:`Robot` (returned as it is, renamed if ``name`` is given); a
+            ``pinocchio.RobotWrapper`` (``example_robot_data.load("solo12")`` returns one); a
+            ``pinocchio.Model`` (no geometry: it touches nothing); a tuple ``(model, collision_model)``
+            (its collision geometry is also drawn) or ``(model, collision_model, visual_model)``; a
+            path or robot name (see :func:`load_robot`). Pinocchio objects are copied: changing them
+            later does not change the robot.
+        name: the robot's name; default the model's name (``model.name``), or "robot".
 
     Raises:
-        InvalidRobot: ``source`` is none of these, or its model is not simulable.
+        InvalidRobot: ``obj`` is none of these, or its model is unusable, or a geometry is attached to
+            a joint or frame its model does not have (the geometry model of another model).
+        RobotNotFound: a name that is no robot.
     """
-    if isinstance(source, Robot):
-        return source
-    if isinstance(source, (str, os.PathLike)):
-        return load_robot(source)
-    if isinstance(source, tuple) and len(source) == 3 and isinstance(source[0], pin.Model):
-        model, collision, visual = source
-        return _finish(name or model.name or "robot", model, collision, visual, "", (), {})
-    raise InvalidRobot(
-        f"cannot make a robot of {type(source).__name__} {name or ''}: give a gaussim.Robot, a URDF "
-        "path, a robot name, or a (pinocchio.Model, collision GeometryModel, visual GeometryModel) tuple"
-    )
+    if isinstance(obj, Robot):
+        return obj if name is None else dataclasses.replace(obj, name=name)
+    if isinstance(obj, str | os.PathLike):
+        robot = load_robot(obj)
+        return robot if name is None else dataclasses.replace(robot, name=name)
+    if isinstance(obj, pin.RobotWrapper):
+        parts: tuple[object, ...] = (obj.model, obj.collision_model, obj.visual_model)
+    elif isinstance(obj, tuple) and len(obj) in (2, 3):
+        parts = obj
+    else:
+        parts = (obj,)
+    model, collision, visual = (*parts, None, None)[:3]
+    if not isinstance(model, pin.Model):
+        raise InvalidRobot(f"as_robot: cannot make a robot of {_described(obj)}; accepted: {ACCEPTED}")
+    geometries = []
+    for role, geometry in (("collision_model", collision), ("visual_model", visual)):
+        if geometry is not None and not isinstance(geometry, pin.GeometryModel):
+            raise InvalidRobot(
+                f"as_robot: the {role} must be a pinocchio.GeometryModel (or None), got "
+                f"{_described(geometry)}; accepted: {ACCEPTED}"
+            )
+        geometries.append(geometry.clone() if geometry is not None else None)
+    collision, visual = geometries
+    collision = collision if collision is not None else pin.GeometryModel()
+    visual = visual if visual is not None else collision.clone()
+    model = pin.Model(model)
+    return Robot(name or model.name or "robot", model, collision, visual, "", (), _configurations(model))
+
+
+def _described(obj: object) -> str:
+    """Its type and, when it fits a line, its value."""
+    if isinstance(obj, tuple):
+        return f"a tuple of ({', '.join(type(item).__name__ for item in obj)})"
+    text = shown(obj)
+    return type(obj).__name__ + ("" if "\n" in text else f" {text}")
 
 
 def _known_names() -> list[str]:
@@ -182,9 +268,23 @@ def _known_names() -> list[str]:
     return local + example_robot_names()
 
 
-def _from_urdf(
-    path: Path, package_dirs: tuple[str, ...] | list[str], floating: bool, name: str | None = None
-) -> Robot:
+def _from_file(path: Path, package_dirs: tuple[str, ...], floating: bool | None) -> Robot:
+    """A robot of a URDF, MJCF or SDF file, told apart by its root element."""
+    try:
+        tag = ET.parse(path).getroot().tag.rpartition("}")[2]  # without an XML namespace
+    except ET.ParseError as err:
+        raise InvalidRobot(f"{path}: not well-formed XML ({err})") from err
+    if tag == "mujoco":
+        return _from_mjcf(path, floating)
+    if tag == "sdf":
+        return _from_sdf(path, package_dirs, floating)
+    if tag == "robot":
+        return _from_urdf(path, package_dirs, bool(floating))
+    known = ", ".join(f"<{t}> ({f})" for t, f in FORMATS.items())
+    raise InvalidRobot(f"{path}: the root element <{tag}> is no robot format gaussim reads; known: {known}")
+
+
+def _from_urdf(path: Path, package_dirs: tuple[str, ...] | list[str], floating: bool) -> Robot:
     dirs = [str(d) for d in (*package_dirs, path.parent)]
     check_urdf(path)
     try:
@@ -195,60 +295,169 @@ def _from_urdf(
     except (RuntimeError, ValueError, OSError) as err:
         cause = mesh_fault(path, dirs, str(err)) or str(err)
         raise InvalidRobot(f"{path}: cannot build a model from this URDF: {cause}") from err
-    return _finish(name or path.stem, model, collision, visual, str(path), tuple(dirs), {})
+    _warn_mimics(path, model)
+    return Robot(path.stem, model, collision, visual, str(path), tuple(dirs), {})
 
 
-def _finish(
-    name: str,
-    model: pin.Model,
-    collision: pin.GeometryModel,
-    visual: pin.GeometryModel,
-    urdf: str,
-    package_dirs: tuple[str, ...],
-    configurations: dict[str, np.ndarray],
-) -> Robot:
-    """Check the model is simulable and prepare the collision geometry for contact detection."""
+def _from_mjcf(path: Path, floating: bool | None) -> Robot:
+    root = mjcf.read(path)
+    mjcf.check_file(path, root)
+    try:
+        model, _ = pin.buildModelAndLegacyConstraintsFromMJCF(str(path))
+        floats = model.njoints > 1 and model.joints[1].shortname() == "JointModelFreeFlyer"
+        if floating is False and floats:
+            body = next(f.name for f in model.frames if f.type == pin.FrameType.BODY and f.parentJoint == 1)
+            raise InvalidRobot(
+                f"{path}: body '{body}' has a <freejoint>, so the robot floats: floating_base=False cannot "
+                "fix it (remove the <freejoint> to fix the base)"
+            )
+        if floating and not floats:
+            model, _ = pin.buildModelAndLegacyConstraintsFromMJCF(
+                str(path), pin.JointModelFreeFlyer(), "root_joint"
+            )
+        collision = pin.buildGeomFromMJCF(model, str(path), pin.GeometryType.COLLISION)
+        visual = pin.buildGeomFromMJCF(model, str(path), pin.GeometryType.VISUAL)
+    except (RuntimeError, ValueError, OSError) as err:
+        raise InvalidRobot(f"{path}: cannot build a model from this MJCF: {_cause(err)}") from err
+    notes = mjcf.check(path, root, collision, model)
+    mjcf.set_joint_limits(root, model)
+    planes = [
+        g.name for g in collision.geometryObjects if isinstance(g.geometry, UNBOUNDED) and g.parentJoint == 0
+    ]
+    for geometry in (collision, visual):
+        for plane in planes:
+            if geometry.existGeometryName(plane):
+                geometry.removeGeometryObject(plane)
+    if planes:
+        notes.append(
+            f"the world's planes {', '.join(repr(p) for p in planes)} are left out (a gaussim Scene has its "
+            "own ground: gaussim.Ground)"
+        )
+    for note in notes:
+        warnings.warn(f"{path}: {note}", GaussimWarning, stacklevel=4)
+    return Robot(path.stem, model, collision, visual, str(path), (str(path.parent),), _configurations(model))
+
+
+def _from_sdf(path: Path, package_dirs: tuple[str, ...], floating: bool | None) -> Robot:
+    converted = sdf.to_urdf(path, package_dirs)
+    floats = converted.world_joint is None if floating is None else floating
+    if floats and converted.world_joint is not None:
+        raise InvalidRobot(
+            f"{path}: joint '{converted.world_joint}' attaches the model to the world: floating_base=True "
+            "cannot make it float (remove that joint)"
+        )
+    try:
+        if floats:
+            model = pin.buildModelFromXML(converted.urdf, pin.JointModelFreeFlyer())
+        else:
+            model = pin.buildModelFromXML(converted.urdf)
+        collision = pin.buildGeomFromUrdfString(model, converted.urdf, pin.GeometryType.COLLISION)
+        visual = pin.buildGeomFromUrdfString(model, converted.urdf, pin.GeometryType.VISUAL)
+    except (RuntimeError, ValueError, OSError) as err:
+        raise InvalidRobot(f"{path}: cannot build a model from this SDF: {_cause(err)}") from err
+    for note in converted.notes:
+        warnings.warn(f"{path}: {note}", GaussimWarning, stacklevel=4)
+    return Robot(path.stem, model, collision, visual, str(path), (*package_dirs, str(path.parent)), {})
+
+
+def _cause(err: Exception) -> str:
+    """The message of a Pinocchio error, without the C++ function and line it carries."""
+    text = str(err)
+    found = re.search(r"message:\s*(.+)", text, re.S)
+    return " ".join((found[1] if found else text).split())
+
+
+def _configurations(model: pin.Model) -> dict[str, np.ndarray]:
+    """The model's named configurations (an SRDF's, an MJCF's keyframes)."""
+    return {e.key(): np.array(e.data()) for e in model.referenceConfigurations}
+
+
+def _warn_mimics(path: Path, model: pin.Model) -> None:
+    mimics = [(j, target) for j, target in mimic_joints(path) if model.existJointName(j)]
+    if mimics:
+        listed = ", ".join(f"'{j}' (mimics '{target}')" for j, target in mimics)
+        warnings.warn(
+            f"{path}: gaussim does not honour <mimic>: the joints {listed} move as free joints",
+            GaussimWarning,
+            stacklevel=4,
+        )
+
+
+def _check(robot: Robot) -> None:
+    """Raise :class:`InvalidRobot` unless the robot is simulable."""
+    where, model = robot.source, robot.model
+    if not isinstance(model, pin.Model):
+        raise InvalidRobot(f"{where}: the model must be a pinocchio.Model, got {type(model).__name__}")
+    for role in ("collision_model", "visual_model"):
+        geometry = getattr(robot, role)
+        if not isinstance(geometry, pin.GeometryModel):
+            raise InvalidRobot(
+                f"{where}: the {role} must be a pinocchio.GeometryModel, got {type(geometry).__name__}"
+            )
     if model.nv == 0:
-        raise InvalidRobot(f"{urdf or name}: the model has no degree of freedom")
+        raise InvalidRobot(f"{where}: the model has no degree of freedom")
     for joint_id in range(1, model.njoints):
         inertia = model.inertias[joint_id]
         if not np.isfinite(inertia.mass) or inertia.mass < 0:
-            raise InvalidRobot(
-                f"{urdf or name}: body of joint '{model.names[joint_id]}' has mass {inertia.mass}"
-            )
-    _check_inertias(model, urdf or name)
+            raise InvalidRobot(f"{where}: body of joint '{model.names[joint_id]}' has mass {inertia.mass}")
+    _check_inertias(model, where)
     for joint_id in range(1, model.njoints):
         joint = model.joints[joint_id]
         lower = model.lowerPositionLimit[joint.idx_q : joint.idx_q + joint.nq]
         upper = model.upperPositionLimit[joint.idx_q : joint.idx_q + joint.nq]
         if np.any(lower > upper):
             raise InvalidRobot(
-                f"{urdf or name}: joint '{model.names[joint_id]}' has its lower limit {lower.tolist()} "
+                f"{where}: joint '{model.names[joint_id]}' has its lower limit {lower.tolist()} "
                 f"above its upper limit {upper.tolist()}"
             )
-    mimics = (
-        [(j, target) for j, target in mimic_joints(Path(urdf)) if model.existJointName(j)] if urdf else []
-    )
-    if mimics:
-        listed = ", ".join(f"'{j}' (mimics '{target}')" for j, target in mimics)
-        warnings.warn(
-            f"{urdf}: gaussim does not honour <mimic>: the joints {listed} move as free joints",
-            GaussimWarning,
-            stacklevel=3,
-        )
+    for key, q in robot.reference_configurations.items():
+        if np.shape(q) != (model.nq,) or not np.all(np.isfinite(q)):
+            raise InvalidRobot(
+                f"{where}: configuration '{key}' must be {model.nq} finite numbers, got {shown(q)}"
+            )
     data = model.createData()
     mass_matrix = pin.crba(model, data, pin.neutral(model))
     if not np.all(np.isfinite(mass_matrix)) or np.linalg.eigvalsh(mass_matrix).min() <= 0:
         raise InvalidRobot(
-            f"{urdf or name}: the mass matrix is not positive definite at the neutral "
+            f"{where}: the mass matrix is not positive definite at the neutral "
             "configuration (a moving body without mass or inertia?)"
         )
-    for geometry in collision.geometryObjects:
-        if isinstance(geometry.geometry, coal.BVHModelBase):
-            # Contacts are detected on the convex hull of a mesh (coal's GJK/EPA needs convex shapes
-            # to give signed distances and contact patches); built once here.
-            geometry.geometry.buildConvexHull(True, "Qt")
-    return Robot(name, model, collision, visual, urdf, package_dirs, configurations)
+    _check_geometry(model, robot.collision_model, where, "collision")
+    _check_geometry(model, robot.visual_model, where, "visual")
+
+
+def _check_geometry(model: pin.Model, geometry: pin.GeometryModel, where: str, role: str) -> None:
+    """Refuse a geometry attached to a joint or frame that is not the model's, or a collision shape
+    without bounds."""
+    joints = ", ".join(f"{i} '{n}'" for i, n in enumerate(model.names))
+    unset = np.iinfo(np.uint64).max  # the frame of a GeometryObject made without one
+    for g in geometry.geometryObjects:
+        name = f"{role} geometry '{g.name}'"
+        if g.geometry is None:
+            raise InvalidRobot(f"{where}: {name} has no shape")
+        if g.parentJoint >= model.njoints:
+            raise InvalidRobot(
+                f"{where}: {name} is attached to joint {g.parentJoint}, which the model does not have "
+                f"(its joints: {joints}): is it the geometry model of another model?"
+            )
+        if g.parentFrame != unset and (
+            g.parentFrame >= model.nframes or model.frames[g.parentFrame].parentJoint != g.parentJoint
+        ):
+            frame = (
+                f"frame '{model.frames[g.parentFrame].name}' (on joint "
+                f"'{model.names[model.frames[g.parentFrame].parentJoint]}')"
+                if g.parentFrame < model.nframes
+                else f"frame {g.parentFrame}, which the model does not have"
+            )
+            raise InvalidRobot(
+                f"{where}: {name} is attached to joint '{model.names[g.parentJoint]}' and to {frame}: "
+                "is it the geometry model of another model?"
+            )
+        if role == "collision" and isinstance(g.geometry, UNBOUNDED):
+            raise InvalidRobot(
+                f"{where}: {name} is an unbounded {type(g.geometry).__name__}, which no body is: give the "
+                "scene a ground instead (gaussim.Scene(robot, ground=gaussim.Ground()))"
+            )
 
 
 def _check_inertias(model: pin.Model, where: str) -> None:

@@ -1,0 +1,205 @@
+"""An MJCF file read beside Pinocchio's parser, which builds the model (``pin.buildModelFromMJCF``) but
+departs from MuJoCo's reading of the same file without a word (measured on Pinocchio 4.1 against
+MuJoCo on the same files): it reads only the first body of ``<worldbody>``; gives each mesh geom
+1 kg and a unit inertia whatever its mass; takes every ``range`` as a limit, ``limited="false"``
+or not, subtracts ``ref`` from it, and converts a slide joint's range from degrees. This module
+finds those cases in the file: the first two are reported, the limits are set as MuJoCo sets them."""
+
+from __future__ import annotations
+
+import math
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import coal
+import numpy as np
+import pinocchio as pin
+
+from .exceptions import InvalidRobot
+
+JOINT_TYPES = ("hinge", "slide", "ball", "free")
+# the numeric attributes of the elements that place and weigh bodies
+NUMERIC = (
+    "pos", "quat", "euler", "axisangle", "xyaxes", "zaxis", "axis", "fromto", "size", "range", "ref",
+    "mass", "density", "diaginertia", "fullinertia", "armature", "damping",
+)  # fmt: skip
+
+
+def read(path: Path) -> ET.Element:
+    """The ``<mujoco>`` element of the MJCF at ``path``, its ``<include>`` files inlined; raises
+    :class:`InvalidRobot` naming the file when it is not well-formed XML or not an MJCF."""
+    try:
+        root = ET.parse(path).getroot()
+    except ET.ParseError as err:
+        raise InvalidRobot(f"{path}: not well-formed XML ({err})") from err
+    if root.tag != "mujoco":
+        raise InvalidRobot(f"{path}: an MJCF file's root element is <mujoco>, got <{root.tag}>")
+    for parent in list(root.iter()):
+        for k, child in enumerate(list(parent)):
+            if child.tag == "include":
+                included = read(path.parent / child.get("file", ""))
+                parent.remove(child)
+                for offset, element in enumerate(included):
+                    parent.insert(k + offset, element)
+    return root
+
+
+def check_file(path: Path, root: ET.Element) -> None:
+    """Raise :class:`InvalidRobot` naming the element for what Pinocchio's parser would take without a
+    word or with an error naming nothing: a number that is not finite, a joint of unknown type, a
+    world without bodies."""
+    for element in root.iter():
+        for key in NUMERIC:
+            text = element.get(key)
+            if text is None:
+                continue
+            try:
+                values = [float(x) for x in text.split()]
+            except ValueError:
+                values = []
+            if not values or not all(math.isfinite(v) for v in values):
+                raise InvalidRobot(f"{path}: {_named(element)}: {key} must be finite numbers, got '{text}'")
+    defaults = _defaults(root)
+    for body, classname in _bodies_with_class(root, defaults):
+        for joint in body.findall("joint"):
+            kind = _attribute(joint, "type", joint.get("class", classname), defaults, "hinge")
+            if kind not in JOINT_TYPES:
+                raise InvalidRobot(
+                    f"{path}: {_named(joint)} of body '{body.get('name', '')}' has type '{kind}'; known: "
+                    f"{', '.join(JOINT_TYPES)}"
+                )
+    if not bodies(root):
+        raise InvalidRobot(f"{path}: <worldbody> has no <body>: nothing in it moves")
+
+
+def compiler(root: ET.Element, attribute: str, default: str) -> str:
+    """A ``<compiler>`` attribute (the last one given wins, as in MuJoCo)."""
+    values = [c.get(attribute) for c in root.iter("compiler") if c.get(attribute) is not None]
+    return str(values[-1]) if values else default
+
+
+def bodies(root: ET.Element) -> list[ET.Element]:
+    """The top-level bodies of ``<worldbody>``."""
+    return [b for world in root.iter("worldbody") for b in world.findall("body")]
+
+
+def check(path: Path, root: ET.Element, collision: pin.GeometryModel, model: pin.Model) -> list[str]:
+    """Raise :class:`InvalidRobot` when a body takes its inertia from a mesh geom (Pinocchio gives
+    such a geom 1 kg and a unit inertia [kg m^2]); return what the model leaves out of the file:
+    the top-level bodies after the first and the ``<equality>`` constraints, each a sentence."""
+    from_geoms = compiler(root, "inertiafromgeom", "auto")
+    explicit = {b.get("name") for b in root.iter("body") if b.find("inertial") is not None}
+    meshes = sorted(
+        {
+            model.frames[g.parentFrame].name
+            for g in collision.geometryObjects
+            if isinstance(g.geometry, coal.BVHModelBase)
+            and (from_geoms == "true" or model.frames[g.parentFrame].name not in explicit)
+        }
+    )
+    if from_geoms != "false" and meshes:
+        raise InvalidRobot(
+            f"{path}: the bodies {', '.join(repr(b) for b in meshes)} take their inertia from mesh geoms, "
+            "which Pinocchio's MJCF parser does not compute (it gives each 1 kg and a unit inertia): give "
+            'them an <inertial> (MuJoCo writes every body\'s: add saveinertial="true" to <compiler>, load '
+            "the file with mujoco.MjModel.from_xml_path and save it with mujoco.mj_saveLastXML)"
+        )
+    left_out = []
+    top = bodies(root)
+    if len(top) > 1:
+        names = ", ".join(repr(b.get("name", "")) for b in top[1:])
+        left_out.append(
+            f"Pinocchio's MJCF parser reads only the first body of <worldbody> ('{top[0].get('name', '')}'): "
+            f"the bodies {names} are left out (give each its own file to load it)"
+        )
+    equalities = [e for section in root.iter("equality") for e in section]
+    if equalities:
+        names = ", ".join(f"<{e.tag} {e.get('name', '')}>".replace(" >", ">") for e in equalities)
+        left_out.append(
+            f"the <equality> constraints {names} are not honoured "
+            "(declare them as gaussim bilaterals: gaussim.Anchor, gaussim.LoopClosure)"
+        )
+    return left_out
+
+
+def set_joint_limits(root: ET.Element, model: pin.Model) -> None:
+    """Set the position limits of the model's hinge and slide joints as MuJoCo reads them [rad or m]:
+    a joint is limited by its ``range`` when ``limited`` is true, or "auto" with ``autolimits`` and a
+    range given; the range of a hinge is in degrees unless ``<compiler angle="radian">``; ``ref``
+    moves no limit."""
+    degrees = compiler(root, "angle", "degree") == "degree"
+    auto = compiler(root, "autolimits", "true") == "true"
+    defaults = _defaults(root)
+    for body, classname in _bodies_with_class(root, defaults):
+        for joint in body.findall("joint"):
+            name = joint.get("name")
+            if name is None or not model.existJointName(name):
+                continue
+            pin_joint = model.joints[model.getJointId(name)]
+            if pin_joint.nq != 1:
+                continue
+            scope = joint.get("class", classname)
+            text = _attribute(joint, "range", scope, defaults, "")
+            limited = _attribute(joint, "limited", scope, defaults, "auto")
+            lower, upper = -np.inf, np.inf
+            if text and (limited == "true" or (limited == "auto" and auto)):
+                lower, upper = (float(x) for x in text.split())
+                if degrees and _attribute(joint, "type", scope, defaults, "hinge") == "hinge":
+                    lower, upper = math.radians(lower), math.radians(upper)
+            model.lowerPositionLimit[pin_joint.idx_q] = lower
+            model.upperPositionLimit[pin_joint.idx_q] = upper
+
+
+def _defaults(root: ET.Element) -> dict[str, tuple[ET.Element, str | None]]:
+    """Each ``<default>`` class: (its element, the class it inherits from); the top one is "main"."""
+    classes: dict[str, tuple[ET.Element, str | None]] = {}
+
+    def visit(element: ET.Element, parent: str | None) -> None:
+        name = element.get("class", "main")
+        classes[name] = (element, parent)
+        for child in element.findall("default"):
+            visit(child, name)
+
+    for top in root.findall("default"):
+        visit(top, None)
+    return classes
+
+
+def _bodies_with_class(
+    root: ET.Element, defaults: dict[str, tuple[ET.Element, str | None]]
+) -> list[tuple[ET.Element, str]]:
+    """Every body with the class its elements take when they name none (the nearest ``childclass``)."""
+    found: list[tuple[ET.Element, str]] = []
+
+    def visit(body: ET.Element, classname: str) -> None:
+        classname = body.get("childclass", classname)
+        found.append((body, classname))
+        for child in body.findall("body"):
+            visit(child, classname)
+
+    for body in bodies(root):
+        visit(body, "main")
+    return found
+
+
+def _attribute(
+    element: ET.Element,
+    key: str,
+    classname: str,
+    defaults: dict[str, tuple[ET.Element, str | None]],
+    default: str,
+) -> str:
+    """An attribute of ``element``, or of its class's defaults for its tag, up the class chain."""
+    if element.get(key) is not None:
+        return str(element.get(key))
+    current: str | None = classname
+    while current is not None and current in defaults:
+        scope, current = defaults[current]
+        for entry in scope.findall(element.tag):
+            if entry.get(key) is not None:
+                return str(entry.get(key))
+    return default
+
+
+def _named(element: ET.Element) -> str:
+    return f"<{element.tag} {element.get('name')}>" if element.get("name") else f"<{element.tag}>"

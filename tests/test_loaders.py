@@ -1,0 +1,462 @@
+"""Robots from every source: MJCF against MuJoCo's reading of the same file, SDF against a URDF of
+the same robot (written by hand, and pybullet_data's KUKA iiwa pair), the Pinocchio objects users
+hold through ``as_robot``; each falls or steps in a Simulator, and each bad input names its fault."""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import coal
+import example_robot_data
+import mujoco
+import numpy as np
+import pinocchio as pin
+import pybullet_data
+import pytest
+
+import gaussim
+from gaussim.robot import as_robot
+
+DATA = Path(__file__).resolve().parent / "data"
+HOPPER, WALKER, WALKER_URDF = DATA / "hopper.xml", DATA / "walker.sdf", DATA / "walker.urdf"
+KUKA = Path(pybullet_data.getDataPath()) / "kuka_iiwa"
+EXACT = 1e-12  # two readings of the same numbers
+KUKA_ROUNDING = 1e-4  # pybullet_data's model.sdf rounds its angles to 6 digits (1.5708 for pi / 2)
+PENETRATION = 1e-4  # [m] the deepest a resting contact may sink
+FALL_TIME = 0.4  # [s]
+
+
+def load_quietly(path: Path, **kwargs) -> gaussim.Robot:
+    """A robot whose file leaves out what a Scene holds (a floor, static models): that is warned."""
+    with pytest.warns(gaussim.GaussimWarning, match="left out"):
+        return gaussim.load_robot(path, **kwargs)
+
+
+@pytest.fixture(scope="module")
+def hopper() -> gaussim.Robot:
+    return load_quietly(HOPPER)
+
+
+@pytest.fixture(scope="module")
+def walker() -> gaussim.Robot:
+    return load_quietly(WALKER)
+
+
+def symmetric(M: np.ndarray) -> np.ndarray:
+    return np.triu(M) + np.triu(M, 1).T
+
+
+def mass_matrix(robot: gaussim.Robot, q: np.ndarray) -> np.ndarray:
+    return symmetric(pin.crba(robot.model, robot.model.createData(), q))
+
+
+def random_configurations(robot: gaussim.Robot, count: int = 3) -> list[np.ndarray]:
+    np.random.seed(0)  # pin.randomConfiguration draws from numpy's global generator
+    bound = np.ones(robot.model.nq)
+    return [pin.randomConfiguration(robot.model, -bound, bound) for _ in range(count)]
+
+
+def mujoco_configuration(q: np.ndarray) -> np.ndarray:
+    """A free-floating robot's q in MuJoCo's order (its quaternion w, x, y, z; Pinocchio's x, y, z, w)."""
+    return np.concatenate([q[:3], [q[6]], q[3:6], q[7:]])
+
+
+# --- MJCF -----------------------------------------------------------------------------------------
+
+
+def test_mjcf_hopper_is_mujocos_robot(hopper):
+    """nq, nv, masses, the mass matrix at random configurations, the joint limits and the keyframe
+    are MuJoCo's for the same file."""
+    reference = mujoco.MjModel.from_xml_path(str(HOPPER))
+    data = mujoco.MjData(reference)
+    assert (hopper.model.nq, hopper.model.nv) == (reference.nq, reference.nv) == (10, 9)
+    assert hopper.floating
+    assert hopper.mass == pytest.approx(reference.body_mass.sum(), abs=EXACT)
+    assert [hopper.model.inertias[i].mass for i in range(1, 5)] == pytest.approx(reference.body_mass[1:])
+    for q in random_configurations(hopper):
+        data.qpos[:] = mujoco_configuration(q)
+        mujoco.mj_forward(reference, data)
+        M = np.zeros((reference.nv, reference.nv))
+        mujoco.mj_fullM(reference, data, M)
+        # MuJoCo's free joint moves its linear velocity in the world frame, Pinocchio's in the body's
+        T = np.eye(reference.nv)
+        T[:3, :3] = pin.Quaternion(q[6], *q[3:6]).matrix()
+        np.testing.assert_allclose(mass_matrix(hopper, q), T.T @ M @ T, atol=EXACT)
+    for k, name in enumerate(["hip", "knee", "ankle"], start=1):
+        iq = hopper.model.joints[hopper.model.getJointId(name)].idx_q
+        limits = reference.jnt_range[k] if reference.jnt_limited[k] else (-np.inf, np.inf)
+        assert (hopper.model.lowerPositionLimit[iq], hopper.model.upperPositionLimit[iq]) == pytest.approx(
+            limits
+        )
+    np.testing.assert_allclose(
+        mujoco_configuration(hopper.configuration("crouch")), reference.key_qpos[0], atol=EXACT
+    )
+
+
+def test_mjcf_geometry(hopper):
+    """Collision geometry is what collides in MuJoCo (the visual-only sphere is drawn, not collided);
+    the floor plane is left out; the mesh foot has its convex hull."""
+    assert [g.name for g in hopper.collision_model.geometryObjects] == ["torso", "thigh", "shin", "foot"]
+    assert [g.name for g in hopper.visual_model.geometryObjects] == [
+        "torso",
+        "torso_light",
+        "thigh",
+        "shin",
+        "foot",
+    ]
+    foot = hopper.collision_model.geometryObjects[hopper.geometry_id("foot")].geometry
+    assert isinstance(foot, coal.BVHModelBase) and foot.convex is not None
+    assert hopper.urdf == str(HOPPER) and hopper.source == str(HOPPER)
+
+
+def test_mjcf_floating_base(tmp_path):
+    """A <freejoint> floats the robot: floating_base=True honours it, False is refused; a fixed MJCF
+    gets a free flyer when asked."""
+    with pytest.warns(gaussim.GaussimWarning):
+        assert gaussim.load_robot(HOPPER, floating_base=True).model.nq == 10
+    with pytest.raises(
+        gaussim.InvalidRobot, match=r"hopper.xml: body 'torso' has a <freejoint>.*floating_base=False"
+    ):
+        gaussim.load_robot(HOPPER, floating_base=False)
+    arm = tmp_path / "arm.xml"
+    arm.write_text(
+        '<mujoco><worldbody><body name="base"><geom type="box" size="0.1 0.1 0.1" mass="2"/>'
+        '<body name="link" pos="0 0 0.1"><joint name="j" axis="0 1 0"/>'
+        '<geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.02" mass="1"/></body></body>'
+        "</worldbody></mujoco>"
+    )
+    fixed, floating = gaussim.load_robot(arm), gaussim.load_robot(arm, floating_base=True)
+    assert (fixed.model.nq, fixed.floating, fixed.mass) == (1, False, 3.0)  # the base's 2 kg on the universe
+    assert (floating.model.nq, floating.floating, floating.mass) == (8, True, 3.0)
+
+
+MJCF_FAULTS = {
+    "not xml": ("<mujoco><worldbody>", r"not well-formed XML"),
+    "number": (
+        '<mujoco><worldbody><body name="a" pos="0 nan 1"><freejoint/><geom size="0.1"/></body>'
+        "</worldbody></mujoco>",
+        r"<body a>: pos must be finite numbers, got '0 nan 1'",
+    ),
+    "joint type": (
+        '<mujoco><worldbody><body name="a"><joint name="j" type="fixed"/><geom size="0.1"/></body>'
+        "</worldbody></mujoco>",
+        r"<joint j> of body 'a' has type 'fixed'; known: hinge, slide, ball, free",
+    ),
+    "no body": (
+        '<mujoco><worldbody><geom type="plane" size="1 1 1"/></worldbody></mujoco>',
+        r"has no <body>",
+    ),
+    "mesh inertia": (
+        '<mujoco><asset><mesh name="m" file="tetra.obj"/></asset><worldbody><body name="a"><freejoint/>'
+        '<geom type="mesh" mesh="m" mass="0.3"/></body></worldbody></mujoco>',
+        r"bodies 'a' take their inertia from mesh geoms.*give them an <inertial>",
+    ),
+    "missing mesh": (
+        '<mujoco><asset><mesh name="m" file="absent.stl"/></asset><worldbody><body name="a"><freejoint/>'
+        '<inertial pos="0 0 0" mass="1" diaginertia="1 1 1"/><geom type="mesh" mesh="m"/></body>'
+        "</worldbody></mujoco>",
+        r"cannot build a model from this MJCF: Could not load resource .*absent.stl",
+    ),
+    "not a robot file": (
+        "<scene/>",
+        r"root element <scene> is no robot format gaussim reads; known: <robot>",
+    ),
+}
+
+
+@pytest.mark.parametrize("fault", MJCF_FAULTS)
+def test_mjcf_faults_name_the_file_and_cause(tmp_path, fault):
+    text, message = MJCF_FAULTS[fault]
+    path = tmp_path / "robot.xml"
+    path.write_text(text)
+    (tmp_path / "tetra.obj").write_text((DATA / "tetra.obj").read_text())
+    with pytest.raises(gaussim.InvalidRobot, match=str(path) + ".*" + message):
+        gaussim.load_robot(path)
+
+
+def test_mjcf_left_out_bodies_are_warned(tmp_path):
+    """Pinocchio reads only the first body of <worldbody>: the others are named."""
+    path = tmp_path / "two.xml"
+    body = '<body name="{0}" pos="{1} 0 1"><freejoint/><geom size="0.1" mass="1"/></body>'
+    path.write_text(f"<mujoco><worldbody>{body.format('a', 0)}{body.format('b', 1)}</worldbody></mujoco>")
+    with pytest.warns(
+        gaussim.GaussimWarning, match=r"only the first body of <worldbody> \('a'\): the bodies 'b'"
+    ):
+        assert gaussim.load_robot(path).model.nq == 7
+
+
+# --- SDF ------------------------------------------------------------------------------------------
+
+
+def test_sdf_walker_is_its_urdf(walker):
+    """walker.sdf (SDFormat frames, degrees, quaternions, axes in the model frame) is walker.urdf: the
+    same nq, masses, limits, mass matrix and geometry placements at random configurations."""
+    urdf = gaussim.load_robot(WALKER_URDF, floating_base=True)
+    assert walker.floating  # no joint attaches it to the world
+    assert (walker.model.nq, walker.model.nv) == (urdf.model.nq, urdf.model.nv) == (11, 9)
+    assert walker.mass == pytest.approx(urdf.mass, abs=EXACT) and walker.mass == pytest.approx(4.7)
+    np.testing.assert_allclose(walker.model.lowerPositionLimit[7:], urdf.model.lowerPositionLimit[7:])
+    np.testing.assert_allclose(walker.model.upperPositionLimit[7:], urdf.model.upperPositionLimit[7:])
+    for q in random_configurations(urdf):
+        np.testing.assert_allclose(mass_matrix(walker, q), mass_matrix(urdf, q), atol=EXACT)
+        placed = []
+        for robot in (walker, urdf):
+            geometry = robot.collision_model.createData()
+            pin.updateGeometryPlacements(
+                robot.model, robot.model.createData(), robot.collision_model, geometry, q
+            )
+            placed.append([g.homogeneous for g in geometry.oMg])
+        np.testing.assert_allclose(placed[0], placed[1], atol=EXACT)
+    assert walker.visual_model.geometryObjects[0].meshColor == pytest.approx([0.2, 0.4, 0.8, 1.0])
+
+
+def test_sdf_kuka_is_its_urdf():
+    """pybullet_data's KUKA iiwa, SDFormat 1.6 with meshes, is its model.urdf (to the SDF's rounding)."""
+    sdf = gaussim.load_robot(KUKA / "model.sdf", floating_base=False)
+    urdf = gaussim.load_robot(KUKA / "model.urdf")
+    assert (sdf.model.nq, sdf.floating, sdf.mass) == (7, False, pytest.approx(17.5))
+    assert sdf.collision_model.ngeoms == 8
+    assert all(g.geometry.convex is not None for g in sdf.collision_model.geometryObjects)
+    for q in random_configurations(urdf):
+        np.testing.assert_allclose(mass_matrix(sdf, q), mass_matrix(urdf, q), atol=KUKA_ROUNDING)
+    assert gaussim.load_robot(KUKA / "model.sdf").model.nq == 14  # an SDF model without a world joint floats
+
+
+def sdf_model(body: str) -> str:
+    link = (
+        '<link name="{0}"><inertial><mass>1</mass></inertial>'
+        "<collision name='c'><geometry><sphere><radius>0.1</radius></sphere></geometry></collision></link>"
+    )
+    return f'<sdf version="1.9"><model name="m">{link.format("a")}{link.format("b")}{body}</model></sdf>'
+
+
+def joint(name: str, kind: str, parent: str, child: str) -> str:
+    return (
+        f'<joint name="{name}" type="{kind}"><parent>{parent}</parent><child>{child}</child>'
+        "<axis><xyz>0 0 1</xyz></axis></joint>"
+    )
+
+
+SDF_FAULTS = {
+    "joint type": (
+        sdf_model(joint("j", "ball", "a", "b")),
+        r"joint 'j': type 'ball' is not read; known: revolute",
+    ),
+    "missing link": (
+        sdf_model(joint("j", "revolute", "a", "c")),
+        r"joint 'j': child link 'c' does not exist",
+    ),
+    "loop": (
+        sdf_model(joint("j", "revolute", "a", "b") + joint("k", "revolute", "a", "b")),
+        r"joint 'k': link 'b' is also the child of joint 'j': a closed kinematic loop",
+    ),
+    "two trees": (sdf_model(""), r"links 'a', 'b' have no parent joint"),
+    "number": (
+        sdf_model(joint("j", "revolute", "a", "b").replace("0 0 1", "0 0 x")),
+        r"joint 'j' <xyz>: must be 3 finite number\(s\), got '0 0 x'",
+    ),
+    "mesh": (
+        sdf_model(joint("j", "revolute", "a", "b")).replace(
+            "<sphere><radius>0.1</radius></sphere>", "<mesh><uri>model://m/absent.stl</uri></mesh>", 1
+        ),
+        r"link 'a' <collision c>: mesh 'model://m/absent.stl' not found \(looked in: ",
+    ),
+    "shape": (
+        sdf_model(joint("j", "revolute", "a", "b")).replace(
+            "<sphere><radius>0.1</radius></sphere>",
+            "<capsule><radius>0.1</radius><length>1</length></capsule>",
+            1,
+        ),
+        r"geometry <capsule> is not read; known: box, sphere, cylinder, mesh",
+    ),
+    "frame": (
+        sdf_model(joint("j", "revolute", "a", "b")).replace(
+            '<link name="a">', '<link name="a"><pose relative_to="nowhere">0 0 0 0 0 0</pose>'
+        ),
+        r"no frame 'nowhere'; known: a, b, j",
+    ),
+    "two models": (
+        '<sdf version="1.9"><world name="w"><model name="x"/><model name="y"/></world></sdf>',
+        r"one moving <model> per SDF file, this one has 'x', 'y'",
+    ),
+}
+
+
+@pytest.mark.parametrize("fault", SDF_FAULTS)
+def test_sdf_faults_name_the_file_and_element(tmp_path, fault):
+    text, message = SDF_FAULTS[fault]
+    path = tmp_path / "robot.sdf"
+    path.write_text(text)
+    with pytest.raises(gaussim.InvalidRobot, match=str(path) + ": .*" + message):
+        gaussim.load_robot(path)
+
+
+def test_sdf_world_joint_fixes_the_base(tmp_path):
+    """A joint to the world fixes the model; floating_base=True is refused."""
+    path = tmp_path / "arm.sdf"
+    path.write_text(sdf_model(joint("j", "revolute", "a", "b") + joint("anchor", "fixed", "world", "a")))
+    robot = gaussim.load_robot(path)
+    assert (robot.model.nq, robot.floating) == (2, False)  # the unlimited revolute is continuous (cos, sin)
+    with pytest.raises(gaussim.InvalidRobot, match=r"joint 'anchor' attaches the model to the world"):
+        gaussim.load_robot(path, floating_base=True)
+
+
+# --- falling onto the ground ----------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("robot, start", [("hopper", "qpos0"), ("walker", None)])
+def test_falls_onto_the_ground(request, robot, start):
+    """Dropped from its start, the robot lands on a gaussim Ground and does not sink into it."""
+    robot = request.getfixturevalue(robot)
+    q = robot.configuration(start) if start else robot.neutral()
+    if start is None:
+        q[2] = 1.0
+    sim = gaussim.Simulator(gaussim.Scene(robot, ground=gaussim.Ground()), gaussim.Options(dt=1e-3))
+    state = sim.reset(q)
+    landed = False
+    while state.t < FALL_TIME:
+        state = sim.step(state)
+        report = sim.last_step
+        assert report is not None and report.converged
+        assert all(c.gap >= -PENETRATION for c in report.contacts)
+        landed = landed or bool(report.contacts)
+    assert landed and state.q[2] < q[2] - 0.05
+    assert all(abs(c.point[2]) < 1e-3 for c in sim.last_step.contacts)
+
+
+# --- as_robot -------------------------------------------------------------------------------------
+
+
+def hand_built() -> tuple[pin.Model, pin.GeometryModel]:
+    """A free box with a mesh (a cube's corners, no convex hull built) and a sphere, made by hand."""
+    model = pin.Model()
+    model.name = "crate"
+    root = model.addJoint(0, pin.JointModelFreeFlyer(), pin.SE3.Identity(), "root")
+    model.appendBodyToJoint(root, pin.Inertia.FromBox(2.0, 0.2, 0.2, 0.2), pin.SE3.Identity())
+    model.addBodyFrame("crate", root, pin.SE3.Identity(), 0)
+    corners = np.array([[x, y, z] for x in (-0.1, 0.1) for y in (-0.1, 0.1) for z in (-0.1, 0.1)])
+    mesh = coal.BVHModelOBBRSS()
+    mesh.beginModel(12, 8)
+    mesh.addVertices(corners)
+    faces = [(0, 1, 3), (0, 3, 2), (4, 6, 7), (4, 7, 5), (0, 4, 5), (0, 5, 1)]
+    faces += [(2, 3, 7), (2, 7, 6), (0, 2, 6), (0, 6, 4), (1, 5, 7), (1, 7, 3)]
+    mesh.addTriangles(np.array(faces))
+    mesh.endModel()
+    geometry = pin.GeometryModel()
+    geometry.addGeometryObject(pin.GeometryObject("crate_mesh", root, pin.SE3.Identity(), mesh))
+    ball = pin.SE3(np.eye(3), np.array([0.0, 0.0, 0.15]))
+    geometry.addGeometryObject(pin.GeometryObject("crate_ball", root, ball, coal.Sphere(0.05)))
+    return model, geometry
+
+
+def steps(robot: gaussim.Robot, q: np.ndarray | None = None) -> gaussim.State:
+    """Ten steps of the robot on the ground (without one when it has no collision geometry)."""
+    ground = gaussim.Ground() if robot.collision_model.ngeoms else None
+    sim = gaussim.Simulator(gaussim.Scene(robot, ground=ground))
+    state = sim.reset(q)
+    for _ in range(10):
+        state = sim.step(state)
+    assert np.all(np.isfinite(state.q))
+    return state
+
+
+def test_a_hand_built_robot_steps_on_the_ground():
+    """The crash of issue 20: a Robot of one's own model, with a mesh, stepped into computeLocalAABB of
+    a convex hull never built; a Robot builds it when made."""
+    model, geometry = hand_built()
+    robot = gaussim.Robot("crate", model, geometry, geometry, "")
+    q = robot.neutral()
+    q[2] = 0.1  # resting on its mesh
+    state = steps(robot, q)
+    assert state.q[2] == pytest.approx(0.1, abs=1e-3)
+
+
+@pytest.mark.parametrize("form", ["robot", "wrapper", "model", "pair", "triple", "path", "name"])
+def test_as_robot_takes_what_users_hold(form, hopper):
+    solo = example_robot_data.load("solo12")
+    model, geometry = hand_built()
+    held = {
+        "robot": hopper,
+        "wrapper": solo,
+        "model": model,
+        "pair": (model, geometry),
+        "triple": (model, geometry, geometry),
+        "path": str(WALKER),
+        "name": "pendulum",
+    }[form]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", gaussim.GaussimWarning)  # walker.sdf's static ground is left out
+        robot, renamed = as_robot(held), as_robot(held, name="other")
+    assert renamed.name == "other"
+    if form == "robot":
+        assert robot is hopper
+    if form == "wrapper":
+        assert robot.name == "solo" and robot.urdf == "" and "standing" in robot.reference_configurations
+        assert robot.collision_model.ngeoms == solo.collision_model.ngeoms
+        q = robot.configuration("standing")
+    else:
+        q = robot.neutral()
+        if robot.floating:
+            q[2] = 1.0
+    if form in ("model", "pair", "triple"):
+        assert robot.name == "crate" and robot.source == "the in-memory model 'crate'"
+        assert robot.collision_model.ngeoms == (0 if form == "model" else 2)
+        assert robot.visual_model.ngeoms == robot.collision_model.ngeoms
+    steps(robot, q)
+
+
+def test_as_robot_copies():
+    """Changing the model after as_robot does not reach the robot (a Robot is immutable)."""
+    model, geometry = hand_built()
+    robot = as_robot((model, geometry))
+    model.inertias[1] = pin.Inertia.Zero()
+    geometry.removeGeometryObject("crate_ball")
+    assert robot.mass == 2.0 and robot.collision_model.ngeoms == 2
+
+
+def test_as_robot_bad_inputs():
+    model, geometry = hand_built()
+    with pytest.raises(
+        gaussim.InvalidRobot,
+        match=r"cannot make a robot of int 3; accepted: a gaussim.Robot, a pinocchio.RobotWrapper",
+    ):
+        as_robot(3)
+    with pytest.raises(
+        gaussim.InvalidRobot, match=r"the collision_model must be a pinocchio.GeometryModel .*got str"
+    ):
+        as_robot((model, "box"))
+    with pytest.raises(gaussim.RobotNotFound, match=r"no robot 'nobody'"):
+        as_robot("nobody")
+    stray = pin.GeometryModel()
+    stray.addGeometryObject(pin.GeometryObject("stray", 5, pin.SE3.Identity(), coal.Sphere(0.1)))
+    with pytest.raises(
+        gaussim.InvalidRobot,
+        match=r"collision geometry 'stray' is attached to joint 5, which the model does not have "
+        r"\(its joints: 0 'universe', 1 'root'\): is it the geometry model of another model\?",
+    ):
+        as_robot((model, stray))
+    solo = example_robot_data.load("solo12")
+    humanoid = pin.buildSampleModelHumanoid()  # more joints than Solo-12: its frames are the ones that differ
+    with pytest.raises(
+        gaussim.InvalidRobot,
+        match=r"collision geometry 'base_link_0' is attached to joint 'root_joint' and to frame",
+    ):
+        as_robot((humanoid, solo.collision_model))
+    plane = pin.GeometryModel()
+    plane.addGeometryObject(
+        pin.GeometryObject("floor", 0, pin.SE3.Identity(), coal.Halfspace(np.array([0, 0, 1.0]), 0.0))
+    )
+    with pytest.raises(
+        gaussim.InvalidRobot, match=r"collision geometry 'floor' is an unbounded Halfspace.*gaussim.Ground"
+    ):
+        as_robot((model, plane))
+    heavy = pin.Model(model)
+    heavy.inertias[1] = pin.Inertia(-1.0, np.zeros(3), np.eye(3))
+    with pytest.raises(
+        gaussim.InvalidRobot, match=r"the in-memory model 'crate': body of joint 'root' has mass -1.0"
+    ):
+        as_robot(heavy)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the checks raise; they do not warn
+        as_robot(model)
