@@ -108,11 +108,10 @@ class DynamicsStage:
     """Stage 1 for one Pinocchio model and data: each step's free motion and, when a constraint needs
     it, its Gauss problem.
 
-    Two orders give the same numbers at different costs (measured on Solo-12, dt 1e-3): a step that
-    poses a QP is cheapest as CRBA + RNEA + Cholesky (:func:`compute_dynamics`; 115 us a step against
-    118 us through ABA then CRBA), free flight as ABA alone (:meth:`free_motion`; 12.7 us a
-    step against 18.3 us). Each step takes the order the previous one needed; the acceleration
-    scheme always poses its problem.
+    Two orders give the same numbers at different costs: a step that poses a QP is cheapest as
+    CRBA + RNEA + Cholesky (:func:`compute_dynamics`), free flight as ABA alone (:meth:`free_motion`).
+    Each step takes the order the previous one needed; the acceleration scheme always poses its
+    problem.
     """
 
     def __init__(self, model: pin.Model, data: pin.Data) -> None:

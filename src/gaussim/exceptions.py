@@ -42,7 +42,7 @@ class RobotNotFound(GaussimError):
 
 
 class InvalidRobot(GaussimError):
-    """A URDF file could not be parsed into a usable model."""
+    """A robot description (URDF, MJCF, SDF or an in-memory model) is not a usable model."""
 
 
 class FrameNotFound(GaussimError):

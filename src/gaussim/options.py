@@ -49,8 +49,8 @@ class Options:
         eps_abs: ProxQP absolute tolerance on primal/dual residuals and duality gap.
         max_iter: ProxQP's cap on its outer iterations for a solve from a cold start; a warm-started
             solve gets at most WARM_START_ITERATIONS of them (gaussim.solver) before gaussim solves
-            again from a cold start. Normal solves need far fewer (measured: at most 258, on Talos
-            standing); a point reached at the cap is accepted when the KKT check certifies it.
+            again from a cold start. Normal solves need far fewer (a few hundred at most); a point
+            reached at the cap is accepted when the KKT check certifies it.
         on_failure: ``"raise"`` (default) a :class:`SolverError` when ProxQP does not converge, or
             ``"report"`` (accept the finite iterate and record the status). A non-finite solution
             or an infeasible constraint set always raises.
@@ -58,7 +58,7 @@ class Options:
             is an error naming the pair (the step would push it out at once: kN forces, a body thrown
             up); raise it to start so all the same.
         timings: record each step's wall time per stage in ``StepReport.timings`` (profiling; off by
-            default: each stage's mark costs about 0.1 us, and a free-flight step is 7.5 us).
+            default: a mark per stage is a noticeable part of a free-flight step's cost).
     """
 
     dt: float = 1e-3

@@ -248,7 +248,7 @@ class Scene:
         if self.obstacles and not robot.collision_model.ngeoms:
             raise InvalidOptions(
                 "robot",
-                f"'{robot.name}' has no collision geometry ({robot.urdf} declares no <collision>): it would "
+                f"'{robot.name}' has no collision geometry ({robot.source} declares none): it would "
                 f"pass through {', '.join(names)}; give its links collision elements, or drop the obstacles",
             )
 
