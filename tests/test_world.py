@@ -305,3 +305,16 @@ def test_a_fixed_base_robot_is_placed_where_told():
     alone = arm.model.createData()
     pin.forwardKinematics(arm.model, alone, pin.neutral(arm.model))
     np.testing.assert_allclose(data.oMi[1].translation, alone.oMi[1].translation + [1.0, 0, 0.5], atol=1e-15)
+
+
+def test_a_torque_given_one_way_does_not_linger_into_the_next(solo12):
+    """The actuation stage's padding holds no entry of an earlier torque: a wrench on the crate, then
+    the actuated joints' torques alone, then the world's, each padded afresh."""
+    scene = gaussim.Scene(bodies={"crate": crate(), "solo": solo12}, gravity=(0, 0, 0))
+    sim = gaussim.Simulator(scene)
+    actuation, rng = sim.actuation, np.random.default_rng(1)
+    wrench, joints, world = rng.normal(size=6), rng.normal(size=12), rng.normal(size=24)
+    np.testing.assert_array_equal(actuation.torque({"crate": wrench}), np.r_[wrench, np.zeros(18)])
+    np.testing.assert_array_equal(actuation.torque(joints), np.r_[np.zeros(12), joints])
+    np.testing.assert_array_equal(actuation.torque(world), world)
+    np.testing.assert_array_equal(actuation.torque({"solo": joints}), np.r_[np.zeros(12), joints])
