@@ -318,3 +318,22 @@ def test_a_torque_given_one_way_does_not_linger_into_the_next(solo12):
     np.testing.assert_array_equal(actuation.torque(joints), np.r_[np.zeros(12), joints])
     np.testing.assert_array_equal(actuation.torque(world), world)
     np.testing.assert_array_equal(actuation.torque({"solo": joints}), np.r_[np.zeros(12), joints])
+
+
+def test_bodies_own_their_geometries_whatever_order_pinocchio_merges_them():
+    """pin.appendModel puts a fixed base's geometries (on the universe) ahead of the earlier bodies'
+    moving ones: a body's geometries are found by name, so no automatic pair joins one body's links,
+    and two arms and a cube start apart."""
+    panda = gaussim.load_robot("panda")
+    scene = gaussim.Scene(
+        bodies={"arm": panda, "arm2": Body(panda, placement=pose(y=0.8)), "cube": crate("cube")},
+        ground=gaussim.Ground(),
+    )
+    names = [g.name for g in scene.robot.collision_model.geometryObjects]
+    for name, layout in scene.bodies.items():
+        assert sorted(names[g] for g in layout.geometries) == sorted(
+            n for n in names if n.startswith(name + "/")
+        )
+    cross = [p for p in scene.pairs if p.other is not None]
+    assert cross and all(names[p.geometry].split("/")[0] != names[p.other].split("/")[0] for p in cross)
+    gaussim.Simulator(scene).reset({"cube": pose(x=0.5, z=0.1)})

@@ -346,7 +346,7 @@ class BodyLayout:
     q: slice
     v: slice
     joints: range
-    geometries: range
+    geometries: tuple[int, ...]
     floating: bool
     free: bool
     color: tuple[float, float, float, float]
@@ -382,29 +382,24 @@ class World:
             merged = _merged(robots, specs, "/")
         self.robot: Robot = merged
         self.bodies: dict[str, BodyLayout] = {}
-        q = v = joint = geometry = 0
+        model, collision = merged.model, merged.collision_model
         for k, (name, spec) in enumerate(specs.items()):
-            robot = robots[name]
-            model = robot.model
-            color = spec.color or PALETTE[k % len(PALETTE)]
+            prefix = "" if single else f"{name}/"
+            # found by name: pin.appendModel keeps the joints in order, not the geometries
+            joints = [j for j in range(1, model.njoints) if model.names[j].startswith(prefix)]
+            first, last = model.joints[joints[0]], model.joints[joints[-1]]
             self.bodies[name] = BodyLayout(
                 name,
-                robot,
-                slice(q, q + model.nq),
-                slice(v, v + model.nv),
-                range(joint + 1, joint + model.njoints),
-                range(geometry, geometry + robot.collision_model.ngeoms),
-                robot.floating,
+                robots[name],
+                slice(first.idx_q, last.idx_q + last.nq),
+                slice(first.idx_v, last.idx_v + last.nv),
+                range(joints[0], joints[-1] + 1),
+                tuple(g for g, obj in enumerate(collision.geometryObjects) if obj.name.startswith(prefix)),
+                robots[name].floating,
                 isinstance(spec.source, FreeBody),
-                color,
-                "" if single else f"{name}/",
+                spec.color or PALETTE[k % len(PALETTE)],
+                prefix,
                 spec,
-            )
-            q, v, joint, geometry = (
-                q + model.nq,
-                v + model.nv,
-                joint + model.njoints - 1,
-                geometry + robot.collision_model.ngeoms,
             )
         self._owner = {g: layout for layout in self.bodies.values() for g in layout.geometries}
 
