@@ -1,14 +1,21 @@
 """The browser viewer as a person sees it: replay pages rendered by headless Chromium, the live
-server on 127.0.0.1, and the fallback for missing meshes."""
+server on 127.0.0.1, the bodies of a world each in its colour, and the fallback for missing meshes."""
 
 from __future__ import annotations
 
+import base64
+import html.parser
+import re
 import urllib.request
+import warnings
 
 import numpy as np
 import pytest
+import umsgpack
 from matplotlib.image import imread
 
+import gaussim
+from gaussim import Body, FreeBody, pose
 from gaussim.viewer import Viewer, _visual_model, page_dom, screenshot
 
 # A pixel is drawn differently when one of its channels differs by more than this (of 1).
@@ -16,6 +23,12 @@ PIXEL_TOLERANCE = 0.1
 # The robot covers at least this fraction of the central region of a replay screenshot.
 MIN_ROBOT_FRACTION = 0.01
 FEET = ("FL", "FR", "HL", "HR")
+# Two body colours far from the sky's blues, the ground's grey and the contact markers' red and orange.
+GREEN, MAGENTA = (0.2, 0.8, 0.2, 1.0), (0.8, 0.2, 0.8, 1.0)
+# A pixel shows a colour when its chromaticity rgb / (r + g + b) (kept by diffuse shading) is this close.
+CHROMA_TOLERANCE = 0.05
+# A body covers at least this fraction of a screenshot; a hidden one, less than NO_BODY_FRACTION.
+MIN_BODY_FRACTION, NO_BODY_FRACTION = 0.01, 1e-4
 
 
 @pytest.fixture(scope="module")
@@ -26,7 +39,7 @@ def pages(solo12_run, tmp_path_factory):
     with Viewer(spec.scene) as viewer:
         viewer.replay(log)
         replay = viewer.save_html(folder / "replay.html")
-        viewer.meshcat["robot"].set_property("visible", False)
+        viewer.meshcat["bodies"].set_property("visible", False)
         viewer.meshcat["contacts"].set_property("visible", False)
         background = viewer.save_html(folder / "background.html")
     return replay, background
@@ -74,13 +87,16 @@ def test_live_viewer_binds_localhost_and_shuts_down(solo12_run):
     assert server.poll() is not None, "the meshcat server still runs after close()"
 
 
-def test_missing_visual_meshes_fall_back_to_collision_geometry(solo12):
+def test_missing_visual_meshes_fall_back_to_collision_geometry(solo12, box):
     visual = solo12.visual_model.copy()
     visual.geometryObjects[0].meshPath = "/nonexistent/base.stl"
     with pytest.warns(UserWarning, match=r"base_link_0: /nonexistent/base.stl"):
         shown = _visual_model(visual, solo12.collision_model)
     assert shown is solo12.collision_model
     assert _visual_model(solo12.visual_model, solo12.collision_model) is solo12.visual_model
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a URDF box's meshPath "BOX" names no file to miss
+        assert _visual_model(box.visual_model, box.collision_model) is box.visual_model
 
 
 def _dom_once_built(page) -> str:
@@ -91,3 +107,158 @@ def _dom_once_built(page) -> str:
         if "contacts" in dom:
             break
     return dom
+
+
+@pytest.fixture(scope="module")
+def two_bodies(tmp_path_factory):
+    """The replay page of a green crate and a magenta ball dropped 1 mm onto the ground (0.1 s), the
+    same page with the crate hidden as a user hides it, and the scene."""
+    bodies = {
+        "crate": Body(FreeBody.box("crate", (0.3, 0.3, 0.2), mass=2.0), color=GREEN),
+        "ball": Body(FreeBody.sphere("ball", 0.1, mass=0.5), color=MAGENTA),
+    }
+    scene = gaussim.Scene(bodies=bodies, ground=gaussim.Ground())
+    sim = gaussim.Simulator(scene, gaussim.Options(dt=1e-3))
+    state = sim.reset({"crate": pose(z=0.101), "ball": pose(x=0.4, z=0.101)})
+    log = gaussim.RunLog(scene.robot.name, "", sim.options)
+    log.start(state)
+    tau = np.zeros(scene.robot.model.nv)
+    for _ in range(100):
+        state = sim.step(state)
+        log.record(state, tau, sim.last_step)
+    log.finish(True)
+    folder = tmp_path_factory.mktemp("two_bodies")
+    viewer = Viewer(scene, live=False)
+    viewer.replay(log)
+    replay = viewer.save_html(folder / "replay.html")
+    viewer.meshcat["contacts"].set_property("visible", False)  # the arrows cross the bodies
+    both = viewer.save_html(folder / "both.html")
+    viewer.meshcat["bodies/crate"].set_property("visible", False)
+    no_crate = viewer.save_html(folder / "no_crate.html")
+    return replay, both, no_crate, scene
+
+
+def test_replay_page_scene_tree_has_a_folder_per_body(two_bodies):
+    """The page's controls hold bodies/crate/box and bodies/ball/sphere (each a toggle) and the
+    contact arrows of both bodies on the ground."""
+    dom = _dom_once_built(two_bodies[0])
+    folders = _folders(dom)
+    assert {"Scene/meshcat/bodies/crate/box", "Scene/meshcat/bodies/ball/sphere"} <= folders
+    bodies = {f for f in folders if re.fullmatch(r"Scene/meshcat/bodies/[^/]+", f)}
+    assert bodies == {"Scene/meshcat/bodies/crate", "Scene/meshcat/bodies/ball"}
+    contacts = {f.rsplit("/", 1)[1] for f in folders if f.startswith("Scene/meshcat/contacts/")}
+    assert any(c.startswith("crate:box:ground") for c in contacts)
+    assert any(c.startswith("ball:sphere:ground") for c in contacts)
+
+
+def test_replay_page_draws_each_body_in_its_colour(two_bodies, tmp_path):
+    """Screenshots: the crate's green and the ball's magenta both appear; hiding the crate's folder
+    removes the green and keeps the magenta."""
+    _, both, no_crate, _ = two_bodies
+    for wait_ms in (4000, 12000, 30000):  # software WebGL on a loaded 2-core machine can take longer
+        shown = imread(screenshot(both, tmp_path / "both.png", wait_ms=wait_ms))
+        hidden = imread(screenshot(no_crate, tmp_path / "no_crate.png", wait_ms=wait_ms))
+        if min(_share(shown, GREEN), _share(shown, MAGENTA), _share(hidden, MAGENTA)) > MIN_BODY_FRACTION:
+            break
+    assert _share(shown, GREEN) > MIN_BODY_FRACTION, "the crate was not drawn in its colour"
+    assert _share(shown, MAGENTA) > MIN_BODY_FRACTION, "the ball was not drawn in its colour"
+    assert _share(hidden, MAGENTA) > MIN_BODY_FRACTION, "hiding the crate hid the ball"
+    assert _share(hidden, GREEN) < NO_BODY_FRACTION, "the crate is still drawn once hidden"
+
+
+def test_page_colours_free_shapes_and_tints_a_robot(solo12, tmp_path):
+    """In the page's scene data: every free shape (box, sphere, cylinder, capsule, convex mesh) is a
+    drawn object in its body's colour (the scene's palette), and Solo-12, whose URDF colours its
+    meshes, is drawn in its own grey tinted towards its body's colour."""
+    stl = tmp_path / "tetra.stl"
+    stl.write_text(_tetrahedron_stl(0.2))
+    shapes = {
+        "box": FreeBody.box("box", (0.1, 0.2, 0.3), mass=1.0),
+        "sphere": FreeBody.sphere("sphere", 0.1, mass=1.0),
+        "cylinder": FreeBody.cylinder("cylinder", 0.1, 0.3, mass=1.0),
+        "capsule": FreeBody.capsule("capsule", 0.1, 0.3, mass=1.0),
+        "mesh": FreeBody.mesh("mesh", str(stl), mass=1.0),
+    }
+    scene = gaussim.Scene(bodies={"solo": solo12, **shapes})
+    page = Viewer(scene, live=False).save_html(tmp_path / "page.html")
+    objects = _page_objects(page)
+    kinds = {"box": "BoxGeometry", "sphere": "SphereGeometry", "cylinder": "CylinderGeometry"}
+    for name in shapes:
+        kind, colour = objects[f"/meshcat/bodies/{name}/{name}"]
+        assert kind == kinds.get(name, "BufferGeometry"), name  # a capsule and a hull: triangle meshes
+        assert colour == _hex(scene.bodies[name].color), name
+    colours = {path: colour for path, (_, colour) in objects.items()}
+    grey = solo12.visual_model.geometryObjects[0].meshColor
+    body_colour = scene.bodies["solo"].color
+    solo = {path: c for path, c in colours.items() if path.startswith("/meshcat/bodies/solo/")}
+    assert len(solo) == solo12.visual_model.ngeoms
+    assert set(solo.values()) == {_hex(0.5 * (np.asarray(grey) + np.asarray(body_colour)))}
+    assert len(set(colours.values())) == 1 + len(shapes), "two bodies share a colour"
+
+
+def _share(image: np.ndarray, rgba) -> float:
+    """The fraction of an image's lit pixels (H, W, 3 or 4) whose chromaticity is that of rgba."""
+    rgb = image[..., :3]
+    total = rgb.sum(axis=-1)
+    chroma = rgb / np.maximum(total, 1e-9)[..., None]
+    reference = np.asarray(rgba[:3]) / sum(rgba[:3])
+    close = np.abs(chroma - reference).max(axis=-1) < CHROMA_TOLERANCE
+    return float((close & (total > 0.15)).mean())
+
+
+def _hex(rgba) -> int:
+    red, green, blue = (int(round(255 * c)) for c in rgba[:3])
+    return red << 16 | green << 8 | blue
+
+
+def _page_objects(page) -> dict[str, tuple[str, int]]:
+    """Each object of a saved page (its set_object commands, decoded from the page's data): its
+    geometry's type and its material's colour 0xRRGGBB."""
+    objects = {}
+    for data in re.findall(r'fetch\("data:application/octet-binary;base64,([^"]+)"', page.read_text()):
+        command = umsgpack.unpackb(base64.b64decode(data))
+        if command.get("type") == "set_object" and command["object"].get("materials"):
+            shown = command["object"]
+            objects[command["path"]] = (shown["geometries"][0]["type"], shown["materials"][0]["color"])
+    return objects
+
+
+def _folders(dom: str) -> set[str]:
+    """The paths of the folders in the page's scene controls (dat.GUI nests ul > li.title)."""
+    folders: set[str] = set()
+
+    class Folders(html.parser.HTMLParser):
+        def __init__(self) -> None:
+            super().__init__()
+            self.path: list[str | None] = []
+            self.title = False
+
+        def handle_starttag(self, tag, attrs):
+            if tag == "ul":
+                self.path.append(None)
+            self.title = tag == "li" and ("class", "title") in attrs
+
+        def handle_endtag(self, tag):
+            if tag == "ul" and self.path:
+                self.path.pop()
+            self.title = False
+
+        def handle_data(self, data):
+            if self.title and self.path and self.path[-1] is None:
+                self.path[-1] = data
+                folders.add("/".join(name for name in self.path if name))  # dat.GUI's root has no title
+
+    Folders().feed(dom)
+    return folders
+
+
+def _tetrahedron_stl(side: float) -> str:
+    points = side * np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
+    faces = ((0, 2, 1), (0, 1, 3), (0, 3, 2), (1, 2, 3))
+    facets = "".join(
+        "facet normal 0 0 0\nouter loop\n"
+        + "".join("vertex {} {} {}\n".format(*points[i]) for i in face)
+        + "endloop\nendfacet\n"
+        for face in faces
+    )
+    return f"solid tetra\n{facets}endsolid tetra\n"

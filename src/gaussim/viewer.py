@@ -1,9 +1,14 @@
-"""Browser viewer (meshcat): the robot, the world, the contact points and the force arrows, live or
+"""Browser viewer (meshcat): the bodies, the world, the contact points and the force arrows, live or
 as a self-contained replay page.
+
+Each body is drawn in its colour (``BodyLayout.color``) under its own node, ``bodies/<body>``, which
+the page's controls show or hide. A free body's shape and a geometry whose robot file gives it no
+colour take the body's colour; a geometry with its own colour is tinted halfway towards it, so that
+two robots of one model are told apart.
 
 Force arrows start at the contact point. Each contact force is drawn as two arrows: its normal
 component (blue) and its friction component (orange), ``force_scale`` metres long per newton. The
-default scale draws the robot's weight m g as DEFAULT_WEIGHT_LENGTH metres, so the arrows of a
+default scale draws the bodies' weight m g as DEFAULT_WEIGHT_LENGTH metres, so the arrows of a
 standing robot add up to about that length. Contact points are red dots.
 
 meshcat is imported here only, when a viewer is made. A live viewer starts its own meshcat server
@@ -36,8 +41,9 @@ from .report import StepReport
 from .runlog import RunLog
 from .scene import Box, Ground, Scene, Sphere
 from .state import State
+from .world import BodyLayout
 
-# The robot's weight is drawn this long by default [m].
+# The bodies' weight is drawn this long by default [m].
 DEFAULT_WEIGHT_LENGTH = 0.25
 NORMAL_COLOR, FRICTION_COLOR, POINT_COLOR = 0x1F77B4, 0xFF7F0E, 0xD62728
 GROUND_COLOR, OBSTACLE_COLOR = 0xB0B0B0, 0x8FBC8F
@@ -48,16 +54,18 @@ GROUND_SIZE = 4.0  # side of the drawn ground square [m]
 MAX_FRAMES = 100_000
 # Arrows shorter than this are hidden [m].
 MIN_ARROW = 1e-4
-# Node names: the robot, the world and the contacts (one folder per contact, by name).
-ROBOT, WORLD, CONTACTS = "robot", "world", "contacts"
+# Node names: the bodies (one folder per body), the world and the contacts (one folder per contact).
+BODIES, WORLD, CONTACTS = "bodies", "world", "contacts"
+# A geometry with its own colour is drawn this far from it towards its body's colour.
+TINT = 0.5
 
 
 class Viewer:
     """A meshcat view of a scene. Attach it to a run (:meth:`show` each frame) or replay a log.
 
     Args:
-        scene: the scene to draw (robot, ground, obstacles).
-        force_scale: arrow length per force [m/N]; default: the robot's weight is DEFAULT_WEIGHT_LENGTH.
+        scene: the scene to draw (bodies, ground, obstacles).
+        force_scale: arrow length per force [m/N]; default: the bodies' weight is DEFAULT_WEIGHT_LENGTH.
         zmq_url: an already running meshcat server; by default a new one is started on 127.0.0.1.
         live: False for a viewer that only makes pages (:meth:`static_html`): no server, no socket.
 
@@ -73,7 +81,6 @@ class Viewer:
         live: bool = True,
     ) -> None:
         import meshcat
-        from pinocchio.visualize import MeshcatVisualizer
 
         robot = scene.robot
         self.scene = scene
@@ -90,15 +97,10 @@ class Viewer:
                     _stop(server[0])
                 raise
             self.meshcat.window.server_proc = server[0] if server else None
-        visual = _visual_model(robot.visual_model, robot.collision_model)
-        self._robot = MeshcatVisualizer(robot.model, robot.collision_model, visual)
-        self._robot.initViewer(viewer=self.meshcat)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", UserWarning)  # missing meshes were reported by _visual_model
-            self._robot.loadViewerModel(rootNodeName=ROBOT)
-        self.visual = visual
+        self.model = robot.model
+        self.visual = _visual_model(robot.visual_model, robot.collision_model)
         self.data = robot.model.createData()
-        self.visual_data = pin.GeometryData(visual)
+        self.visual_data = pin.GeometryData(self.visual)
         weight = pin.computeTotalMass(robot.model) * float(np.linalg.norm(scene.gravity))
         self.force_scale = (
             force_scale if force_scale is not None else DEFAULT_WEIGHT_LENGTH / max(weight, 1e-9)
@@ -107,6 +109,7 @@ class Viewer:
             raise GaussimError(f"force_scale must be a positive number, got {force_scale}")
         self._contacts: set[str] = set()
         self._aimed = False
+        self._nodes = self._draw_bodies()
         self._draw_world()
 
     @property
@@ -117,9 +120,11 @@ class Viewer:
     # -- live ------------------------------------------------------------------------------------------
 
     def show(self, q: np.ndarray, contacts: Sequence[ContactForce] = ()) -> None:
-        """Draw the robot at configuration q and the given contact forces (others are hidden)."""
+        """Draw the bodies at the world's configuration q (nq,) and the given contact forces (others are
+        hidden)."""
         self._aim(q)
-        self._robot.display(q)
+        for node, placement in self._placements(q):
+            self.meshcat[node].set_transform(placement)
         shown = set()
         for c in contacts:
             node = self._contact_node(c.name)
@@ -138,7 +143,7 @@ class Viewer:
     # -- replay ----------------------------------------------------------------------------------------
 
     def replay(self, log: RunLog, fps: float = 30.0, speed: float = 1.0) -> None:
-        """Load the run as a meshcat animation (robot motion and force arrows) at ``fps`` frames per
+        """Load the run as a meshcat animation (bodies' motion and force arrows) at ``fps`` frames per
         second of wall time, ``speed`` times real time; the page plays it and has its controls."""
         from meshcat.animation import Animation
 
@@ -161,16 +166,10 @@ class Viewer:
         # the contacts of state k (k >= 1) are those of the step that led to it, step k - 1
         first = np.searchsorted(contacts["step"], states - 1, side="left")
         last = np.searchsorted(contacts["step"], states - 1, side="right")
-        model, q = self._robot.model, log.q
-        nodes = [
-            self._robot.getViewerNodeName(g, pin.GeometryType.VISUAL) for g in self.visual.geometryObjects
-        ]
         for frame, (k, lo, hi) in enumerate(zip(states.tolist(), first.tolist(), last.tolist())):
-            pin.forwardKinematics(model, self.data, q[k])
-            pin.updateGeometryPlacements(model, self.data, self.visual, self.visual_data)
             with animation.at_frame(self.meshcat, frame) as f:
-                for node, placement in zip(nodes, self.visual_data.oMg):
-                    f[node].set_transform(placement.homogeneous)
+                for node, placement in self._placements(log.q[k]):
+                    f[node].set_transform(placement)
                 visible = set()
                 for row in range(lo, hi) if k > 0 else ():
                     name = names[contacts["id"][row]]
@@ -217,11 +216,11 @@ class Viewer:
     # -- drawing ---------------------------------------------------------------------------------------
 
     def _aim(self, q: np.ndarray) -> None:
-        """Point the camera at the robot in configuration q once, from a distance that frames it."""
+        """Point the camera at the bodies in configuration q once, from a distance that frames them."""
         if self._aimed:
             return
         self._aimed = True
-        model, data = self._robot.model, self.data
+        model, data = self.model, self.data
         pin.forwardKinematics(model, data, q)
         origins = np.array([placement.translation for placement in data.oMi[1:]])
         center = origins.mean(axis=0)
@@ -233,6 +232,41 @@ class Viewer:
         )
         self.meshcat["/Grid"].set_property("visible", False)
         self.meshcat["/Axes"].set_property("visible", False)
+
+    def _placements(self, q: np.ndarray) -> list[tuple[str, np.ndarray]]:
+        """Each drawn geometry's node and its placement (4, 4) at configuration q, its mesh scale
+        included."""
+        pin.forwardKinematics(self.model, self.data, q)
+        pin.updateGeometryPlacements(self.model, self.data, self.visual, self.visual_data)
+        return [
+            (
+                node,
+                self.visual_data.oMg[g].homogeneous @ np.diag([*self.visual.geometryObjects[g].meshScale, 1]),
+            )
+            for g, node in self._nodes
+        ]
+
+    def _draw_bodies(self) -> list[tuple[int, str]]:
+        """Draw every visual geometry under its body's node, in its colour; the (geometry index, node)
+        of those drawn (a geometry meshcat cannot show is reported in a warning)."""
+        world = self.scene.world
+        nodes, skipped = [], []
+        for g, obj in enumerate(self.visual.geometryObjects):
+            # a one-body world's names carry no prefix; a world of several names each "body/geometry"
+            body = (
+                next(iter(world.bodies.values())) if len(world) == 1 else world.body(obj.name.split("/")[0])
+            )
+            shape = _shape(obj)
+            if shape is None:
+                skipped.append(obj.name)
+                continue
+            node = f"{BODIES}/{body.name}/{obj.name.removeprefix(body.prefix)}"
+            rgba = _color(body, obj)
+            self.meshcat[node].set_object(shape, _material(_hex(rgba), float(rgba[3]), phong=True))
+            nodes.append((g, node))
+        if skipped:
+            warnings.warn(f"meshcat cannot draw these geometries: {', '.join(skipped)}", stacklevel=3)
+        return nodes
 
     def _draw_world(self) -> None:
         import meshcat.geometry as mg
@@ -371,19 +405,60 @@ def _frame_along(direction: np.ndarray, axis: int) -> np.ndarray:
     return rotation
 
 
-def _material(color: int, opacity: float = 1.0) -> Any:
+def _material(color: int, opacity: float = 1.0, phong: bool = False) -> Any:
     import meshcat.geometry as mg
 
-    return mg.MeshLambertMaterial(color=color, opacity=opacity, transparent=opacity < 1.0)
+    kind = mg.MeshPhongMaterial if phong else mg.MeshLambertMaterial
+    return kind(color=color, opacity=opacity, transparent=opacity < 1.0)
+
+
+def _hex(rgba: Sequence[float] | np.ndarray) -> int:
+    """An RGB colour of channels in [0, 1] as the integer 0xRRGGBB."""
+    red, green, blue = (int(round(255 * float(np.clip(c, 0.0, 1.0)))) for c in rgba[:3])
+    return red << 16 | green << 8 | blue
+
+
+def _color(body: BodyLayout, obj: pin.GeometryObject) -> np.ndarray:
+    """A geometry's RGBA (4,): its body's colour, or its own (given by its robot file) tinted by TINT
+    towards it."""
+    color = np.asarray(body.color, dtype=float)
+    if body.free or not obj.overrideMaterial:
+        return color
+    own = np.asarray(obj.meshColor, dtype=float)
+    return np.append((1 - TINT) * own[:3] + TINT * color[:3], own[3] * color[3])
+
+
+def _shape(obj: pin.GeometryObject) -> Any:
+    """The meshcat geometry of a Pinocchio geometry object, or None: a primitive (box, sphere,
+    cylinder, capsule, cone) or a convex hull as coal holds it, a mesh from its file (STL, OBJ, DAE:
+    the shape only; the colour is the body's), or a triangle mesh without a file."""
+    import coal
+    import meshcat.geometry as mg
+    from pinocchio.visualize.meshcat_visualizer import loadMesh, loadPrimitive
+
+    if isinstance(obj.geometry, coal.ShapeBase):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # an unsupported shape is reported by the caller
+            return loadPrimitive(obj)
+    files = {".stl": mg.StlMeshGeometry, ".obj": mg.ObjMeshGeometry, ".dae": mg.DaeMeshGeometry}
+    kind = files.get(Path(obj.meshPath).suffix.lower())
+    if kind is not None and Path(obj.meshPath).is_file():
+        return kind.from_file(obj.meshPath)
+    if isinstance(obj.geometry, coal.BVHModelBase):
+        return loadMesh(obj.geometry)
+    return None
 
 
 def _visual_model(visual: pin.GeometryModel, collision: pin.GeometryModel) -> pin.GeometryModel:
     """The visual geometry, or the collision geometry when visual meshes are missing (with a warning
     naming the files)."""
+    import coal
+
     missing = [
         f"{g.name}: {g.meshPath}"
         for g in visual.geometryObjects
-        if g.meshPath and not Path(g.meshPath).is_file()
+        # a primitive's meshPath is its kind ("BOX"), not a file
+        if g.meshPath and not isinstance(g.geometry, coal.ShapeBase) and not Path(g.meshPath).is_file()
     ]
     if not visual.ngeoms or missing:
         if missing:
