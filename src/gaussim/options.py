@@ -48,7 +48,7 @@ class Options:
         active_tolerance: acceleration scheme: a gap below this is an active contact [m].
         eps_abs: ProxQP absolute tolerance on primal/dual residuals and duality gap.
         max_iter: ProxQP's cap on its outer iterations for a solve from a cold start; a warm-started
-            solve gets at most WARM_START_ITERATIONS of them (gaussim.solver) before gaussim solves
+            solve gets at most WARM_START_ITERATIONS of them (gaussim.solver.proxqp) before gaussim solves
             again from a cold start. Normal solves need far fewer (measured: at most 258, on Talos
             standing); a point reached at the cap is accepted when the KKT check certifies it.
         on_failure: ``"raise"`` (default) a :class:`SolverError` when ProxQP does not converge, or
