@@ -60,7 +60,7 @@ class Simulator:
         self.detector = ContactDetector(scene, self.options.contact_margin) if scene.pairs else None
         self.modules = self._modules(scene, self.options)
         # modules whose rows do not come from detected contacts: with one, every step poses the QP
-        self._rows_without_contact = any(not isinstance(m, ContactModule) for m in self.modules)
+        self._rows_without_contact = any(not m.needs_contacts for m in self.modules)
         self.solvers: dict[Level, GaussSolver] = {
             level: GaussSolver(self.options) for level in ("velocity", "impulse", "acceleration")
         }
