@@ -24,12 +24,14 @@ acceleration scheme, the paper's:
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 import pinocchio as pin
 
 from .assembly import assemble
 from .collision import NO_CONTACTS, ContactDetector, Contacts
-from .constraints import BilateralModule, ContactModule, LimitModule
+from .constraints import BilateralModule, ContactModule, LimitModule, checked_modules
 from .constraints.base import ConstraintModule, Context, Level, Rows
 from .dynamics import Dynamics, DynamicsStage, damped_torque, padded_torque
 from .exceptions import InvalidState, SolverError
@@ -48,9 +50,15 @@ _FLOAT = np.dtype(float)  # a torque of this dtype is read as given
 
 
 class Simulator:
-    """Steps a scene with the Gauss principle; ``last_step`` holds the latest :class:`StepReport`."""
+    """Steps a scene with the Gauss principle; ``last_step`` holds the latest :class:`StepReport`.
 
-    def __init__(self, scene: Scene, options: Options | None = None) -> None:
+    ``constraints``: the user's constraint families (:class:`gaussim.constraints.ConstraintModule`),
+    posed with the scene's own each step; their reactions are ``StepReport.reactions(name)``.
+    """
+
+    def __init__(
+        self, scene: Scene, options: Options | None = None, *, constraints: Sequence[ConstraintModule] = ()
+    ) -> None:
         self.scene = scene
         self.options = options or Options()
         self.model = scene.robot.model.copy()
@@ -58,7 +66,7 @@ class Simulator:
         self.data = self.model.createData()
         self.dynamics = DynamicsStage(self.model, self.data)
         self.detector = ContactDetector(scene, self.options.contact_margin) if scene.pairs else None
-        self.modules = self._modules(scene, self.options)
+        self.modules = checked_modules(self._modules(scene, self.options), constraints)
         # modules whose rows do not come from detected contacts: with one, every step poses the QP
         self._rows_without_contact = any(not m.needs_contacts for m in self.modules)
         self.solvers: dict[Level, GaussSolver] = {
