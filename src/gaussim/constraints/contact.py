@@ -1,4 +1,4 @@
-"""Unilateral contacts with Coulomb friction (docs/FORMULATION.md sections 2, 5).
+"""Unilateral contacts with Coulomb friction (docs/FORMULATION.md sections 2, 4, 5).
 
 Each contact point with normal n, point Jacobian J (3, nv) and friction mu contributes the rows
 
