@@ -267,7 +267,7 @@ def test_non_convergence_is_reported_or_raised(box):
         state = lenient.step(lenient.reset(q, v))
     assert not lenient.last_step.converged
     certificate = lenient.last_step.certificates[-1]
-    assert certificate.status == "PROXQP_MAX_ITER_REACHED"
+    assert certificate.status is gaussim.solver.Status.MAX_ITER_REACHED
     assert certificate.outer_iterations == 3 < certificate.iterations
     assert np.all(np.isfinite(state.q))
 

@@ -1,4 +1,4 @@
-"""Bilateral constraints: the QP equals a direct KKT solve of FORMULATION.md section 4."""
+"""Bilateral constraints: the QP equals a direct KKT solve of docs/FORMULATION.md section 4."""
 
 import numpy as np
 import pinocchio as pin
@@ -12,7 +12,7 @@ KKT_TOLERANCE = 1e-8
 # Energy oscillation of semi-implicit Euler at dt = 1 ms on a swinging linkage, relative.
 ENERGY_RTOL = 0.01
 # Anchor drift while shaking at joint speeds up to ~5 rad/s: the stabilisation bounds it by
-# O(|w|^2 r dt^2 / stabilisation) = 25 * 0.2 * 1e-6 / 0.2 = 2.5e-5 m (FORMULATION.md section 5, drift) [m].
+# O(|w|^2 r dt^2 / stabilisation) = 25 * 0.2 * 1e-6 / 0.2 = 2.5e-5 m (docs/FORMULATION.md section 5) [m].
 DRIFT_TOLERANCE = 5e-5
 FEET = ["FL_FOOT", "FR_FOOT", "HL_FOOT", "HR_FOOT"]
 

@@ -1,11 +1,15 @@
 """Every example runs headless as a test (short durations)."""
 
 import csv
+import importlib.util
 import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
+
+import gaussim
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
@@ -39,3 +43,50 @@ def test_watch_box_stack(tmp_path):
 def test_free_bodies():
     stdout = _run(str(EXAMPLES / "free_bodies.py"), "--dt", "2e-3")
     assert "rolling:" in stdout and "flipping: turned over 1 times" in stdout  # it flips at 4.2 s
+
+
+def _example(name: str):  # type: ignore[no-untyped-def]
+    """The example ``name`` as a module, to call its functions."""
+    spec = importlib.util.spec_from_file_location(name, EXAMPLES / f"{name}.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module  # its dataclasses look their module up there
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.mark.parametrize("scheme", gaussim.options.SCHEMES)
+def test_custom_constraint(scheme):
+    """A ball held only by the user's AbovePlane module falls freely, lands when sqrt(2 (z0 - r) / g)
+    says (within the step), rests at z = r pushed by m g, and moves as the same ball on gaussim's
+    frictionless ground."""
+    stdout = _run(str(EXAMPLES / "custom_constraint.py"), "--scheme", scheme)
+    assert "pushed up by 9.810000 N" in stdout
+    example, dt, z0 = _example("custom_constraint"), 1e-3, 0.5
+    custom = example.drop(False, z0, dt=dt, scheme=scheme)
+    r, mass = example.RADIUS, gaussim.load_robot("ball", floating_base=True).mass
+    assert abs(custom.landed - np.sqrt(2 * (z0 - r) / example.G)) <= dt
+    k = np.arange(len(custom.t))[custom.t < custom.landed - dt / 2]  # the steps before the landing one
+    falling = z0 - example.G * dt**2 * k * (k + 1) / 2  # free fall, v+ = v - g dt then z+ = z + dt v+
+    np.testing.assert_allclose(custom.z[k], falling, rtol=0, atol=1e-12)
+    np.testing.assert_array_less(r, custom.z[k])
+    assert abs(custom.z[-1] - r) < 1e-9
+    assert custom.push == pytest.approx(mass * example.G, rel=1e-9)
+    np.testing.assert_allclose(custom.z, example.drop(True, z0, dt=dt, scheme=scheme).z, rtol=0, atol=1e-12)
+
+
+def test_a_custom_constraint_is_checked_once():
+    """What the Simulator refuses from a user: not a ConstraintModule, or a name already taken."""
+    example = _example("custom_constraint")
+    ball = gaussim.load_robot("ball", floating_base=True)
+    scene = gaussim.Scene(ball)
+    with pytest.raises(gaussim.InvalidOptions, match=r"constraints\[0\]: must be a gaussim.constraints"):
+        gaussim.Simulator(scene, constraints=[object()])
+    plane = example.AbovePlane(ball, "ball", height=0.1)
+    with pytest.raises(gaussim.InvalidOptions, match="constraints\\[1\\]: the name 'above_plane' is taken"):
+        gaussim.Simulator(scene, constraints=[plane, plane])
+    plane.name = "contact"
+    with pytest.raises(gaussim.InvalidOptions, match="the name 'contact' is taken; taken: contact, limit"):
+        gaussim.Simulator(scene, constraints=[plane])
+    with pytest.raises(gaussim.FrameNotFound, match="no frame 'hand'"):
+        example.AbovePlane(ball, "hand", height=0.1)

@@ -34,6 +34,10 @@ def test_log_round_trip(tmp_path):
     np.testing.assert_array_equal(loaded.tau, log.tau)
     assert loaded.contact_records() == log.contact_records()
     assert loaded.options == log.options and "[ground]" in loaded.scene_text
+    # a step's status is stored as its Status value, a plain string that old logs hold too
+    stored = loaded.solver_arrays()["status"]
+    assert stored.dtype.kind == "U" and set(stored) <= {s.value for s in gaussim.solver.Status} | {"NO_QP"}
+    np.testing.assert_array_equal(stored, log.solver_arrays()["status"])
     # reproducible from the log alone: the same scene text and options give the same trajectory
     scene_file = tmp_path / "again.toml"
     scene_file.write_text(loaded.scene_text)

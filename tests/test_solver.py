@@ -9,16 +9,10 @@ import pytest
 
 import gaussim
 from gaussim.assembly import GaussProblem
-from gaussim.solver import (
-    ACTIVE_SET_FLOOR,
-    KKT_RTOL,
-    GaussSolver,
-    _initialise,
-    _kkt_residuals,
-    _sides,
-    _warm,
-    kkt_residual,
-)
+from gaussim.solver import KKT_RTOL, GaussSolver, Status, kkt_residual
+from gaussim.solver.active_set import ACTIVE_SET_FLOOR, active_set_candidate
+from gaussim.solver.certificate import kkt_residuals
+from gaussim.solver.proxqp import _initialise, _sides
 
 DATA = Path(__file__).parent / "data"
 
@@ -49,21 +43,21 @@ def test_the_previous_solution_is_kept_only_when_it_still_solves_the_problem():
     solver = GaussSolver(gaussim.Options())
     first = solver.solve(_problem(0.0))
     again = solver.solve(_problem(0.0))
-    assert again.certificate.status == "GAUSSIM_PREVIOUS_SOLUTION_CERTIFIED" and again.certificate.converged
+    assert again.certificate.status == Status.PREVIOUS_SOLUTION_CERTIFIED and again.certificate.converged
     assert again.certificate.iterations == 0 and again.certificate.relative_kkt_residual <= 1e-9
     np.testing.assert_array_equal(again.x, first.x)
     np.testing.assert_array_equal(again.multipliers, first.multipliers)
     heavier = _problem(0.0)
     heavier.g[2] += 1e-6
     moved = solver.solve(heavier)
-    assert moved.certificate.status == "GAUSSIM_ACTIVE_SET_CERTIFIED" and moved.certificate.converged
+    assert moved.certificate.status == Status.ACTIVE_SET_CERTIFIED and moved.certificate.converged
     assert moved.lambda_in[0] == pytest.approx(9.81e-3 + 1e-6, abs=1e-15)
     assert moved.x[2] == pytest.approx(0.0, abs=1e-15)
     lifted = solver.solve(_problem(-0.5))  # the row is no longer active: its multiplier would pull
-    assert lifted.certificate.status == "PROXQP_SOLVED"
+    assert lifted.certificate.status == Status.SOLVED
     assert lifted.x[2] == pytest.approx(-9.81e-3, rel=1e-9) and abs(lifted.lambda_in[0]) < 1e-12
     landed = solver.solve(_problem(0.0))  # a row that becomes active: the free x violates it
-    assert landed.certificate.status == "PROXQP_SOLVED"
+    assert landed.certificate.status == Status.SOLVED
     assert landed.lambda_in[0] == pytest.approx(9.81e-3, abs=1e-9)
 
 
@@ -84,10 +78,10 @@ def test_the_active_set_solve_handles_dependent_rows_and_matches_proxqp():
     solver = GaussSolver(gaussim.Options())
     solver.solve(_sticking_point(1e-3))
     warm = solver.solve(_sticking_point(2e-3))
-    assert warm.certificate.status == "GAUSSIM_ACTIVE_SET_CERTIFIED"
+    assert warm.certificate.status == Status.ACTIVE_SET_CERTIFIED
     assert np.all(warm.lambda_in >= 0.0)
     cold = GaussSolver(gaussim.Options()).solve(_sticking_point(2e-3))
-    assert cold.certificate.status == "PROXQP_SOLVED"
+    assert cold.certificate.status == Status.SOLVED
     C = _sticking_point(2e-3).C
     # the exact answer: the point sticks, the ground pushing back with (-push, 0, weight); ProxQP's is within
     # KKT_RTOL eps_abs of it, the active-set solve's within round-off
@@ -96,7 +90,7 @@ def test_the_active_set_solve_handles_dependent_rows_and_matches_proxqp():
     np.testing.assert_allclose(cold.x, 0.0, atol=1e-7)
     np.testing.assert_allclose(C.T @ cold.lambda_in, [-2e-3, 0.0, 9.81e-3], atol=1e-7)
     sliding = solver.solve(_sticking_point(1.0))  # beyond mu m g: the contact slides, rows drop out
-    assert sliding.certificate.status in ("PROXQP_SOLVED", "GAUSSIM_CERTIFIED_AT_MAX_ITER")
+    assert sliding.certificate.status in (Status.SOLVED, Status.CERTIFIED_AT_MAX_ITER)
     assert sliding.x[0] > 0.5
     fresh = GaussSolver(gaussim.Options()).solve(_sticking_point(1.0))
     np.testing.assert_allclose(sliding.x, fresh.x, atol=1e-7)
@@ -126,13 +120,12 @@ def test_sign_violation_is_judged_relative_to_the_problem_scale():
     """A -1.6e-7 multiplier on a light row beside a 1e4 load (a 1e6 kg box on a 1 kg one, as ProxQP
     returned it at eps_abs 1e-9) is a round-off, not a pull: accepted relative to max(1, |g|), still
     counted in the absolute residual; the same multiplier in a problem of unit scale is not."""
-    from gaussim.solver import KKT_RTOL, _kkt_residuals
 
     def residuals(load: float, z: float) -> tuple[float, float]:
         H, g = np.eye(2), np.array([load, 0.0])
         C, l = np.eye(2), np.array([0.0, 0.0])  # x >= 0: the load presses row 0, row 1 is idle
         x, multipliers = np.zeros(2), np.array([load, z])
-        return _kkt_residuals(H, g, np.zeros((0, 2)), np.zeros(0), C, l, x, np.zeros(0), multipliers)[:2]
+        return kkt_residuals(H, g, np.zeros((0, 2)), np.zeros(0), C, l, x, np.zeros(0), multipliers)[:2]
 
     absolute, relative = residuals(1e4, -1.6e-7)
     assert absolute == pytest.approx(1.6e-7)
@@ -142,7 +135,7 @@ def test_sign_violation_is_judged_relative_to_the_problem_scale():
 
 
 @pytest.mark.parametrize(
-    ("conflict", "status"), [(1e-8, "GAUSSIM_CERTIFIED_AT_MAX_ITER"), (1e-6, "PROXQP_MAX_ITER_REACHED")]
+    ("conflict", "status"), [(1e-8, Status.CERTIFIED_AT_MAX_ITER), (1e-6, Status.MAX_ITER_REACHED)]
 )
 def test_iteration_cap_is_accepted_only_when_the_kkt_check_certifies_the_point(conflict, status):
     """Two rows that conflict by ``conflict`` (x_3 >= 0 and x_3 <= -conflict, as redundant contact rows
@@ -155,7 +148,7 @@ def test_iteration_cap_is_accepted_only_when_the_kkt_check_certifies_the_point(c
     )
     solution = GaussSolver(gaussim.Options(on_failure="report")).solve(problem)
     assert solution.certificate.status == status
-    assert solution.certificate.converged == (status != "PROXQP_MAX_ITER_REACHED")
+    assert solution.certificate.converged == (status != Status.MAX_ITER_REACHED)
     assert solution.x[2] == pytest.approx(-conflict / 2, rel=1e-6)
 
 
@@ -205,11 +198,11 @@ def test_an_uncertified_proxqp_answer_is_solved_on_its_active_set():
     options = gaussim.Options(dt=0.02)
     solver = GaussSolver(options)
     p, (x, z) = problem, _proxqp_alone(solver, problem)
-    relative = _kkt_residuals(p.H, p.g, p.A, p.b, p.C, p.l, x, np.zeros(0), z)[1]
+    relative = kkt_residuals(p.H, p.g, p.A, p.b, p.C, p.l, x, np.zeros(0), z)[1]
     assert relative > KKT_RTOL * options.eps_abs, "ProxQP now certifies it: the test rescues nothing"
     solution = solver.solve(problem)
     c = solution.certificate
-    assert c.status == "GAUSSIM_ACTIVE_SET_CERTIFIED" and c.restarted and c.converged, c
+    assert c.status == Status.ACTIVE_SET_CERTIFIED and c.restarted and c.converged, c
     assert c.relative_kkt_residual < 1e-14, c
     np.testing.assert_allclose(solution.x, x, atol=1e-5)
     assert np.all(p.C @ solution.x >= p.l - 1e-12)
@@ -269,9 +262,11 @@ def test_a_refused_answer_is_solved_again_to_a_tighter_tolerance():
     options = gaussim.Options(friction_facets=16)
     solver = GaussSolver(options)
     p, (x, z) = problem, _proxqp_alone(solver, problem)
-    assert _kkt_residuals(p.H, p.g, p.A, p.b, p.C, p.l, x, np.zeros(0), z)[1] > KKT_RTOL * options.eps_abs
+    assert kkt_residuals(p.H, p.g, p.A, p.b, p.C, p.l, x, np.zeros(0), z)[1] > KKT_RTOL * options.eps_abs
     candidate = np.empty(len(x)), np.empty(len(z))
-    assert _warm(p.H, p.g, p.A, p.b, p.C, p.l, x, z, options.eps_abs, ACTIVE_SET_FLOOR, *candidate)[0] == 0
+    tolerance = options.eps_abs
+    how, _ = active_set_candidate(p.H, p.g, p.A, p.b, p.C, p.l, x, z, tolerance, ACTIVE_SET_FLOOR, *candidate)
+    assert how == 0
     solution = solver.solve(problem)
     c = solution.certificate
     assert c.converged and c.restarted and c.relative_kkt_residual <= KKT_RTOL * options.eps_abs, c

@@ -6,9 +6,9 @@ F = tau - b(q, v) under constraints minimises the Gauss functional
     Z(a) = 1/2 a^T M a - a^T F    over the admissible set Omega(t, q, v)
 
 (at the velocity level, Z(v+) = 1/2 (v+ - v_free)^T M (v+ - v_free) with v_free = v + dt M^-1 F).
-Each constraint module (contacts with Coulomb friction, joint limits, bilateral constraints)
-contributes linear rows to Omega; ProxQP solves the QP and its multipliers are the reactions.
-See FORMULATION.md in the project's documentation for the derivation.
+Each constraint module (contacts with Coulomb friction, joint limits, bilateral constraints, or a
+user's :class:`gaussim.constraints.ConstraintModule`) contributes linear rows to Omega; ProxQP solves
+the QP and its multipliers are the reactions. docs/FORMULATION.md states the formulation.
 """
 
 from .constraints import BilateralReaction, ContactForce, LimitReaction

@@ -48,9 +48,9 @@ class Options:
         active_tolerance: acceleration scheme: a gap below this is an active contact [m].
         eps_abs: ProxQP absolute tolerance on primal/dual residuals and duality gap.
         max_iter: ProxQP's cap on its outer iterations for a solve from a cold start; a warm-started
-            solve gets at most WARM_START_ITERATIONS of them (gaussim.solver) before gaussim solves
-            again from a cold start. Normal solves need far fewer (a few hundred at most); a point
-            reached at the cap is accepted when the KKT check certifies it.
+            solve gets at most WARM_START_ITERATIONS of them (gaussim.solver.proxqp) before gaussim
+            solves again from a cold start. Normal solves need far fewer (a few hundred at most); a
+            point reached at the cap is accepted when the KKT check certifies it.
         on_failure: ``"raise"`` (default) a :class:`SolverError` when ProxQP does not converge, or
             ``"report"`` (accept the finite iterate and record the status). A non-finite solution
             or an infeasible constraint set always raises.

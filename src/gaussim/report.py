@@ -10,7 +10,17 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .constraints import BilateralReaction, ConstraintModule, ContactForce, LimitReaction, Rows
+from .constraints import (
+    BilateralModule,
+    BilateralReaction,
+    ConstraintModule,
+    ContactForce,
+    ContactModule,
+    LimitModule,
+    LimitReaction,
+    Rows,
+)
+from .constraints.contact import contact_batch
 from .solver import Certificate
 
 if TYPE_CHECKING:
@@ -81,7 +91,10 @@ class StepReport:
         """True when the step recorded its stages' wall times (``Options.timings``)."""
         return self.mark is not _untimed
 
-    def _reactions(self, family: str) -> list:
+    def reactions(self, family: str) -> list:
+        """The reactions of the constraint family named ``family`` (a module's ``name``), as its module
+        reports them from the multipliers of the step's last QP (forces [N], torques [N m]); empty when
+        it held no rows."""
         return [
             r for m, rows, lam in self.blocks if m.name == family for r in m.reactions(rows, lam, self.scale)
         ]
@@ -96,37 +109,36 @@ class StepReport:
 
     @cached_property
     def contacts(self) -> list[ContactForce]:
-        return self._reactions("contact")
+        return self.reactions(ContactModule.name)
 
     @cached_property
     def limits(self) -> list[LimitReaction]:
-        return self._reactions("limit")
+        return self.reactions(LimitModule.name)
 
     @cached_property
     def bilaterals(self) -> list[BilateralReaction]:
-        return self._reactions("bilateral")
+        return self.reactions(BilateralModule.name)
 
     @property
     def contact_jacobian(self) -> np.ndarray | None:
-        for m, rows, _ in self.blocks:
-            if m.name == "contact":
-                J = rows.data.J  # type: ignore[attr-defined]
-                return J.reshape(-1, J.shape[-1])
-        return None
+        batch = contact_batch(self.blocks)
+        return None if batch is None else batch.J.reshape(-1, batch.J.shape[-1])
 
     @property
     def friction_relaxed(self) -> bool:
         """True when the De Saxce shift's fixed point was not reached within
         ``Options.friction_iterations`` and the step kept the plain pyramid relaxation (see
         gaussim.constraints.contact)."""
-        return any(m.name == "contact" and rows.data.relaxed for m, rows, _ in self.blocks)  # type: ignore[attr-defined]
+        batch = contact_batch(self.blocks)
+        return batch is not None and batch.relaxed
 
     @property
     def friction_unsettled(self) -> bool:
-        """True when the acceleration-level sliding friction had not reached its fixed point (its
-        normal forces still moving, f_t = mu f_n not met) when ``Options.friction_iterations`` QPs were
-        spent (see gaussim.constraints.contact); the step is then not ``converged``."""
-        return any(m.name == "contact" and rows.data.unsettled for m, rows, _ in self.blocks)  # type: ignore[attr-defined]
+        """True when a module's fixed-point iteration had not settled (``Rows.settled``) when
+        ``Options.friction_iterations`` QPs were spent: among gaussim's modules, the acceleration-level
+        sliding friction's (its normal forces still moving, f_t = mu f_n not met; see
+        gaussim.constraints.contact); the step is then not ``converged``."""
+        return not all(rows.settled for _, rows, _ in self.blocks)
 
     @property
     def converged(self) -> bool:

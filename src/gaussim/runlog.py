@@ -80,6 +80,10 @@ LAYOUT: dict[str, tuple[str, tuple[str, ...]]] = {
 NPZ_HEADER = tuple(key for key, (_, shape) in LAYOUT.items() if not shape)
 # A step's status when its QPs converged but its friction fixed point did not (friction_unsettled).
 FRICTION_UNSETTLED = "FRICTION_UNSETTLED"
+# A step's status when it solved no QP (nothing restricted its motion).
+NO_QP = "NO_QP"
+# The stored statuses of a step that converged (a solver status is stored as its value: Status.value).
+ACCEPTED = (*(status.value for status in CONVERGED), NO_QP)
 
 
 class RunLogError(GaussimError):
@@ -128,11 +132,15 @@ class RunLog:
         step = self.steps
         self._append_state(state)
         self._tau.append(np.asarray(tau, dtype=float))
-        statuses = [c.status for c in report.certificates]
-        worst = next((s for s in statuses if s not in CONVERGED), statuses[0] if statuses else "NO_QP")
-        if worst in CONVERGED and report.friction_unsettled:
-            worst = FRICTION_UNSETTLED
-        self._solver.append((len(statuses), report.iterations, report.max_residual, worst))
+        certificates = report.certificates
+        worst = next((c for c in certificates if not c.converged), certificates[0] if certificates else None)
+        if worst is None:
+            status = NO_QP
+        elif worst.converged and report.friction_unsettled:
+            status = FRICTION_UNSETTLED
+        else:
+            status = worst.status.value
+        self._solver.append((len(certificates), report.iterations, report.max_residual, status))
         for c in report.contacts:
             if c.name not in self._ids:
                 self._ids[c.name] = len(self.contact_names)
@@ -338,7 +346,7 @@ class RunLog:
                 f"dt = {o.dt:g} s is too coarse for the {o.scheme} scheme on this scene; reduce dt "
                 "(or the friction)"
             )
-        failed = int(np.sum(~np.isin(s["status"], [*CONVERGED, "NO_QP"])))
+        failed = int(np.sum(~np.isin(s["status"], ACCEPTED)))
         if failed:
             found.append(
                 f"{failed} steps did not converge (max KKT residual {s['kkt_residual'].max():.2e}, "
@@ -352,7 +360,7 @@ class RunLog:
         each of :meth:`warnings`."""
         c, s = self.contact_arrays(), self.solver_arrays()
         wall_time = self.wall_time
-        failed = int(np.sum(~np.isin(s["status"], [*CONVERGED, "NO_QP"])))
+        failed = int(np.sum(~np.isin(s["status"], ACCEPTED)))
         t = self.t
         warnings = self.warnings()
         status = "complete" if self.complete else "INCOMPLETE: " + self.reason

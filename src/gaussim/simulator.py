@@ -15,14 +15,14 @@ floating bases (dynamics.FloatingBases, integrator): the base's linear velocity 
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 import pinocchio as pin
 
 from .actuation import Actuation
 from .collision import NO_CONTACTS, ContactDetector, Contacts
-from .constraints import BilateralModule, ContactModule, LimitModule
+from .constraints import BilateralModule, ContactModule, LimitModule, checked_modules
 from .constraints.base import ConstraintModule
 from .dynamics import DynamicsStage
 from .exceptions import InvalidState, SolverError
@@ -39,9 +39,15 @@ UNIT_TOLERANCE = 1e-6
 
 
 class Simulator:
-    """Steps a scene with the Gauss principle; ``last_step`` holds the latest :class:`StepReport`."""
+    """Steps a scene with the Gauss principle; ``last_step`` holds the latest :class:`StepReport`.
 
-    def __init__(self, scene: Scene, options: Options | None = None) -> None:
+    ``constraints``: the user's constraint families (:class:`gaussim.constraints.ConstraintModule`),
+    posed with the scene's own each step; their reactions are ``StepReport.reactions(name)``.
+    """
+
+    def __init__(
+        self, scene: Scene, options: Options | None = None, *, constraints: Sequence[ConstraintModule] = ()
+    ) -> None:
         self.scene = scene
         self.options = options or Options()
         self.world = scene.world
@@ -51,10 +57,10 @@ class Simulator:
         self.actuation = Actuation(self.model, self.world, self.options.dt)
         self.dynamics = DynamicsStage(self.model, self.data)
         self.detector = ContactDetector(scene, self.options.contact_margin) if scene.pairs else None
-        self.modules = self._modules(scene, self.options)
+        self.modules = checked_modules(self._modules(scene, self.options), constraints)
         self.gauss = GaussStage(self.model, self.data, self.modules, self.options)
         # a module whose rows do not come from detected contacts makes every step pose the QP
-        always = any(not isinstance(m, ContactModule) for m in self.modules)
+        always = any(not m.needs_contacts for m in self.modules)
         self.scheme: Scheme = SCHEMES[self.options.scheme](self.dynamics, self.gauss, self.actuation, always)
         self.last_step: StepReport | None = None
         self._last_state: State | None = None  # the state the last step returned: already valid

@@ -1,4 +1,4 @@
-"""What every constraint module shares: the rows it contributes and how bounds are stabilised.
+"""The constraint protocol: a family of constraints is a :class:`ConstraintModule` that returns its rows.
 
 A module turns one constraint family of the scene into rows of the admissible set
 
@@ -6,14 +6,16 @@ A module turns one constraint family of the scene into rows of the admissible se
 
 where x is the unknown of the Gauss problem being posed: the next velocity v+ (``velocity``
 level), the post-impact velocity w (``impulse`` level) or the acceleration a (``acceleration``
-level). The QP multipliers of those rows are the reactions (impulses at the first two levels).
+level). The QP multipliers of those rows are the reactions (impulses at the first two levels), >= 0
+on unilateral rows: J^T lambda is the generalized force the family applies. See docs/FORMULATION.md.
 """
 
 from __future__ import annotations
 
+import abc
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Literal, Protocol
+from typing import Any, Generic, Literal, TypeVar
 
 import numpy as np
 import pinocchio as pin
@@ -23,28 +25,32 @@ from ..collision import Contacts
 from ..options import Options
 
 Level = Literal["velocity", "impulse", "acceleration"]
+T = TypeVar("T")
 
 
 @dataclass
-class Rows:
-    """Rows of one module.
+class Rows(Generic[T]):
+    """Rows of one module, and the module's own record of them (``data``, of the module's type T).
 
     Attributes:
         J: row Jacobians, shape (m, nv).
         bound: right-hand sides, shape (m,).
         equality: True for bilateral rows.
-        labels: returns one name per row; called only to report infeasibility.
-        data: module-specific bookkeeping used to turn multipliers into reactions.
+        labels: returns one name per row; called only to report an infeasibility or a reaction.
+        data: the module's bookkeeping that turns multipliers into reactions (None when it needs none).
         force: generalized force the module applies outside the QP, shape (nv,), or None
             (sliding friction at the acceleration level).
+        settled: False when the module's fixed-point iteration (:meth:`ConstraintModule.refine`) had
+            not reached its fixed point at the QP of these rows: the step is then not converged.
     """
 
     J: np.ndarray
     bound: np.ndarray
     equality: bool
     labels: Callable[[], list[str]]
-    data: object = None
+    data: T = None  # type: ignore[assignment]  # a module without bookkeeping: Rows[None]
     force: np.ndarray | None = None
+    settled: bool = True
 
     def __len__(self) -> int:
         return len(self.bound)
@@ -56,16 +62,16 @@ class Context:
 
     Attributes:
         model, data: Pinocchio model and data with kinematics (and drifts at acceleration level).
-        q, v: current configuration (nq,) and velocity (nv,).
+        q: current configuration, shape (nq,).
+        v: current velocity, shape (nv,).
         x_free: the unconstrained solution at this level, shape (nv,): v + dt M^-1 F (velocity),
             v (impulse) or M^-1 F (acceleration).
         contacts: detected contact points.
         options: the step options.
         level: which Gauss problem is posed.
-        lagged: per-contact arrays carried between fixed-point iterations of one step, aligned with
-            the contacts that produced rows (slip velocity for the De Saxce shift, normal force and
-            stick decisions for acceleration-level sliding), and the iteration's own bookkeeping
-            (its passes; whether the shift was dropped).
+        lagged: each module's record of its fixed-point iteration (:meth:`ConstraintModule.refine`),
+            carried between the QPs of one solve, keyed by ``id(module)`` (the contact module's is a
+            :class:`~gaussim.constraints.contact.FrictionIterate`); empty at a solve's first QP.
     """
 
     model: pin.Model
@@ -76,22 +82,55 @@ class Context:
     contacts: Contacts
     options: Options
     level: Level
-    lagged: dict[str, Any] = field(default_factory=dict)
+    lagged: dict[int, Any] = field(default_factory=dict)
 
 
-class ConstraintModule(Protocol):
-    """A constraint family: produces rows and turns their multipliers into reactions."""
+@dataclass
+class RowReaction:
+    """The reaction of one row: its multiplier in the row's force units ([N] for a row n^T J_p x of
+    a point Jacobian J_p and a unit direction n, [N m] for a joint's row; impulses in impact reports).
+
+    Attributes:
+        name: the row's label.
+        value: the multiplier times the report's scale (>= 0 on unilateral rows).
+    """
 
     name: str
+    value: float
 
-    def rows(self, ctx: Context) -> Rows | None:
+
+class ConstraintModule(abc.ABC, Generic[T]):
+    """A constraint family: one method, :meth:`rows`, returns its rows of the admissible set or None.
+
+    Subclass it to add a family to a simulation (``Simulator(scene, options, constraints=[...])``);
+    :meth:`reactions` and :meth:`refine` have defaults (one :class:`RowReaction` per row; no
+    fixed-point iteration). A step's report gives the reactions of a family by its ``name``
+    (``StepReport.reactions(name)``).
+
+    Attributes:
+        name: the family's name, unique in a simulation (the built-in ones: ``contact``, ``limit``,
+            ``bilateral``).
+        needs_contacts: True when the rows come only from the step's detected contacts (the built-in
+            contact module): a step without contacts, whose every module says so, poses no QP.
+    """
+
+    name: str = ""
+    needs_contacts: bool = False
+
+    @abc.abstractmethod
+    def rows(self, ctx: Context) -> Rows[T] | None:
         """Rows of the admissible set at ``ctx.level``, or None when nothing restricts x."""
 
-    def reactions(self, rows: Rows, multipliers: np.ndarray, scale: float) -> list:
+    def reactions(self, rows: Rows[T], multipliers: np.ndarray, scale: float) -> list:
         """Reports from the multipliers of ``rows``, times ``scale`` (1/dt turns impulses into forces)."""
+        return [RowReaction(name, float(scale * lam)) for name, lam in zip(rows.labels(), multipliers)]
 
-    def refine(self, ctx: Context, rows: Rows, x: np.ndarray, multipliers: np.ndarray) -> bool:
-        """Update ``ctx.lagged`` from a solution; True when the step must be solved again."""
+    def refine(self, ctx: Context, rows: Rows[T], x: np.ndarray, multipliers: np.ndarray) -> bool:
+        """Update the module's record in ``ctx.lagged`` from the solution (x, its multipliers of
+        ``rows``); True when the step must be posed and solved again (at most
+        ``Options.friction_iterations`` QPs a step); set ``rows.settled`` False when the iteration is
+        not at its fixed point."""
+        return False
 
 
 def stabilised_bound(
@@ -129,7 +168,7 @@ def bound_of(level, dt, stabilisation, phi, rate, drift, unilateral):  # type: i
 
 
 def is_active(ctx: Context, phi: np.ndarray, rate: np.ndarray, margin: float) -> np.ndarray:
-    """Which unilateral constraints restrict x at ctx.level (see FORMULATION.md section 2).
+    """Which unilateral constraints restrict x at ctx.level (see docs/FORMULATION.md section 2).
 
     Velocity level: the constraint could be reached within the step (phi + dt * rate <= margin).
     Impulse and acceleration levels: the constraint is closed or closes within the step

@@ -13,7 +13,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..scene import Anchor, Bilateral
-from .base import Context, Rows, stabilised_bound
+from .base import ConstraintModule, Context, Rows, stabilised_bound
 
 LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 
@@ -53,8 +53,9 @@ class _Side:
         return placement.translation, placement.rotation, J, drift
 
 
-class BilateralModule:
-    """Rows of the anchors and loop closures the scene declares."""
+class BilateralModule(ConstraintModule[list[int]]):
+    """Rows of the anchors and loop closures the scene declares; each rows' ``data`` holds the number
+    of rows of each constraint."""
 
     name = "bilateral"
 
@@ -68,7 +69,7 @@ class BilateralModule:
                 pair = (_Side(robot_frame_id(b.frame_a)), _Side(robot_frame_id(b.frame_b)), b.orientation)
             self.constraints.append((b.name, *pair))
 
-    def rows(self, ctx: Context) -> Rows | None:
+    def rows(self, ctx: Context) -> Rows[list[int]] | None:
         acceleration = ctx.level == "acceleration"
         J_rows, bounds, labels = [], [], []
         for name, a, b, orientation in self.constraints:
@@ -84,12 +85,11 @@ class BilateralModule:
             labels += [f"{name} row {i}" for i in range(m)]
         return Rows(np.vstack(J_rows), np.concatenate(bounds), True, lambda: labels, [len(b) for b in bounds])
 
-    def reactions(self, rows: Rows, multipliers: np.ndarray, scale: float) -> list[BilateralReaction]:
+    def reactions(
+        self, rows: Rows[list[int]], multipliers: np.ndarray, scale: float
+    ) -> list[BilateralReaction]:
         reports, start = [], 0
-        for (name, *_), m in zip(self.constraints, rows.data):  # type: ignore[call-overload]
+        for (name, *_), m in zip(self.constraints, rows.data):
             reports.append(BilateralReaction(name, scale * multipliers[start : start + m]))
             start += m
         return reports
-
-    def refine(self, ctx: Context, rows: Rows, x: np.ndarray, multipliers: np.ndarray) -> bool:
-        return False

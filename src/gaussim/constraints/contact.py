@@ -1,4 +1,4 @@
-"""Unilateral contacts with Coulomb friction (FORMULATION.md sections 2, 5).
+"""Unilateral contacts with Coulomb friction (docs/FORMULATION.md sections 2, 4, 5).
 
 Each contact point with normal n, point Jacobian J (3, nv) and friction mu contributes the rows
 
@@ -30,15 +30,16 @@ iterated to a fixed point with Anderson mixing (:func:`_anderson`) in at most
 sticks instead. A sticking contact's rows stop its slip within the step (a Baumgarte rate on it
 would let a stopping block creep, its slip shrinking by 1 - 2 stabilisation a step).
 
-All contacts of a step are handled at once, as arrays; ``Context.lagged`` holds the fixed-point
-values ("slip", "normal", "stops", and the mixing's "history") aligned with the contacts that produced
-rows.
+All contacts of a step are handled at once, as arrays; the module's :class:`FrictionIterate` in
+``Context.lagged`` carries the fixed-point values between the QPs of one solve.
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 from functools import cached_property
+from typing import Any
 
 import coal
 import numpy as np
@@ -55,7 +56,7 @@ from ..dynamics import (
     support_masks,
 )
 from ..linalg import dot
-from .base import LEVELS, Context, Rows, bound_of, is_active
+from .base import LEVELS, ConstraintModule, Context, Rows, bound_of, is_active
 
 # Below this tangential speed a contact sticks: no sliding force at the acceleration level, no De
 # Saxce shift (a lagged slip that small is the step's own error, which mu would amplify) [m/s].
@@ -104,8 +105,37 @@ class ContactForce:
         return self.force - self.normal_force * self.normal
 
 
-class _Batch:
-    """The contacts that produced rows, and what turns multipliers back into forces.
+@dataclass
+class FrictionIterate:
+    """What the friction's fixed-point iteration carries between the QPs of one solve, aligned with
+    the contacts that produced rows (the module docstring poses the iteration).
+
+    Attributes:
+        slip: the slip the De Saxce shift uses, shape (m, 3) [m/s], or None: each contact's current one.
+        normal: acceleration-level sliding: the lagged normal force of each contact, shape (m,) [N],
+            or None: no friction force yet.
+        stops: acceleration-level sliding: the contacts that stick instead, shape (m,), or None: none.
+        history: the Anderson mixing's (inputs, outputs) of the last passes (:func:`_anderson`), or None.
+        passes: the De Saxce passes made.
+        relaxed: True once the passes have not come within RELAX_TOLERANCE of the fixed point: the
+            next QP drops the shift.
+    """
+
+    slip: np.ndarray | None = None
+    normal: np.ndarray | None = None
+    stops: np.ndarray | None = None
+    history: tuple[list, list] | None = None
+    passes: int = 0
+    relaxed: bool = False
+
+
+# The iterate of a solve's first QP (read, never written: refine makes each solve its own).
+_FIRST_PASS = FrictionIterate()
+
+
+class ContactBatch:
+    """The contact module's record of its rows: the contacts that produced them, and what turns
+    multipliers back into forces.
 
     Rows are grouped by contact: contact i owns rows starts[i] to starts[i + 1]. The per-step arrays
     come from :func:`_pyramids` packed in one buffer (returning each would cost more than computing
@@ -120,8 +150,6 @@ class _Batch:
         sliding: which contacts get that friction force, shape (m,), or None when none does.
         shifts: True when the contacts with a full pyramid refine their De Saxce shift.
         relaxed: True when these rows dropped the shift: its fixed point was not reached.
-        unsettled: True when the solution of these rows moved the sliding contacts' normal forces (or
-            reversed a slip): the acceleration-level sliding friction is not at its fixed point.
     """
 
     def __init__(
@@ -135,7 +163,6 @@ class _Batch:
     ) -> None:
         self.contacts, self.packed, self.starts = contacts, packed, starts
         self.sliding, self.shifts, self.relaxed = sliding, shifts, relaxed
-        self.unsettled = False
 
     @cached_property
     def _views(self) -> tuple[np.ndarray, ...]:
@@ -311,10 +338,11 @@ def _pyramids(  # type: ignore[no-untyped-def]
     return total, None, None
 
 
-class ContactModule:
+class ContactModule(ConstraintModule[ContactBatch]):
     """Rows of the ground and obstacle contacts detected this step."""
 
     name = "contact"
+    needs_contacts = True
 
     def __init__(
         self, model: pin.Model, facets: int, mode: str, geometry: pin.GeometryModel | None = None
@@ -335,11 +363,12 @@ class ContactModule:
         self._data: pin.Data | None = None
         self._joint_jacobians = np.zeros((6, 0))
 
-    def rows(self, ctx: Context) -> Rows | None:
+    def rows(self, ctx: Context) -> Rows[ContactBatch] | None:
         contacts = ctx.contacts
         if not len(contacts):
             return None
-        level, lagged, options = ctx.level, ctx.lagged, ctx.options
+        level, options = ctx.level, ctx.options
+        lagged: FrictionIterate = ctx.lagged.get(id(self), _FIRST_PASS)
         if level != "velocity":
             J = point_jacobians(ctx.data, self.masks, contacts.joint, contacts.other_joint, contacts.point)
             keep = is_active(ctx, contacts.gap, _dot(J @ ctx.v, contacts.normal), 0.0)
@@ -366,9 +395,9 @@ class ContactModule:
             contacts.gap,
             contacts.friction,
             contacts.restitution,
-            lagged.get("slip", no_slip),
-            lagged.get("stops", no_stops),
-            lagged.get("normal", no_force),
+            no_slip if lagged.slip is None else lagged.slip,
+            no_stops if lagged.stops is None else lagged.stops,
+            no_force if lagged.normal is None else lagged.normal,
             LEVELS[level],
             self.cos,
             self.sin,
@@ -391,7 +420,7 @@ class ContactModule:
                 for r in range(count)
             ]
 
-        batch = _Batch(contacts, packed, starts, sliding, shifts, "relaxed" in lagged)
+        batch = ContactBatch(contacts, packed, starts, sliding, shifts, lagged.relaxed)
         return Rows(rows, bound, False, labels, batch, force)
 
     def _jacobians(self, data: pin.Data) -> np.ndarray:
@@ -410,8 +439,10 @@ class ContactModule:
                 array.flags.writeable = False
         return self._blanks[m]
 
-    def reactions(self, rows: Rows, multipliers: np.ndarray, scale: float) -> list[ContactForce]:
-        b: _Batch = rows.data  # type: ignore[assignment]
+    def reactions(
+        self, rows: Rows[ContactBatch], multipliers: np.ndarray, scale: float
+    ) -> list[ContactForce]:
+        b = rows.data
         c = b.contacts
         forces = scale * b.forces(multipliers) + b.friction
         return [
@@ -421,37 +452,56 @@ class ContactModule:
             for i in range(len(c))
         ]
 
-    def refine(self, ctx: Context, rows: Rows, x: np.ndarray, multipliers: np.ndarray) -> bool:
-        b: _Batch = rows.data  # type: ignore[assignment]
-        lagged, normals, m = ctx.lagged, b.contacts.normal, len(b.contacts)
+    def refine(self, ctx: Context, rows: Rows[ContactBatch], x: np.ndarray, multipliers: np.ndarray) -> bool:
+        b = rows.data
+        normals, m = b.contacts.normal, len(b.contacts)
         changed = False
         if b.sliding is not None:
+            lagged = self._iterate(ctx)
             u_next = _tangential(b.J @ (ctx.v + ctx.options.dt * x), normals)
             reverse = b.sliding & (_dot(u_next, b.friction) > 0)  # such a contact sticks instead
             if reverse.any():
-                lagged["stops"] = lagged.get("stops", np.zeros(m, bool)) | reverse
-                lagged.pop("history", None)  # fewer sliding contacts: another map
+                lagged.stops = (np.zeros(m, bool) if lagged.stops is None else lagged.stops) | reverse
+                lagged.history = None  # fewer sliding contacts: another map
             slides = b.sliding & ~reverse
-            lam, previous = multipliers[b.starts[:-1]], lagged.get("normal", np.zeros(m))
+            previous = np.zeros(m) if lagged.normal is None else lagged.normal
+            lam = multipliers[b.starts[:-1]]
             moved = bool((np.abs(lam - previous) > NORMAL_FORCE_TOLERANCE)[slides].any())
-            if moved and "normal" in lagged:  # mixed from the second pass on: the first lagged no force
-                history = lagged.setdefault("history", ([], []))
-                lam[slides] = _anderson(history, previous[slides], lam[slides])
-            lagged["normal"] = np.where(slides, lam, previous)
-            b.unsettled = moved or bool(reverse.any())
-            changed = b.unsettled
+            if moved and lagged.normal is not None:  # mixed from the second pass: the first lagged no force
+                if lagged.history is None:
+                    lagged.history = ([], [])
+                lam[slides] = _anderson(lagged.history, previous[slides], lam[slides])
+            lagged.normal = np.where(slides, lam, previous)
+            rows.settled = not (moved or bool(reverse.any()))
+            changed = not rows.settled
         if b.shifts and not b.relaxed:
             mu = b.contacts.friction
             slip = _slips(b.packed, b.starts, x, normals, mu, SLIP_TOLERANCE[self.mode])
             if slip is not None:
-                passes = lagged["passes"] = lagged.get("passes", 0) + 1
-                last = passes >= ctx.options.friction_iterations - 1  # one QP left in the step
+                lagged = self._iterate(ctx)
+                lagged.passes += 1
+                last = lagged.passes >= ctx.options.friction_iterations - 1  # one QP left in the step
                 if last and _slips(b.packed, b.starts, x, normals, mu, RELAX_TOLERANCE) is not None:
-                    lagged["relaxed"] = True  # far from the fixed point: that QP drops the shift
+                    lagged.relaxed = True  # far from the fixed point: that QP drops the shift
                     slip = np.zeros_like(slip)
-                lagged["slip"] = slip
+                lagged.slip = slip
                 changed = True
         return changed
+
+    def _iterate(self, ctx: Context) -> FrictionIterate:
+        """This solve's iterate, made at its first update."""
+        lagged = ctx.lagged.get(id(self))
+        if lagged is None:
+            lagged = ctx.lagged[id(self)] = FrictionIterate()
+        return lagged
+
+
+def contact_batch(blocks: Iterable[tuple[ConstraintModule, Rows, Any]]) -> ContactBatch | None:
+    """The contact module's record among the blocks of a QP (a step report's), or None: no contact rows."""
+    for module, rows, _ in blocks:
+        if isinstance(module, ContactModule):
+            return rows.data
+    return None
 
 
 def _anderson(history: tuple[list, list], x: np.ndarray, y: np.ndarray) -> np.ndarray:

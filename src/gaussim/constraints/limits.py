@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from .base import Context, Rows, is_active, stabilised_bound
+from .base import ConstraintModule, Context, Rows, is_active, stabilised_bound
 
 
 @dataclass
@@ -23,8 +23,9 @@ class LimitReaction:
     torque: float
 
 
-class LimitModule:
-    """Rows of the joint limits of the 1-dof joints with finite limits."""
+class LimitModule(ConstraintModule[np.ndarray]):
+    """Rows of the joint limits of the 1-dof joints with finite limits; each rows' ``data`` holds the
+    indices of the limits they hold."""
 
     name = "limit"
 
@@ -48,7 +49,7 @@ class LimitModule:
         self.idx_q, self.idx_v = np.array(idx_q, dtype=int), np.array(idx_v, dtype=int)
         self.signs, self.limits, self.labels = np.array(signs), np.array(bounds), labels
 
-    def rows(self, ctx: Context) -> Rows | None:
+    def rows(self, ctx: Context) -> Rows[np.ndarray] | None:
         if not len(self.signs):
             return None
         phi = self.signs * (ctx.q[self.idx_q] - self.limits)
@@ -65,11 +66,8 @@ class LimitModule:
 
         return Rows(J, bound, False, labels, active)
 
-    def reactions(self, rows: Rows, multipliers: np.ndarray, scale: float) -> list[LimitReaction]:
+    def reactions(self, rows: Rows[np.ndarray], multipliers: np.ndarray, scale: float) -> list[LimitReaction]:
         return [
             LimitReaction(self.labels[i][0], self.labels[i][1], float(scale * lam * self.signs[i]))
-            for i, lam in zip(rows.data, multipliers)  # type: ignore[call-overload]
+            for i, lam in zip(rows.data, multipliers)
         ]
-
-    def refine(self, ctx: Context, rows: Rows, x: np.ndarray, multipliers: np.ndarray) -> bool:
-        return False

@@ -1,0 +1,15 @@
+"""Stage 5, the solve of the Gauss problem, and its certificate.
+
+    min_x 1/2 x^T H x + g^T x   s.t.   A x = b,   C x >= l
+
+Modules: :mod:`.certificate` (the status of a solve and gaussim's own KKT check of its answer),
+:mod:`.active_set` (the answer built from the last solution's active rows, one linear solve),
+:mod:`.proxqp` (the dense ProxQP wrapper that tries that first, then ProxQP, then recovers),
+:mod:`.diagnosis` (the errors of a failed solve: the rows behind an infeasibility), :mod:`.portable`
+(proxsuite loaded with its portable build, so that runs repeat bit for bit).
+"""
+
+from .certificate import CONVERGED, KKT_RTOL, Certificate, Solution, Status, kkt_residual
+from .proxqp import GaussSolver
+
+__all__ = ["CONVERGED", "KKT_RTOL", "Certificate", "GaussSolver", "Solution", "Status", "kkt_residual"]

@@ -1,0 +1,176 @@
+"""The certificate of a solve: its status, ProxQP's residuals and gaussim's own KKT check.
+
+The check is independent of the solver: at a point (x, lambda_eq, lambda_in) of the Gauss problem
+
+    min_x 1/2 x^T H x + g^T x   s.t.   A x = b,   C x >= l
+
+it measures the stationarity residual |H x + g - A^T lambda_eq - C^T lambda_in|, the primal
+violations |A x - b| and l - C x, the sign violation -lambda_in and the complementarity
+|lambda_in (C x - l)|.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from ..assembly import GaussProblem
+from ..linalg import dot, matvec
+
+# A solution is accepted when its relative KKT residual (see Certificate) is below KKT_RTOL * eps_abs.
+KKT_RTOL = 100.0
+
+
+class Status(enum.Enum):
+    """How one solve ended: ProxQP's status, or gaussim's word on it.
+
+    Each value is the name a run log stores (its ``solver_status`` column), which ``str`` gives too.
+    """
+
+    SOLVED = "PROXQP_SOLVED"
+    """ProxQP converged (and gaussim's KKT check certifies its answer)."""
+    MAX_ITER_REACHED = "PROXQP_MAX_ITER_REACHED"
+    """ProxQP stopped at its iteration cap, at a point the KKT check does not certify."""
+    PRIMAL_INFEASIBLE = "PROXQP_PRIMAL_INFEASIBLE"
+    """The admissible set is empty."""
+    SOLVED_CLOSEST_PRIMAL_FEASIBLE = "PROXQP_SOLVED_CLOSEST_PRIMAL_FEASIBLE"
+    """The admissible set is empty; ProxQP solved the closest feasible problem."""
+    DUAL_INFEASIBLE = "PROXQP_DUAL_INFEASIBLE"
+    """The problem is unbounded."""
+    NOT_RUN = "PROXQP_NOT_RUN"
+    """ProxQP did not solve."""
+    CERTIFIED_AT_MAX_ITER = "GAUSSIM_CERTIFIED_AT_MAX_ITER"
+    """ProxQP stopped at its iteration cap at a point the KKT check certifies: accepted."""
+    KKT_CHECK_FAILED = "GAUSSIM_KKT_CHECK_FAILED"
+    """ProxQP said solved, the KKT check disagrees."""
+    PREVIOUS_SOLUTION_CERTIFIED = "GAUSSIM_PREVIOUS_SOLUTION_CERTIFIED"
+    """The previous solution solves this problem to eps_abs by the KKT check: ProxQP was not called."""
+    ACTIVE_SET_CERTIFIED = "GAUSSIM_ACTIVE_SET_CERTIFIED"
+    """So does the solution on the previous solution's active set, one linear solve: ProxQP was not
+    called."""
+
+    def __str__(self) -> str:
+        return self.value
+
+    @property
+    def converged(self) -> bool:
+        """True for the statuses of an accepted solution."""
+        return self in CONVERGED
+
+
+# The statuses of an accepted solution: ProxQP's, or ProxQP stopped at its iteration cap at a point
+# gaussim's KKT check certifies (redundant rows that conflict in round-off keep ProxQP's primal residual
+# above eps_abs), or a solution built from the last one that the check certifies.
+CONVERGED = (
+    Status.SOLVED,
+    Status.CERTIFIED_AT_MAX_ITER,
+    Status.PREVIOUS_SOLUTION_CERTIFIED,
+    Status.ACTIVE_SET_CERTIFIED,
+)
+# The statuses that say the problem has no solution: no restart can help.
+PRIMAL_INFEASIBLE = (Status.PRIMAL_INFEASIBLE, Status.SOLVED_CLOSEST_PRIMAL_FEASIBLE)
+INFEASIBLE = (*PRIMAL_INFEASIBLE, Status.DUAL_INFEASIBLE)
+
+
+@dataclass
+class Certificate:
+    """What ProxQP says about one solve, and gaussim's check of it.
+
+    Attributes:
+        status: how the solve ended (:class:`Status`).
+        iterations: ProxQP's iterations in all: the inner ones of each of its outer iterations.
+        outer_iterations: ProxQP's outer iterations, the ones ``Options.max_iter`` caps.
+        primal_residual: max constraint violation of the returned x.
+        dual_residual: norm of the stationarity residual H x + g + A^T y + C^T z.
+        duality_gap: ProxQP's duality gap.
+        kkt_residual: gaussim's own check of the returned point on the problem as posed: the largest
+            of the primal violation, the stationarity residual |H x + g - A^T y - C^T z|, the sign
+            violation of z and the complementarity |z_i (C x - l)_i|.
+        relative_kkt_residual: the same with the stationarity residual and the sign violation
+            relative to max(1, |g|_inf) and each complementarity relative to max(1, |z_i|); a
+            solution is accepted when it is below KKT_RTOL * eps_abs.
+        restarted: True when the warm-started answer failed that check and ProxQP was run again
+            from a cold start.
+    """
+
+    status: Status
+    iterations: int
+    primal_residual: float
+    dual_residual: float
+    duality_gap: float
+    kkt_residual: float = 0.0
+    relative_kkt_residual: float = 0.0
+    outer_iterations: int = 0
+    restarted: bool = False
+
+    @property
+    def converged(self) -> bool:
+        return self.status in CONVERGED
+
+
+@dataclass
+class Solution:
+    """x, the multipliers [lambda_eq; lambda_in] of the equality and inequality rows (the reactions,
+    >= 0 on inequality rows) and the certificate."""
+
+    x: np.ndarray
+    multipliers: np.ndarray
+    n_eq: int
+    certificate: Certificate
+
+    @property
+    def lambda_eq(self) -> np.ndarray:
+        return self.multipliers[: self.n_eq]
+
+    @property
+    def lambda_in(self) -> np.ndarray:
+        return self.multipliers[self.n_eq :]
+
+
+def kkt_residual(problem: GaussProblem, x: np.ndarray, lambda_eq: np.ndarray, lambda_in: np.ndarray) -> float:
+    """Largest violation of the KKT conditions of the Gauss problem at (x, lambda_eq, lambda_in >= 0)
+    (see the module's docstring); NaN when any of them is not finite."""
+    p = problem
+    return kkt_residuals(p.H, p.g, p.A, p.b, p.C, p.l, x, lambda_eq, lambda_in)[0]
+
+
+@njit(cache=True)
+def kkt_residuals(H, g, A, b, C, l, x, y, z):  # type: ignore[no-untyped-def]
+    """(the residual of :func:`kkt_residual`, the same with each term relative to its size, the
+    primal violation, the stationarity residual, the duality gap sum_i z_i s_i): the relative
+    residual takes the stationarity residual and the sign violation -z_i (both in the units of g)
+    relative to max(1, |g|_inf), a complementarity |z_i s_i| relative to max(1, |z_i|), which makes it
+    the slack of a row with a large multiplier (a heavy body's contact). All NaN when any term is not
+    finite."""
+    primal = relative = gap = 0.0
+    complementarity = 0.0
+    finite = True
+    size = 1.0
+    for i in range(len(g)):
+        size = max(size, abs(g[i]))
+    stationarity = matvec(H, x) + g
+    for i in range(len(b)):
+        for k in range(len(g)):  # loops, not array expressions: those allocate a temporary each
+            stationarity[k] -= y[i] * A[i, k]
+        violation = abs(dot(A[i], x) - b[i])
+        primal, finite = max(primal, violation), finite and np.isfinite(violation) and np.isfinite(y[i])
+    for i in range(len(l)):
+        for k in range(len(g)):
+            stationarity[k] -= z[i] * C[i, k]
+        slack = dot(C[i], x) - l[i]
+        gap += z[i] * slack
+        primal = max(primal, -slack)
+        complementarity = max(complementarity, -z[i], abs(z[i] * slack))
+        relative = max(relative, -z[i] / size, abs(z[i] * slack) / max(1.0, abs(z[i])))
+        finite = finite and np.isfinite(slack) and np.isfinite(z[i])
+    dual = 0.0
+    for i in range(len(g)):
+        dual, finite = max(dual, abs(stationarity[i])), finite and np.isfinite(stationarity[i])
+    worst = max(primal, complementarity, dual)
+    relative = max(relative, primal, dual / size)
+    if not finite:
+        return np.nan, np.nan, np.nan, np.nan, np.nan
+    return worst, relative, primal, dual, abs(gap)

@@ -1,0 +1,250 @@
+"""The solve: one dense ProxQP object, reused while the problem keeps its size, after the active set.
+
+Each QP is first tried on what the last one left (:mod:`.active_set`), then warm-started in ProxQP;
+an answer gaussim's KKT check refuses is recovered by cold starts (:meth:`GaussSolver._recover`), and a
+failure is reported (:mod:`.diagnosis`).
+"""
+
+from __future__ import annotations
+
+import warnings
+from typing import Any
+
+import numpy as np
+from numba import njit
+
+from ..assembly import GaussProblem
+from ..exceptions import GaussimWarning
+from ..options import Options
+from .active_set import ACTIVE_SET_FLOOR, active_set_candidate
+from .certificate import INFEASIBLE, KKT_RTOL, PRIMAL_INFEASIBLE, Certificate, Solution, Status, kkt_residuals
+from .diagnosis import failure, infeasibility
+from .portable import proxqp
+
+_STATUS = {output: Status(name) for name, output in proxqp.QPSolverOutput.__members__.items()}
+_SOLVED = proxqp.QPSolverOutput.PROXQP_SOLVED  # compared by identity: hashing the enum costs more
+# ProxQP's outer-iteration cap for a warm-started solve. A warm start needs 0 to 30 iterations over the
+# shipped scenes and the stress stacks; one that needs more is better solved again from a cold start
+# (redundant contact rows that conflict in round-off made a warm start run its 10000 outer iterations).
+WARM_START_ITERATIONS = 100
+# ProxQP's cap on the inner iterations of each outer one (its default is 1500). Where a problem cannot
+# reach eps_abs, the inner loop may exhaust that cap at each outer iteration; the inner solves that
+# converge take a few iterations.
+INNER_ITERATIONS = 100
+# The status of a candidate of active_set_candidate, by its ``how``.
+_FROM_LAST = {1: Status.PREVIOUS_SOLUTION_CERTIFIED, 2: Status.ACTIVE_SET_CERTIFIED}
+
+
+class GaussSolver:
+    """Dense ProxQP, allocated once per problem size and warm-started from the previous result."""
+
+    def __init__(self, options: Options) -> None:
+        self.options = options
+        self._qp: Any = None  # proxsuite.proxqp.dense.QP
+        self._dims: tuple[int, int, int] | None = None
+        self._results: tuple[Any, ...] = ()  # the QP object's x, y, z and info
+        self._cap = 0  # the QP object's iteration cap
+        self._last: tuple[np.ndarray, np.ndarray] = (np.zeros(0), np.zeros(0))  # x, multipliers
+        self._candidate = self._last  # the buffers of the active-set candidate (see _warm)
+        self._warned = False  # about an iterate kept by on_failure='report'
+
+    def solve(self, problem: GaussProblem) -> Solution:
+        """Solve the Gauss problem; raise :class:`SolverError` as ``Options.on_failure`` says."""
+        solution = self._solve(problem)
+        self._last = solution.x, solution.multipliers  # where the next solve starts (see _warm)
+        return solution
+
+    def _solve(self, problem: GaussProblem) -> Solution:
+        p = problem
+        dims, equalities, inequalities = _sides(p)
+        if dims != self._dims:
+            self._fresh(p, dims, equalities, inequalities)
+            solution = self._run(problem)
+        else:
+            warm = self._warm(problem, *self._last, 0.0)
+            if warm is not None:
+                return warm
+            self._qp.update(p.H, p.g, *equalities, *inequalities)  # the upper bounds stay +inf
+            solution = self._run(problem, WARM_START_ITERATIONS)
+        if self._certified(solution):  # converged, finite and certified: nothing more to check
+            return solution
+        if solution.certificate.status not in INFEASIBLE:
+            solution = self._recover(problem, dims, equalities, inequalities)
+        self._check(problem, solution)
+        return solution
+
+    def _recover(
+        self, problem: GaussProblem, dims: tuple[int, int, int], equalities: tuple, inequalities: tuple
+    ) -> Solution:
+        """After an answer the KKT check refused (not an infeasibility), the first certified of:
+
+        1. a cold start in a new QP object: ProxQP 0.8, warm-started, may return the previous solution
+           after 0 iterations when only the bounds changed (a stale contact force on a ball that left
+           the ground), and a warm start from a much different problem can stall or diverge (a box
+           stack whose contact patches changed size; the QP object kept NaNs after);
+        2. that answer solved on the rows it holds active (multipliers above ACTIVE_SET_FLOOR of the
+           largest; see :mod:`.active_set`): ProxQP may stop at a relative residual the check refuses
+           where the active set is exact;
+        3. a cold start at eps_abs / KKT_RTOL: ProxQP's own test passes at residuals the check's
+           relative one can exceed.
+
+        Else the cold start's answer, its status KKT_CHECK_FAILED when ProxQP said solved."""
+        p = problem
+        self._fresh(p, dims, equalities, inequalities)
+        solution = self._run(problem)
+        solution.certificate.restarted = True
+        if self._certified(solution):
+            return solution
+        rescued = self._warm(problem, solution.x, solution.multipliers, ACTIVE_SET_FLOOR)
+        if rescued is not None:
+            rescued.certificate.iterations = solution.certificate.iterations
+            rescued.certificate.outer_iterations = solution.certificate.outer_iterations
+            rescued.certificate.restarted = True
+            return rescued
+        self._fresh(p, dims, equalities, inequalities)
+        settings, eps = self._qp.settings, self.options.eps_abs
+        settings.eps_abs = settings.eps_duality_gap_abs = eps / KKT_RTOL
+        tight = self._run(problem)
+        settings.eps_abs = settings.eps_duality_gap_abs = eps  # the next solves' tolerance
+        tight.certificate.restarted = True
+        if self._certified(tight):
+            return tight
+        if solution.certificate.converged:
+            solution.certificate.status = Status.KKT_CHECK_FAILED
+        return solution
+
+    def _fresh(
+        self, p: GaussProblem, dims: tuple[int, int, int], equalities: tuple, inequalities: tuple
+    ) -> None:
+        """A new QP object for the problem's sizes, initialised with it."""
+        self._qp, self._cap = self._new(*dims), 0
+        _initialise(self._qp, p, equalities, inequalities)
+        self._dims = dims
+        results = self._qp.results  # views that every solve of this QP object writes into
+        self._candidate = np.empty(dims[0]), np.empty(dims[1] + dims[2])  # what _warm writes into
+        self._results = results.x, results.y, results.z, results.info
+
+    def _warm(
+        self, problem: GaussProblem, x: np.ndarray, multipliers: np.ndarray, floor: float
+    ) -> Solution | None:
+        """A solution built from (x, multipliers), the last solution or ProxQP's answer that failed
+        the check, with its rows active whose multipliers exceed ``floor`` times the largest (see
+        :mod:`.active_set`), when gaussim's relative KKT residual certifies it to eps_abs (stricter
+        than the KKT_RTOL eps_abs at which ProxQP's answers are accepted), else None. On a robot
+        standing, the last solution or its active set solves most steps' problems, at a fraction of
+        ProxQP's warm-started update and solve."""
+        p = problem
+        candidate = self._candidate
+        how, (residual, relative, primal, dual, gap) = active_set_candidate(
+            p.H, p.g, p.A, p.b, p.C, p.l, x, multipliers, self.options.eps_abs, floor, *candidate
+        )
+        if not how:
+            return None
+        if how == 2:  # the next call writes into the same buffers: the solution gets copies
+            x, multipliers = candidate[0].copy(), candidate[1].copy()
+        certificate = Certificate(_FROM_LAST[how], 0, primal, dual, gap, residual, relative)
+        return Solution(x, multipliers, len(p.b), certificate)
+
+    def _run(self, problem: GaussProblem, cap: int | None = None) -> Solution:
+        """Solve with at most ``cap`` outer iterations (default and largest: Options.max_iter)."""
+        cap = min(cap or self.options.max_iter, self.options.max_iter)
+        if cap != self._cap:  # a settings write costs as much as a small update: only on a change
+            self._qp.settings.max_iter = self._cap = cap
+        self._qp.solve()
+        x, y, z, info = self._results
+        p = problem
+        # copies (ProxQP's arrays are overwritten by the next solve); the multipliers are -y, -z
+        x, multipliers, residual, relative, _, _, _ = _read(p.H, p.g, p.A, p.b, p.C, p.l, x, y, z)
+        status = info.status
+        certificate = Certificate(  # ProxQP's info gives Python ints and floats
+            Status.SOLVED if status is _SOLVED else _STATUS[status],
+            info.iter,
+            info.pri_res,
+            info.dua_res,
+            info.duality_gap,
+            residual,
+            relative,
+            info.iter_ext,
+        )
+        return Solution(x, multipliers, len(p.b), certificate)
+
+    def _certified(self, solution: Solution) -> bool:
+        """True when the KKT check certifies the solution and ProxQP converged or stopped at its
+        iteration cap; a certified stop at the cap gets the status CERTIFIED_AT_MAX_ITER."""
+        c = solution.certificate
+        if not c.relative_kkt_residual <= KKT_RTOL * self.options.eps_abs:  # NaN fails too
+            return False
+        if c.status is Status.MAX_ITER_REACHED:
+            c.status = Status.CERTIFIED_AT_MAX_ITER
+        return c.converged
+
+    def _new(self, n: int, n_eq: int, n_in: int) -> Any:
+        qp = proxqp.dense.QP(n, n_eq, n_in)
+        settings = qp.settings
+        settings.eps_abs = self.options.eps_abs
+        settings.eps_rel = 0.0
+        settings.verbose = False
+        # Warm start from the previous result, with the duality-gap check on: without it ProxQP 0.8
+        # may accept the previous solution after 0 iterations when only the bounds changed.
+        settings.initial_guess = proxqp.InitialGuess.WARM_START_WITH_PREVIOUS_RESULT
+        settings.check_duality_gap = True
+        settings.eps_duality_gap_abs = self.options.eps_abs
+        settings.eps_duality_gap_rel = 0.0
+        settings.primal_infeasibility_solving = False
+        settings.max_iter_in = INNER_ITERATIONS
+        return qp
+
+    def _check(self, problem: GaussProblem, solution: Solution) -> None:
+        """Raise for an infeasible problem, a non-finite solution or (``Options.on_failure='raise'``)
+        an unconverged one; warn once about an unconverged iterate kept."""
+        c = solution.certificate
+        if c.status in PRIMAL_INFEASIBLE:
+            raise infeasibility(problem, c, self._closest_feasible(problem))
+        error = failure(problem, c, self.options.on_failure == "raise")
+        if error is not None:
+            raise error
+        if not c.converged and not self._warned:
+            self._warned = True
+            warnings.warn(
+                f"ProxQP did not converge ({c.status}, KKT residual {c.kkt_residual:.2e}): "
+                "on_failure='report' kept its iterate, which need not be the Gauss principle's motion; each "
+                "such step is counted (StepReport.converged, the run log's summary); not repeated",
+                GaussimWarning,
+                stacklevel=2,
+            )
+
+    def _closest_feasible(self, problem: GaussProblem) -> np.ndarray:
+        """ProxQP's closest-feasible solution of an infeasible problem: the x that needs the smallest
+        change of the bounds, in the least-squares sense."""
+        p = problem
+        dims, equalities, inequalities = _sides(p)
+        qp = self._new(*dims)
+        qp.settings.primal_infeasibility_solving = True
+        qp.settings.initial_guess = proxqp.InitialGuess.NO_INITIAL_GUESS
+        qp.settings.max_iter = self.options.max_iter
+        _initialise(qp, p, equalities, inequalities)
+        qp.solve()
+        return np.array(qp.results.x)
+
+
+@njit(cache=True)
+def _read(H, g, A, b, C, l, x, y, z):  # type: ignore[no-untyped-def]
+    """(x, the multipliers [-y; -z], the residuals of :func:`kkt_residuals` there), copied out of
+    ProxQP's results."""
+    n_eq, n_in = len(b), len(l)
+    x, multipliers = x.copy(), np.empty(n_eq + n_in)
+    multipliers[:n_eq], multipliers[n_eq:] = -y[:n_eq], -z[:n_in]
+    return (x, multipliers, *kkt_residuals(H, g, A, b, C, l, x, multipliers[:n_eq], multipliers[n_eq:]))
+
+
+def _sides(p: GaussProblem) -> tuple[tuple[int, int, int], tuple, tuple]:
+    """The problem's sizes (n, n_eq, n_in) and its (A, b) and (C, l) as ProxQP takes them (None, None
+    for an empty side)."""
+    dims = (len(p.g), len(p.b), len(p.l))
+    return dims, (p.A, p.b) if dims[1] else (None, None), (p.C, p.l) if dims[2] else (None, None)
+
+
+def _initialise(qp: Any, p: GaussProblem, equalities: tuple, inequalities: tuple) -> None:
+    """Initialise a new QP object with the problem (every inequality row is one-sided: u = +inf)."""
+    upper = np.full(len(p.l), np.inf) if len(p.l) else None
+    qp.init(p.H, p.g, *equalities, *inequalities, upper)
