@@ -98,3 +98,20 @@ def solo12_run(tmp_path_factory) -> tuple[gaussim.RunLog, gaussim.SceneSpec]:
     spec.duration = 0.15
     out = tmp_path_factory.mktemp("solo12") / "run.npz"
     return gaussim.run(spec, out), spec
+
+
+CRATE_SCENE = "robots/scenes/solo12_crate.toml"
+
+
+@pytest.fixture(scope="session")
+def crate_run(tmp_path_factory) -> tuple[gaussim.RunLog, gaussim.SceneSpec, np.ndarray]:
+    """A short logged run of the shipped two-body scene (a crate dropped onto Solo-12's back), with
+    the force on the crate from Solo-12 at each step as the simulator reported it, (N, 3) [N]."""
+    spec = gaussim.load_scene(Path(__file__).parent.parent / CRATE_SCENE)
+    spec.duration = 0.3
+    reported: list[np.ndarray] = []
+    out = tmp_path_factory.mktemp("crate") / "run"
+    log = gaussim.run(
+        spec, out, observer=lambda s, report: reported.append(report.forces_between("crate", "solo"))
+    )
+    return log, spec, np.array(reported)

@@ -564,9 +564,15 @@ LOG_FAULTS = {  # item 15: each leaked a traceback; item 16: format_version was 
         "'contact_id' refers to entries not in 'contact_names'",
     ),
     "wrong-length": ({"solver_qps": np.zeros(9, int)}, "'solver_qps' has shape (9,), where 't' has N = 3"),
+    "no-bodies": ({"contact_body": None}, "damaged run log: no array 'contact_body'"),
+    "bodies-kind": ({"bodies": np.array("ball")}, "'bodies' is a 0-d <U4 array, not the 1-d text array"),
+    "sides": (
+        {"contact_other": np.array(["ground"])},
+        "'contact_other' has shape (1,), where 'contact_names'",
+    ),
     "newer": (
-        {"format_version": np.array(2)},
-        "format_version 2 is newer than this gaussim reads (it reads format 1); upgrade",
+        {"format_version": np.array(3)},
+        "format_version 3 is newer than this gaussim reads (it reads formats 1 to 2); upgrade",
     ),
     "unknown-version": ({"format_version": np.array("one")}, "format_version 'one' is unknown"),
 }
@@ -678,10 +684,11 @@ def test_ctrl_c_before_the_first_step_writes_no_log(tmp_path, capsys, monkeypatc
 
 DIRECTORY_FAULTS = {  # the run log directory (header.json and its chunks), as LOG_FAULTS for the .npz
     "newer": (
-        lambda h, c: {**h, "format_version": 3},
+        lambda h, c: {**h, "format_version": 4},
         None,
-        "format_version 3 is newer than this gaussim reads",
+        "format_version 4 is newer than this gaussim reads (it reads formats 2 to 3)",
     ),
+    "bodies": (lambda h, c: {**h, "bodies": "solo"}, None, "'bodies' must be a list of body names"),
     "robot": (lambda h, c: {**h, "robot": 12}, None, "'robot' must be a str, got 12"),
     "options": (lambda h, c: {**h, "options": {"timestep": 1}}, None, "options: must be a JSON object"),
     "shape": (None, {"v": np.zeros((4, 2))}, "damaged run log: 'v' has shape (4, 2)"),

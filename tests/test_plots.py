@@ -42,3 +42,26 @@ def test_plot_and_replay_commands(solo12_run, tmp_path, capsys):
     assert (tmp_path / "replay.html").read_text().lstrip().lower().startswith("<!doctype html")
     assert main(["replay", str(log_path), "--html", str(tmp_path / "r.html"), "--fps", "0"]) == 2
     assert "--fps: must be > 0" in capsys.readouterr().err
+
+
+def test_force_figure_selects_bodies(crate_run, tmp_path, capsys):
+    """bodies=[...] keeps the contacts that a body (or obstacle) of the list takes part in, either side."""
+    log, spec, _ = crate_run
+    sides = list(zip(log.contact_body, log.contact_other))
+    for bodies, expected in ((["crate"], ("solo", "crate")), (["ground"], ("solo", "ground"))):
+        figure = force_figure(log, spec.scene, bodies=bodies)
+        shown = [line.get_label() for line in figure.axes[0].lines]
+        assert shown == [n for n, pair in zip(log.contact_names, sides) if pair == expected], bodies
+        assert len(figure.axes[1].lines) == len(shown) + 1  # and the pair's mu
+    assert len(force_figure(log, spec.scene, bodies=["solo"]).axes[0].lines) == len(log.contact_names)
+    with pytest.raises(ValueError, match="no body or obstacle 'box'; known: solo, crate, ground"):
+        force_figure(log, spec.scene, bodies=["box"])
+    log_path = tmp_path / "run.npz"
+    log.save(log_path)
+    assert main(["plot", str(log_path), "-o", str(tmp_path / "crate.png"), "--bodies", "crate"]) == 0
+    assert imread(tmp_path / "crate.png").shape[0] > 500
+    assert (
+        main(["plot", str(log_path), "-o", str(tmp_path / "e.png"), "--what", "energy", "--bodies", "crate"])
+        == 2
+    )
+    assert "bodies: selects the contacts of the forces figure" in capsys.readouterr().err

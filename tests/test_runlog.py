@@ -283,3 +283,120 @@ def test_ctrl_c_stops_the_run_at_the_end_of_its_step_unless_ignored(tmp_path, di
         assert signal.getsignal(signal.SIGINT) is disposition, "the disposition is restored"
     finally:
         signal.signal(signal.SIGINT, previous)
+
+
+DATA = Path(__file__).parent / "data"
+
+
+def test_forces_between_bodies_are_logged_as_the_simulator_reports_them(crate_run, tmp_path):
+    """The log's force on the crate from Solo-12 at each step is the step report's forces_between, bit
+    for bit, in the log directory and in its single-file copy; the reaction is its opposite."""
+    log, _, reported = crate_run
+    assert log.bodies == ["solo", "crate"] and log.steps == len(reported)
+    assert np.count_nonzero(reported[:, 2] > 0) > 50, "Solo-12 carries the crate"
+    for loaded in (log, gaussim.RunLog.load(log.save(tmp_path / "run.npz"))):
+        assert np.array_equal(loaded.forces_between("crate", "solo"), reported)
+        assert np.array_equal(loaded.forces_between("solo", "crate"), -reported)
+    assert log.body_pairs() == [("solo", "ground"), ("solo", "crate")]
+    assert not log.forces_between("crate", "ground").any(), "the crate never touches the ground"
+    with pytest.raises(gaussim.InvalidOptions, match="no body 'box' in this log; its bodies: solo, crate"):
+        log.forces_between("box", "solo")
+
+
+def test_the_export_and_the_summary_name_the_bodies(crate_run, tmp_path):
+    log, _, reported = crate_run
+    records = log.contact_records()
+    assert {(b, o) for b, o in zip(records["body"], records["other"])} == {
+        ("solo", "ground"),
+        ("solo", "crate"),
+    }
+    for contact, body, other in zip(records["contact"], records["body"], records["other"]):
+        assert contact.startswith(f"{body}/") and f"/{other}" in contact
+    from gaussim.cli import main
+
+    csv_path = tmp_path / "forces.csv"
+    log.save(tmp_path / "run.npz")
+    assert main(["forces", str(tmp_path / "run.npz"), "--csv", str(csv_path)]) == 0
+    rows = list(csv.DictReader(csv_path.open()))
+    assert [(r["body"], r["other"]) for r in rows] == list(zip(records["body"], records["other"]))
+    summary = log.summary().splitlines()
+    # the force between each pair over the steps they touch, then the contacts grouped by pair
+    pair = next(line for line in summary if line.startswith("solo from crate "))
+    touching = np.linalg.norm(reported[np.linalg.norm(reported, axis=1) > 0], axis=1)
+    steps, mean, peak = pair.split()[3:]
+    assert int(steps) >= len(touching) and float(peak) == pytest.approx(touching.max(), abs=1e-3)
+    grouped = summary[summary.index("solo from crate:") + 1 :]
+    assert grouped and all(line.startswith("solo/base_link_0/crate/box#") for line in grouped)
+
+
+@pytest.mark.parametrize("form", ["box_stack_format1.npz", "box_stack_directory2.runlog", "no scene text"])
+def test_logs_from_before_bodies_still_read(form, tmp_path):
+    """Logs written before contacts named their bodies (format 1, directory 2: box_stack, 5 steps, by
+    gaussim 2e4bfed) read as logs of their one robot: each contact against the ground or the robot's
+    own links (told apart by the scene text, or without one by the geometries' names)."""
+    path = DATA / form
+    if form == "no scene text":
+        with np.load(DATA / "box_stack_format1.npz") as f:
+            arrays = {k: f[k] for k in f.files}
+        path = tmp_path / "log.npz"
+        np.savez(path, **{**arrays, "scene_text": np.array("")})
+    log = gaussim.RunLog.load(path)
+    assert log.bodies == ["box_stack"] and log.steps == 5
+    sides = dict(zip(log.contact_names, zip(log.contact_body, log.contact_other)))
+    assert sides["bottom_0/ground#0"] == ("box_stack", "ground")
+    assert sides["middle_0/bottom_0#2"] == sides["top_0/middle_0#0"] == ("box_stack", "box_stack")
+    # the ground carries the stack: 1 + 10 + 100 kg at rest
+    np.testing.assert_allclose(
+        log.forces_between("box_stack", "ground"), [[0, 0, 111 * 9.81]] * 5, rtol=1e-6, atol=1e-6
+    )
+    assert set(log.contact_records()["other"]) == {"ground", "box_stack"}
+    assert "box_stack from ground " in log.summary() and "box_stack from its own links:" in log.summary()
+
+
+def test_a_step_report_groups_its_contacts_by_body():
+    """A box resting on another on the ground: the table's rows come in one group per pair of bodies,
+    each followed by the force between them."""
+    scene = gaussim.Scene(
+        bodies={
+            "bottom": gaussim.FreeBody.box("bottom", (0.4, 0.4, 0.2), mass=3.0),
+            "top": gaussim.FreeBody.box("top", (0.2, 0.2, 0.2), mass=1.0),
+        },
+        ground=gaussim.Ground(),
+    )
+    sim = gaussim.Simulator(scene)
+    state = sim.reset({"bottom": gaussim.pose(z=0.1), "top": gaussim.pose(z=0.3 + 1e-4)})
+    for _ in range(100):
+        state = sim.step(state)
+    report = sim.last_step
+    lines = report.table().splitlines()[1:-1]
+    sums = [k for k, line in enumerate(lines) if line.startswith("  ")]
+    assert [lines[k].split()[:3] for k in sums] == [["bottom", "from", "ground"], ["bottom", "from", "top"]]
+    for start, end in zip([-1, *sums], sums):
+        a, _, b = lines[end].split()[:3]
+        names = [line.split()[0] for line in lines[start + 1 : end]]
+        assert names and all(name.startswith(f"{a}/box/{b}") for name in names)
+        fz = float(lines[end].split()[-1])
+        assert fz == pytest.approx(report.forces_between(a, b)[2], abs=1e-3)
+    assert float(lines[sums[1]].split()[-1]) == pytest.approx(-1.0 * 9.81, abs=1e-3)  # the top's weight
+
+
+def test_inspect_lists_the_bodies_and_their_pairs(tmp_path, capsys):
+    from gaussim.cli import main
+
+    assert main(["inspect", str(SCENES / "solo12_crate.toml")]) == 0
+    out = capsys.readouterr().out
+    assert "bodies: 2\n" in out
+    assert "  solo: robot solo12; q[0:19], v[0:18]; floating base, 12 actuated; mass 2.5 kg\n" in out
+    assert "  crate: box 0.2 x 0.15 x 0.1 m; q[19:26], v[18:24]; free body, 0 actuated; mass 0.5 kg\n" in out
+    assert "  contact pairs: 6\n    solo - ground: 4: solo/FL_FOOT_0/ground, " in out
+    assert "    crate - ground: 1: crate/box/ground\n    solo - crate: 1: solo/base_link_0/crate/box\n" in out
+    # the automatic pairs: every geometry of Solo-12 against the crate, counted
+    scene = tmp_path / "auto.toml"
+    scene.write_text(
+        (SCENES / "solo12_crate.toml").read_text().split("[contacts]")[0]
+        + '[[bodies]]\nname = "arm"\nrobot = "pendulum"\nposition = [2, 0, 0]\n'
+    )
+    assert main(["inspect", str(scene)]) == 0
+    out = capsys.readouterr().out
+    assert "  arm: robot pendulum; q[26:27], v[24:25]; fixed base at (2, 0, 0) m, 1 actuated" in out
+    assert "    solo - crate: 17: solo/base_link_0/crate/box, " in out and ", ... (11 more)\n" in out

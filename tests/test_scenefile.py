@@ -3,9 +3,11 @@
 from pathlib import Path
 
 import numpy as np
+import pinocchio as pin
 import pytest
 
 import gaussim
+from gaussim import Body, FreeBody, Material, pose
 from gaussim.scenefile import SceneFileError
 
 SCENES = sorted((Path(__file__).resolve().parents[1] / "robots" / "scenes").glob("*.toml"))
@@ -22,6 +24,7 @@ def test_every_robot_of_the_library_has_a_scene():
         "pendulum_limits",
         "double_pendulum",
         "box_stack",
+        "solo12_crate",
     }
 
 
@@ -82,6 +85,11 @@ BALL = '[robot]\nname = "ball"\nfloating_base = true\n'
         (BALL + "[simulation]\nduration = 0\n", "simulation.duration", "must be > 0"),
         ('[robot]\nname = "solo13"\n', "robot.name", "no robot 'solo13'.*solo12"),
         ('[robot]\nurdf = "missing.urdf"\n', "robot.urdf", "no such file"),
+        (
+            '[robot]\nname = "pendulum"\n[initial]\nground_clearance = 0.01\n[ground]\n',
+            "initial.ground_clearance",
+            "needs a floating-base robot",
+        ),
         ("[robot\n", "toml", ""),
     ],
 )
@@ -115,3 +123,218 @@ def test_ground_clearance_places_the_feet(tmp_path):
     sim = gaussim.Simulator(spec.scene, spec.options.replace(contact_margin=1.0))
     sim.step(sim.reset(spec.initial.q))
     assert min(c.gap for c in sim.last_step.contacts) == pytest.approx(0.02, abs=1e-9)
+
+
+# a fixed-base pendulum placed on a stand, a floating ball and a free box, from one file
+BODIES = """
+[[bodies]]
+name = "arm"
+urdf = "models/pendulum.urdf"
+position = [1.0, 0.0, 0.5]
+rpy = [0.0, 0.0, 0.3]
+configuration = [0.2]
+friction = 0.4
+[bodies.control]
+type = "constant"
+tau = [0.5]
+
+[[bodies]]
+name = "ball"
+robot = "ball"
+floating = true
+position = [0.0, 0.0, 0.4]
+velocity = [0.5, 0.0, 0.0, 0.0, 0.0, 0.0]
+contype = 2
+conaffinity = 2
+color = [1.0, 0.0, 0.0]
+
+[[bodies]]
+name = "crate"
+shape = "box"
+size = [0.3, 0.2, 0.1]
+density = 500.0
+position = [0.4, 0.0, 0.2]
+rpy = [0.0, 0.0, 0.5]
+restitution = 0.2
+ground_clearance = 0.001
+
+[ground]
+friction = 0.8
+
+[simulation]
+duration = 0.05
+"""
+
+
+def _bodies_scene(tmp_path, text=BODIES):
+    (tmp_path / "models").mkdir(exist_ok=True)
+    (tmp_path / "models" / "pendulum.urdf").write_text(
+        (gaussim.robot.ROBOTS_DIR / "pendulum.urdf").read_text()
+    )
+    return _write(tmp_path, text)
+
+
+def test_a_scene_of_bodies_is_the_scene_built_in_python(tmp_path):
+    """Three [[bodies]] tables give the world gaussim.Scene(bodies=...) gives (the same pairs and
+    materials), their initial states where the tables put them, and the same run, bit for bit."""
+    spec = gaussim.load_scene(_bodies_scene(tmp_path))
+    arm = gaussim.load_robot(tmp_path / "models" / "pendulum.urdf")
+    ball = gaussim.load_robot("ball", floating_base=True)
+    crate = FreeBody.box("crate", (0.3, 0.2, 0.1), density=500.0)
+    scene = gaussim.Scene(
+        bodies={
+            "arm": Body(arm, placement=pose(1.0, 0.0, 0.5, rpy=(0, 0, 0.3)), material=Material(friction=0.4)),
+            "ball": Body(ball, contype=2, conaffinity=2, color=(1.0, 0.0, 0.0, 1.0)),
+            "crate": Body(crate, material=Material(restitution=0.2)),
+        },
+        ground=gaussim.Ground(friction=0.8),
+    )
+    assert list(spec.scene.bodies) == ["arm", "ball", "crate"]
+    assert crate.mass == pytest.approx(500.0 * 0.3 * 0.2 * 0.1)
+    assert [(p.name, p.friction, p.restitution) for p in spec.scene.pairs] == [
+        (p.name, p.friction, p.restitution) for p in scene.pairs
+    ]
+    assert spec.scene.bodies["ball"].color == (1.0, 0.0, 0.0, 1.0)
+    initial = spec.initial
+    assert initial.body("arm").q.tolist() == [0.2]
+    np.testing.assert_array_equal(initial.body("ball").q, [0, 0, 0.4, 0, 0, 0, 1])
+    np.testing.assert_array_equal(initial.body("ball").v, [0.5, 0, 0, 0, 0, 0])
+    # the crate at its pose, lowered to 1 mm above the ground (its half height 0.05 m)
+    crate_q = initial.body("crate").q
+    np.testing.assert_allclose(crate_q[:3], [0.4, 0.0, 0.051], atol=1e-12)
+    np.testing.assert_allclose(crate_q[3:], pin.Quaternion(pin.rpy.rpyToMatrix(0, 0, 0.5)).coeffs())
+    # the pendulum's base where its placement puts it: its hinge at (1, 0, 2.5)
+    data = spec.robot.model.createData()
+    pin.forwardKinematics(spec.robot.model, data, initial.q)
+    np.testing.assert_allclose(data.oMi[1].translation, [1.0, 0.0, 2.5], atol=1e-15)
+    log = gaussim.run(spec)
+    sim = gaussim.Simulator(scene, spec.options)
+    state = sim.reset({"arm": [0.2], "ball": pose(z=0.4), "crate": crate_q}, {"ball": [0.5, 0, 0, 0, 0, 0]})
+    for k in range(log.steps):
+        state = sim.step(state, {"arm": [0.5]})
+        assert np.array_equal(state.q, log.q[k + 1]) and np.array_equal(state.v, log.v[k + 1]), k
+    assert log.tau[:, 0].tolist() == [0.5] * log.steps  # the arm's control, the others none
+
+
+def test_one_body_table_is_the_one_robot_form(tmp_path):
+    """A single [[bodies]] table and the [robot] form read the same scene (names unprefixed)."""
+    one = gaussim.load_scene(
+        _write(
+            tmp_path,
+            BALL + "[initial]\nq = [0, 0, 0.3, 0, 0, 0, 1]\n[ground]\n[simulation]\nduration = 0.05\n",
+        )
+    )
+    table = gaussim.load_scene(
+        _bodies_scene(
+            tmp_path,
+            '[[bodies]]\nname = "ball"\nrobot = "ball"\nfloating = true\n'
+            "configuration = [0, 0, 0.3, 0, 0, 0, 1]\n[ground]\n[simulation]\nduration = 0.05\n",
+        )
+    )
+    assert [p.name for p in table.scene.pairs] == [p.name for p in one.scene.pairs] == ["ball_0/ground"]
+    np.testing.assert_array_equal(gaussim.run(table).q, gaussim.run(one).q)
+
+
+def test_a_mesh_body_takes_its_path_from_the_scene_folder(tmp_path):
+    """A convex mesh (a 0.2 m cube written as STL) by density: the mass of its volume."""
+    (tmp_path / "meshes").mkdir()
+    corners = np.array([[x, y, z] for x in (0, 0.2) for y in (0, 0.2) for z in (0, 0.2)])
+    faces = [(0, 1, 3), (0, 3, 2), (4, 6, 7), (4, 7, 5), (0, 4, 5), (0, 5, 1)]
+    faces += [(2, 3, 7), (2, 7, 6), (0, 2, 6), (0, 6, 4), (1, 5, 7), (1, 7, 3)]
+    facets = "".join(
+        "facet normal 0 0 0\nouter loop\n"
+        + "".join(f"vertex {' '.join(map(str, corners[k]))}\n" for k in face)
+        + "endloop\nendfacet\n"
+        for face in faces
+    )
+    (tmp_path / "meshes" / "cube.stl").write_text(f"solid cube\n{facets}endsolid cube\n")
+    text = '[[bodies]]\nname = "cube"\nshape = "mesh"\npath = "meshes/cube.stl"\ndensity = 1000.0\n'
+    spec = gaussim.load_scene(_write(tmp_path, text))
+    assert spec.robot.mass == pytest.approx(1000.0 * 0.2**3)
+    missing = _write(tmp_path, text.replace("cube.stl", "ball.stl"))
+    with pytest.raises(SceneFileError, match=rf"^{missing}: bodies\[0\].path: no such file"):
+        gaussim.load_scene(missing)
+
+
+def test_bilaterals_name_the_frames_of_bodies(tmp_path):
+    text = (
+        BODIES
+        + "[[bilaterals]]\ntype = 'anchor'\nframe = 'arm/tip'\nposition = [1.0, 0.0, 1.5]\n"
+        + "[[bilaterals]]\ntype = 'loop'\nframes = ['arm/tip', 'crate/crate']\n"
+    )
+    spec = gaussim.load_scene(_bodies_scene(tmp_path, text))
+    assert [b.name for b in spec.scene.bilaterals] == ["anchor arm/tip", "loop arm/tip-crate/crate"]
+
+
+BOX = '[[bodies]]\nname = "crate"\nshape = "box"\nsize = [0.2, 0.2, 0.2]\nmass = 1.0\n'
+SOLO = '[[bodies]]\nname = "solo"\nrobot = "solo12"\n'
+
+
+@pytest.mark.parametrize(
+    ("text", "key", "message"),
+    [
+        (BOX + "[[bodies]]\nshape = 'sphere'\nradius = 0.1\nmass = 1.0\n", r"bodies\[1\].name", "missing"),
+        (BOX + BOX, r"bodies\[1\].name", "'crate' is also the name of bodies\\[0\\]"),
+        (BOX.replace('"crate"', '"a/b"'), r"bodies\[0\].name", "without '/'"),
+        (BOX + 'robot = "solo12"\n', r"bodies\[0\]", "give exactly one of robot.*got robot, shape"),
+        ('[[bodies]]\nname = "x"\n', r"bodies\[0\]", "give exactly one of robot"),
+        (BOX.replace('"box"', '"cone"'), r"bodies\[0\].shape", "'cone' is not one of box, sphere"),
+        (BOX.replace("mass = 1.0", "mass = 0.0"), r"bodies\[0\].mass", "must be a finite number > 0"),
+        (BOX.replace("mass = 1.0", "mass = -2"), r"bodies\[0\].mass", "must be a finite number > 0"),
+        (BOX + "density = 10.0\n", r"bodies\[0\].mass", "give the mass .* or the density"),
+        (BOX.replace("mass = 1.0", 'mass = "heavy"'), r"bodies\[0\].mass", "must be a finite number"),
+        (BOX.replace("0.2, 0.2, 0.2", "0.2, 0.2"), r"bodies\[0\].size", "must be 3 finite numbers"),
+        (BOX.replace("0.2, 0.2, 0.2", "0.2, -1, 0.2"), r"bodies\[0\].size", "must be a finite number > 0"),
+        (BOX + "radius = 0.1\n", r"bodies\[0\].radius", "a box has size, not a radius"),
+        (
+            BOX.replace('"box"', '"capsule"').replace("size = [0.2, 0.2, 0.2]", "radius = 0.1"),
+            r"bodies\[0\].length",
+            "missing: a capsule needs radius and length",
+        ),
+        (BOX + "floating = true\n", r"bodies\[0\].floating", "only a robot takes it"),
+        (SOLO + "mass = 3.0\n", r"bodies\[0\].mass", "only a shape takes it"),
+        (SOLO.replace("solo12", "solo13"), r"bodies\[0\].robot", "no robot 'solo13'.*solo12"),
+        ('[[bodies]]\nname = "m"\nmjcf = "missing.xml"\n', r"bodies\[0\].mjcf", "no such file"),
+        ('[[bodies]]\nname = "m"\nsdf = "missing.sdf"\n', r"bodies\[0\].sdf", "no such file"),
+        (BOX + "contype = -1\n", r"bodies\[0\].contype", "must be an integer bit mask >= 0"),
+        (BOX + "conaffinity = true\n", r"bodies\[0\].conaffinity", "must be an integer bit mask"),
+        (BOX + "friction = -1.0\n", r"bodies\[0\].friction", "must be a finite number >= 0"),
+        (BOX + "restitution = 2.0\n", r"bodies\[0\].restitution", "must be in \\[0, 1\\]"),
+        (BOX + "color = [1, 0, 2]\n", r"bodies\[0\].color", "in \\[0, 1\\]"),
+        (BOX + "self_collision = 1\n", r"bodies\[0\].self_collision", "must be true or false"),
+        (BOX + "position = [0, 0]\n", r"bodies\[0\].position", "must be 3 finite numbers"),
+        (BOX + "spin = 1\n", r"bodies\[0\].spin", "unknown key; known:.*shape"),
+        (BOX + 'configuration = "standing"\n', r"bodies\[0\].configuration", "no configuration 'standing'"),
+        (BOX + "configuration = [0, 0, 1]\n", r"bodies\[0\].configuration", "must be 7 finite numbers"),
+        (BOX + "velocity = [0, 0, 1]\n", r"bodies\[0\].velocity", "must be 6 finite numbers"),
+        (BOX + "ground_clearance = 0.01\n", r"bodies\[0\].ground_clearance", "needs a \\[ground\\]"),
+        (
+            '[[bodies]]\nname = "arm"\nrobot = "pendulum"\nground_clearance = 0.01\n[ground]\n',
+            r"bodies\[0\].ground_clearance",
+            "needs a floating-base robot",
+        ),
+        (SOLO + "[bodies.control]\ntype = 'pd'\nkp = -1.0\n", r"bodies\[0\].control", "gains must be >= 0"),
+        (SOLO + "[bodies.control]\ntype = 'constant'\ntau = [1]\n", r"bodies\[0\].control.tau", "must be 12"),
+        (SOLO + "[bodies.control]\nkd = 'x'\ntype = 'pd'\n", r"bodies\[0\].control.kd", "finite number"),
+        (SOLO + "[bodies.control]\ngain = 1\n", r"bodies\[0\].control.gain", "unknown key"),
+        (BOX + BALL, "robot", r"a scene of \[\[bodies\]\] gives each body's robot"),
+        (BOX + "[initial]\nq = [0]\n", "initial", "in its own table"),
+        (BOX + "[control]\ntype = 'zero'\n", "control", "in its own table"),
+        ("bodies = []\n", "bodies", "give at least one"),
+        (
+            BOX + "[ground]\n[contacts]\npairs = [['crate/lid', 'ground']]\n",
+            "contacts.pairs",
+            "no collision geometry 'crate/lid'",
+        ),
+        (BOX.replace('"crate"', '"ground"') + "[ground]\n", "obstacles", "name both an obstacle and a body"),
+        (
+            BOX + "[[bilaterals]]\ntype = 'anchor'\nframe = 'solo/base'\nposition = [0, 0, 1]\n",
+            r"bilaterals\[0\].frame",
+            "no frame 'solo/base'",
+        ),
+    ],
+)
+def test_a_bad_body_names_its_field(tmp_path, text, key, message):
+    path = _write(tmp_path, text)
+    with pytest.raises(SceneFileError, match=rf"^{path}: {key}: .*{message}"):
+        gaussim.load_scene(path)

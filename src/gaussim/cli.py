@@ -14,15 +14,21 @@ import signal
 import sys
 import time
 from pathlib import Path
-from typing import TextIO
+from typing import TYPE_CHECKING, TextIO
 
 from .exceptions import ContactError, GaussimError, InvalidOptions, InvalidRobot, InvalidState, SolverError
 from .files import atomic_path, check_writable
 from .options import FRICTION_MODES, SCHEMES
 
+if TYPE_CHECKING:
+    from .scene import Scene
+    from .world import BodyLayout
+
 EXIT_OK, EXIT_FAILURE, EXIT_BAD_INPUT = 0, 1, 2
 # what stops a simulation midway (the other GaussimErrors are bad input)
 SIMULATION_FAILURES = (SolverError, ContactError)
+# the contact pairs of two bodies that `gaussim inspect` names (the others are counted)
+PAIRS_SHOWN = 6
 # control characters (but newline and tab): a name in a file must not drive the terminal
 _CONTROL = re.compile(r"[\x00-\x08\x0b-\x1f\x7f-\x9f]")
 
@@ -76,6 +82,9 @@ def main(argv: list[str] | None = None) -> int:
     plot.add_argument("log", type=Path)
     plot.add_argument("-o", "--output", type=Path, required=True, help="image file (PNG, PDF or SVG)")
     plot.add_argument("--what", choices=("forces", "energy"), default="forces")
+    plot.add_argument(
+        "--bodies", nargs="+", metavar="NAME", help="forces of these bodies' (or obstacles') contacts only"
+    )
 
     inspect = commands.add_parser("inspect", help="describe a scene's robot, constraints and QP size")
     inspect.add_argument("scene", type=Path)
@@ -318,7 +327,7 @@ def _plot(args: argparse.Namespace) -> int:
     plot_path(args.output)
     check_writable(args.output, "--output")
     log, scene = _log_and_scene(args.log)
-    print(f"{args.what} plot: {save_plot(log, scene, args.output, args.what)}")
+    print(f"{args.what} plot: {save_plot(log, scene, args.output, args.what, args.bodies)}")
     return EXIT_OK
 
 
@@ -331,7 +340,7 @@ def _inspect(args: argparse.Namespace) -> int:
     spec = load_scene(args.scene)
     robot, scene, o = spec.robot, spec.scene, spec.options
     model = robot.model
-    _say(f"robot {robot.name} ({robot.urdf})")
+    _say(f"robot {robot.name} ({robot.urdf or f'{len(scene.bodies)} bodies merged'})")
     _say(f"  nq = {model.nq}, nv = {model.nv}, mass = {robot.mass:.3f} kg, floating base: {robot.floating}")
     _say(f"  frames: {', '.join(f.name for f in model.frames)}")
     _say(f"  collision geometries: {', '.join(g.name for g in robot.collision_model.geometryObjects)}")
@@ -342,9 +351,16 @@ def _inspect(args: argparse.Namespace) -> int:
         if model.joints[j].nq == 1 and np.isfinite(model.upperPositionLimit[model.joints[j].idx_q])
     ]
     _say(f"  joint limits: {', '.join(limited) or 'none'}")
+    _say(f"bodies: {len(scene.bodies)}")
+    for layout in scene.bodies.values():
+        _say(f"  {_body_line(layout)}")
     _say("constraints (only these are built):")
     _say(f"  obstacles: {', '.join(ob.name for ob in scene.obstacles) or 'none'}")
-    _say(f"  contact pairs: {len(scene.pairs)}: {', '.join(p.name for p in scene.pairs)}")
+    _say(f"  contact pairs: {len(scene.pairs)}")
+    for (body, other), names in _pairs_by_body(scene).items():
+        listed = ", ".join(names[:PAIRS_SHOWN])
+        more = f", ... ({len(names) - PAIRS_SHOWN} more)" if len(names) > PAIRS_SHOWN else ""
+        _say(f"    {body} - {other if other != body else 'itself'}: {len(names)}: {listed}{more}")
     _say(f"  joint limits: {'on' if scene.joint_limits else 'off'}")
     for b in scene.bilaterals:
         _say(f"  {b.name}")
@@ -362,6 +378,41 @@ def _inspect(args: argparse.Namespace) -> int:
     )
     _say(f"options: dt = {o.dt} s, friction {o.friction_mode} ({facets} facets), duration {spec.duration} s")
     return EXIT_OK
+
+
+def _body_line(layout: BodyLayout) -> str:
+    """One body of ``gaussim inspect``: what it is, its slices of q and v, its base and its mass."""
+    from .world import FreeBody
+
+    source, placement = layout.body.source, layout.body.placement
+    if isinstance(source, FreeBody):
+        size = (
+            source.mesh_path if source.shape == "mesh" else " x ".join(f"{s:g}" for s in source.size) + " m"
+        )
+        what, base = f"{source.shape} {size}", "free body"
+    else:
+        what, base = f"robot {layout.robot.name}", "floating base" if layout.floating else "fixed base"
+        if placement is not None:
+            base += f" at ({', '.join(f'{x:.4g}' for x in placement.translation)}) m"
+    actuated = layout.actuated.stop - layout.actuated.start
+    return (
+        f"{layout.name}: {what}; q[{layout.q.start}:{layout.q.stop}], v[{layout.v.start}:{layout.v.stop}]; "
+        f"{base}, {actuated} actuated; mass {layout.robot.mass:.4g} kg"
+    )
+
+
+def _pairs_by_body(scene: Scene) -> dict[tuple[str, str], list[str]]:
+    """A scene's contact pairs' names by the bodies (or body and obstacle) they are between."""
+    groups: dict[tuple[str, str], list[str]] = {}
+    for pair in scene.pairs:
+        a = scene.world.owner(pair.geometry).name
+        if pair.obstacle is not None:
+            b = scene.obstacles[pair.obstacle].name
+        else:
+            assert pair.other is not None  # a pair of two geometries
+            b = scene.world.owner(pair.other).name
+        groups.setdefault((b, a) if (b, a) in groups else (a, b), []).append(pair.name)
+    return groups
 
 
 def _forces(args: argparse.Namespace) -> int:

@@ -3,24 +3,25 @@ robot's actuated (nv - 6,)), or a :class:`Command` that adds implicit damping.""
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import NamedTuple
 
 import numpy as np
 import pinocchio as pin
 
-from .state import State
+from .state import BodyState, State
 
 
 class Command(NamedTuple):
     """A step's actuation: the joints get tau - damping v+, v+ the step's new velocity
     (``Simulator.step(state, *command)``)."""
 
-    tau: np.ndarray | None
-    damping: np.ndarray | None = None
+    tau: np.ndarray | Mapping[str, np.ndarray] | None
+    damping: np.ndarray | Mapping[str, np.ndarray] | None = None
 
 
-Controller = Callable[[State], np.ndarray | Command | None]
+# a controller reads a world's state, or (per body, in a scene of bodies) its body's
+Controller = Callable[[State | BodyState], np.ndarray | Command | None]
 
 
 def command(output: np.ndarray | Command | None) -> Command:
@@ -28,7 +29,7 @@ def command(output: np.ndarray | Command | None) -> Command:
     return output if isinstance(output, Command) else Command(output)
 
 
-def zero_torque(state: State) -> None:
+def zero_torque(state: State | BodyState) -> None:
     """No actuation."""
     return None
 
@@ -37,7 +38,7 @@ def constant_torque(tau: np.ndarray) -> Controller:
     """The same torque at every step (actuated joints, or all nv)."""
     tau = np.array(tau, dtype=float)
 
-    def control(state: State) -> np.ndarray:
+    def control(state: State | BodyState) -> np.ndarray:
         return tau
 
     return control
@@ -65,7 +66,7 @@ class PDHold:
         size = len(range(model.nv)[actuated])
         self.damping = None if dt is None else np.full(size, kd + dt * kp)
 
-    def __call__(self, state: State) -> np.ndarray | Command:
+    def __call__(self, state: State | BodyState) -> np.ndarray | Command:
         error = pin.difference(self.model, state.q, self.q_ref)
         if self.damping is None:
             return (self.kp * error - self.kd * state.v)[self.actuated]

@@ -3,6 +3,7 @@ friction use, gaps, the solver's work, and energy."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -31,17 +32,27 @@ def _pyplot() -> Any:
     return plt
 
 
-def force_figure(log: RunLog, scene: Scene) -> Any:
+def force_figure(log: RunLog, scene: Scene, bodies: Sequence[str] | None = None) -> Any:
     """Four panels over time: the normal force of each contact, its friction ratio |f_t| / f_n against
-    the friction coefficient mu, its gap, and the solver's KKT residual and iterations."""
+    the friction coefficient mu of its pair, its gap, and the solver's KKT residual and iterations.
+
+    Args:
+        bodies: show only the contacts of these bodies or obstacles (on either side), e.g.
+            ``["crate"]``; default: every contact.
+
+    Raises:
+        InvalidOptions: a name of ``bodies`` is no body or obstacle of the log (the message lists them).
+    """
     plt = _pyplot()
     figure, axes = plt.subplots(4, 1, figsize=(9, 11), sharex=True, constrained_layout=True)
     normal_ax, ratio_ax, gap_ax, solver_ax = axes
     c = log.contact_arrays()
     t = log.t
-    friction = {o.name: o.friction for o in scene.obstacles}
+    friction = {p.name: p.friction for p in scene.pairs}
+    shown = _contacts_of(log, scene, bodies)
     coefficients = set()
-    for i, name in enumerate(log.contact_names):
+    for i in shown:
+        name = log.contact_names[i]
         rows = c["id"] == i
         times = t[c["step"][rows] + 1]
         force, normal = c["force"][rows], c["normal"][rows]
@@ -51,12 +62,12 @@ def force_figure(log: RunLog, scene: Scene) -> Any:
         loaded = f_n > 1e-9
         ratio_ax.plot(times[loaded], f_t[loaded] / f_n[loaded], ".", ms=2)
         gap_ax.plot(times, 1e3 * c["gap"][rows], ".", ms=2)
-        coefficients.add(friction.get(log.contact_obstacle[i], scene.self_contact[0]))
+        coefficients.add(friction.get(name.rsplit("#", 1)[0], scene.self_contact[0]))
     for mu in sorted(coefficients):
         ratio_ax.axhline(mu, color="k", ls="--", lw=1)
         ratio_ax.annotate(f"mu = {mu:g}", (t[0], mu), xytext=(2, 2), textcoords="offset points")
     normal_ax.set_ylabel("normal force [N]")
-    if log.contact_names and len(log.contact_names) <= 12:
+    if shown and len(shown) <= 12:
         normal_ax.legend(fontsize="small", markerscale=4, ncol=2)
     ratio_ax.set_ylabel("|f_t| / f_n")
     gap_ax.set_ylabel("gap [mm]")
@@ -70,8 +81,24 @@ def force_figure(log: RunLog, scene: Scene) -> Any:
     iterations_ax.plot(steps_t, s["iterations"], lw=0.8, color="C3")
     iterations_ax.set_ylabel("ProxQP iterations", color="C3")
     solver_ax.set_xlabel("t [s]")
-    figure.suptitle(f"{log.robot}: contact forces and solver")
+    of = f" of {', '.join(bodies)}" if bodies else ""
+    figure.suptitle(f"{log.robot}: contact forces{of} and solver")
     return figure
+
+
+def _contacts_of(log: RunLog, scene: Scene, bodies: Sequence[str] | None) -> list[int]:
+    """The ids of the log's contacts that ``bodies`` (names of bodies or obstacles) take part in."""
+    if bodies is None:
+        return list(range(len(log.contact_names)))
+    known = [*log.bodies, *(o.name for o in scene.obstacles)]
+    if isinstance(bodies, str) or not all(isinstance(b, str) for b in bodies):
+        raise InvalidOptions("bodies", f"must be a list of body names, got {bodies!r}")
+    for name in bodies:
+        if name not in known:
+            raise InvalidOptions("bodies", f"no body or obstacle '{name}'; known: {', '.join(known)}")
+    return [
+        i for i, (a, b) in enumerate(zip(log.contact_body, log.contact_other)) if a in bodies or b in bodies
+    ]
 
 
 def energy_figure(log: RunLog, scene: Scene) -> Any:
@@ -102,12 +129,17 @@ def plot_path(path: str | Path) -> Path:
     return path
 
 
-def save_plot(log: RunLog, scene: Scene, path: str | Path, what: str = "forces") -> Path:
-    """Write the ``what`` figure ("forces" or "energy") of a run to an image file (.png, .pdf, .svg)."""
+def save_plot(
+    log: RunLog, scene: Scene, path: str | Path, what: str = "forces", bodies: Sequence[str] | None = None
+) -> Path:
+    """Write the ``what`` figure ("forces" or "energy") of a run to an image file (.png, .pdf, .svg);
+    ``bodies`` selects the contacts of the forces figure (see :func:`force_figure`)."""
     if what not in WHATS:
         raise InvalidOptions("what", f"must be one of {', '.join(WHATS)}, got {what!r}")
+    if bodies is not None and what != "forces":
+        raise InvalidOptions("bodies", "selects the contacts of the forces figure; the energy is the world's")
     path = plot_path(path)
-    figure = (force_figure if what == "forces" else energy_figure)(log, scene)
+    figure = force_figure(log, scene, bodies) if what == "forces" else energy_figure(log, scene)
     try:
         with atomic_path(path) as tmp:  # a failed write leaves any previous image
             figure.savefig(tmp, dpi=110)

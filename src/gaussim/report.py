@@ -193,15 +193,26 @@ class StepReport:
         return np.sum([c.force for c in self.contacts], axis=0) if self.contacts else np.zeros(3)
 
     def table(self) -> str:
-        """A plain-text table of the contact forces."""
-        lines = [
-            f"{'contact':<28} {'fx [N]':>9} {'fy [N]':>9} {'fz [N]':>9} {'normal [N]':>11} {'gap [mm]':>9}"
-        ]
+        """A plain-text table of the contact forces, grouped by pair of bodies (or body and obstacle),
+        each group followed by the force between them (:meth:`forces_between`) when there are several."""
+        groups: dict[tuple[str, str], list[ContactForce]] = {}
         for c in self.contacts:
-            fx, fy, fz = c.force
-            lines.append(
-                f"{c.name:<28} {fx:9.3f} {fy:9.3f} {fz:9.3f} {c.normal_force:11.3f} {1e3 * c.gap:9.4f}"
-            )
+            a, b = self.body_of(c) if self.world is not None else ("", c.obstacle)
+            groups.setdefault((b, a) if (b, a) in groups else (a, b), []).append(c)
+        w = max([28, *(len(c.name) for c in self.contacts), *(len(f"  {a} from {b}") for a, b in groups)])
+        lines = [
+            f"{'contact':<{w}} {'fx [N]':>9} {'fy [N]':>9} {'fz [N]':>9} {'normal [N]':>11} {'gap [mm]':>9}"
+        ]
+        for (a, b), contacts in groups.items():
+            for c in contacts:
+                fx, fy, fz = c.force
+                lines.append(
+                    f"{c.name:<{w}} {fx:9.3f} {fy:9.3f} {fz:9.3f} {c.normal_force:11.3f} {1e3 * c.gap:9.4f}"
+                )
+            if len(groups) > 1 and a != b:  # (a body's own links touching: forces on each, not one)
+                fx, fy, fz = self.forces_between(a, b) if a else np.sum([c.force for c in contacts], axis=0)
+                label = f"  {a} from {b}" if a else f"  from {b}"
+                lines.append(f"{label:<{w}} {fx:9.3f} {fy:9.3f} {fz:9.3f}")
         total = self.total_contact_force()
-        lines.append(f"{'total':<28} {total[0]:9.3f} {total[1]:9.3f} {total[2]:9.3f}")
+        lines.append(f"{'total':<{w}} {total[0]:9.3f} {total[1]:9.3f} {total[2]:9.3f}")
         return "\n".join(lines)

@@ -1,8 +1,8 @@
 """Run logs: everything a run produced, no pickle.
 
 A log holds t, q, v (N + 1 states), tau (N steps), the per-contact forces, points, normals and gaps
-of each step, the limit reactions, the solver certificate of each step, the scene text and the
-options: a run can be reproduced and analysed from its log alone.
+of each step with the bodies each contact is between, the limit reactions, the solver certificate of
+each step, the scene text and the options: a run can be reproduced and analysed from its log alone.
 
 Two forms, both read by :meth:`RunLog.load`: one compressed ``.npz`` (:meth:`RunLog.save`, written
 atomically), and the directory a run writes as it goes (:class:`RunLogWriter`): ``header.json`` and
@@ -21,6 +21,7 @@ import os
 import re
 import shutil
 import tempfile
+import tomllib
 from dataclasses import asdict, fields
 from pathlib import Path
 from typing import Any
@@ -34,8 +35,12 @@ from .report import StepReport
 from .solver import CONVERGED
 from .state import State
 
-FORMAT_VERSION = 1  # the single .npz
-DIRECTORY_VERSION = 2  # the directory of chunks
+FORMAT_VERSION = 2  # the single .npz
+DIRECTORY_VERSION = 3  # the directory of chunks
+# the oldest version of each form read, and the first that names each contact's bodies (an older log
+# is of one robot, and read as such)
+OLDEST_VERSION = {"file": 1, "directory": 2}
+BODIES_SINCE = {"file": 2, "directory": 3}
 HEADER = "header.json"
 CHUNK = re.compile(r"chunk-(\d{6})\.npz")
 # the header of a run still going, or ended without a word (SIGKILL, power cut)
@@ -44,10 +49,12 @@ RUNNING = "still running, or stopped by a kill: the log holds the steps of its c
 # approach exactly and rests within g dt^2 of the surface: a deeper penetration is lost accuracy)
 PENETRATION_TOLERANCE = 1e-3
 # what each array of a log holds: its numpy kinds (b bool, i int, f float, U text) and its shape, in
-# the sizes N (steps), nq, nv, C (contact rows), K (contact names), L (limit rows), J (limit names)
+# the sizes N (steps), nq, nv, C (contact rows), K (contact names), L (limit rows), J (limit names),
+# B (bodies)
 LAYOUT: dict[str, tuple[str, tuple[str, ...]]] = {
     "format_version": ("i", ()),
     "robot": ("U", ()),
+    "bodies": ("U", ("B",)),
     "scene_text": ("U", ()),
     "scene_path": ("U", ()),
     "options": ("U", ()),
@@ -61,6 +68,8 @@ LAYOUT: dict[str, tuple[str, tuple[str, ...]]] = {
     "contact_names": ("U", ("K",)),
     "contact_geometry": ("U", ("K",)),
     "contact_obstacle": ("U", ("K",)),
+    "contact_body": ("U", ("K",)),
+    "contact_other": ("U", ("K",)),
     "limit_names": ("U", ("J",)),
     "limit_step": ("i", ("L",)),
     "limit_id": ("i", ("L",)),
@@ -76,8 +85,10 @@ LAYOUT: dict[str, tuple[str, tuple[str, ...]]] = {
     "solver_kkt_residual": ("f", ("N",)),
     "solver_status": ("U", ("N",)),
 }
-# the entries of a single-file log that are its header (its scalars), not its columns
-NPZ_HEADER = tuple(key for key, (_, shape) in LAYOUT.items() if not shape)
+# the entries of a single-file log that are its header (its scalars and its bodies), not its columns
+NPZ_HEADER = tuple(key for key, (_, shape) in LAYOUT.items() if shape in ((), ("B",)))
+# what a log from before BODIES_SINCE lacks
+BODY_ENTRIES = ("bodies", "contact_body", "contact_other")
 # A step's status when its QPs converged but its friction fixed point did not (friction_unsettled).
 FRICTION_UNSETTLED = "FRICTION_UNSETTLED"
 # A step's status when it solved no QP (nothing restricted its motion).
@@ -99,6 +110,11 @@ class RunLog:
         tau: torques applied during each step, shape (N, nv).
         complete: False when the run stopped before its duration; ``reason`` says why.
         scene_text, options: what the run was made from.
+        bodies: the names of the world's bodies (one, the robot's, in a one-robot scene).
+        contact_names: each contact's name, ``"geometry/obstacle#k"``, indexed by the contact ids of
+            :meth:`contact_arrays`; ``contact_geometry``, ``contact_obstacle``: its two sides;
+            ``contact_body``: the body its force acts on (the geometry's), ``contact_other``: the body
+            or obstacle pushing it.
     """
 
     def __init__(self, robot: str, scene_text: str, options: Options, scene_path: str = "") -> None:
@@ -115,6 +131,9 @@ class RunLog:
         self.contact_names: list[str] = []
         self.contact_geometry: list[str] = []
         self.contact_obstacle: list[str] = []
+        self.bodies: list[str] = [robot]
+        self.contact_body: list[str] = []
+        self.contact_other: list[str] = []
         self.limit_names: list[str] = []
         self._ids: dict[str, int] = {}
         self._limit_ids: dict[str, int] = {}
@@ -125,6 +144,9 @@ class RunLog:
     # -- recording ---------------------------------------------------------------------------------
 
     def start(self, state: State) -> None:
+        """Record the initial state (of a Simulator: its world names the bodies)."""
+        if state.world is not None:
+            self.bodies = list(state.world.bodies)
         self._append_state(state)
 
     def record(self, state: State, tau: np.ndarray, report: StepReport) -> None:
@@ -147,6 +169,9 @@ class RunLog:
                 self.contact_names.append(c.name)
                 self.contact_geometry.append(c.geometry)
                 self.contact_obstacle.append(c.obstacle)
+                body, other = report.body_of(c)
+                self.contact_body.append(body)
+                self.contact_other.append(other)
             self._contacts.append((step, self._ids[c.name], c.point, c.normal, c.force, c.gap))
         for r in report.limits:
             key = f"{r.joint} {r.side}"
@@ -232,6 +257,8 @@ class RunLog:
             "contact_names": np.array(self.contact_names[self._names_drained :], dtype=str),
             "contact_geometry": np.array(self.contact_geometry[self._names_drained :], dtype=str),
             "contact_obstacle": np.array(self.contact_obstacle[self._names_drained :], dtype=str),
+            "contact_body": np.array(self.contact_body[self._names_drained :], dtype=str),
+            "contact_other": np.array(self.contact_other[self._names_drained :], dtype=str),
             "limit_names": np.array(self.limit_names[self._limit_names_drained :], dtype=str),
             "limit_step": np.array([r[0] for r in self._limits], dtype=int),
             "limit_id": np.array([r[1] for r in self._limits], dtype=int),
@@ -250,6 +277,7 @@ class RunLog:
     def _header(self) -> dict[str, Any]:
         return {
             "robot": self.robot,
+            "bodies": self.bodies,
             "scene_text": self.scene_text,
             "scene_path": self.scene_path,
             "options": asdict(self.options),
@@ -265,7 +293,8 @@ class RunLog:
         header = self._header()
         arrays: dict[str, Any] = {
             "format_version": np.array(FORMAT_VERSION),
-            **{k: np.array(v) for k, v in header.items() if k not in ("options", "wall_time")},
+            **{k: np.array(v) for k, v in header.items() if k not in ("options", "wall_time", "bodies")},
+            "bodies": np.array(self.bodies, dtype=str),
             "options": np.array(json.dumps(header["options"])),
             "wall_time": np.array(np.nan if self.wall_time is None else self.wall_time),
             **self._rows(),
@@ -282,18 +311,26 @@ class RunLog:
         path = Path(path)
         if path.is_dir():
             header, data = _read_directory(path)
+            bodied = header["format_version"] >= BODIES_SINCE["directory"]
         else:
             data = _read_npz(path)
-            _check_version(path, data.get("format_version"), FORMAT_VERSION)
-            _check_layout(path, data, NPZ_HEADER)
+            _check_version(path, data.get("format_version"), OLDEST_VERSION["file"], FORMAT_VERSION)
+            bodied = int(data["format_version"]) >= BODIES_SINCE["file"]
+            _check_layout(path, data, _held(NPZ_HEADER, bodied))
             header = {k: data[k].item() for k in ("robot", "scene_text", "scene_path", "complete", "reason")}
             try:
                 header["options"] = json.loads(str(data["options"]))
             except json.JSONDecodeError as err:
                 raise RunLogError(f"{path}: options: not JSON ({err})") from err
             header["wall_time"] = None if np.isnan(data["wall_time"]) else float(data["wall_time"])
-        _check_layout(path, data, tuple(k for k in LAYOUT if k not in NPZ_HEADER))
+            if bodied:
+                header["bodies"] = list(map(str, data["bodies"]))
+        _check_layout(path, data, _held(tuple(k for k in LAYOUT if k not in NPZ_HEADER), bodied))
+        if not bodied:
+            header["bodies"] = [str(header["robot"])]
+            data = {**data, **_one_robot_sides(str(header["robot"]), str(header["scene_text"]), data)}
         log = cls(str(header["robot"]), str(header["scene_text"]), _options(path, header["options"]))
+        log.bodies = header["bodies"]
         log.scene_path = str(header["scene_path"])
         log.complete, log.reason = bool(header["complete"]), str(header["reason"])
         log.wall_time = header["wall_time"]
@@ -302,6 +339,8 @@ class RunLog:
         log.contact_names = list(map(str, data["contact_names"]))
         log.contact_geometry = list(map(str, data["contact_geometry"]))
         log.contact_obstacle = list(map(str, data["contact_obstacle"]))
+        log.contact_body = list(map(str, data["contact_body"]))
+        log.contact_other = list(map(str, data["contact_other"]))
         log.limit_names = list(map(str, data["limit_names"]))
         log._names_drained, log._limit_names_drained = len(log.contact_names), len(log.limit_names)
         return log
@@ -309,8 +348,9 @@ class RunLog:
     # -- analysis --------------------------------------------------------------------------------------
 
     def contact_records(self) -> dict[str, list]:
-        """Per-contact force time series as columns: t, contact, geometry, obstacle, point, normal,
-        force and gap (x, y, z split) — what :meth:`contact_forces` and the CSV export hold."""
+        """Per-contact force time series as columns: t, contact, geometry, obstacle, body (the one the
+        force acts on), other (the body or obstacle pushing it), point, normal, force and gap (x, y, z
+        split) — what :meth:`contact_forces` and the CSV export hold."""
         c = self.contact_arrays()
         t = self.t
         columns: dict[str, list] = {
@@ -318,6 +358,8 @@ class RunLog:
             "contact": [self.contact_names[i] for i in c["id"]],
             "geometry": [self.contact_geometry[i] for i in c["id"]],
             "obstacle": [self.contact_obstacle[i] for i in c["id"]],
+            "body": [self.contact_body[i] for i in c["id"]],
+            "other": [self.contact_other[i] for i in c["id"]],
         }
         for name in ("point", "normal", "force"):
             for axis, column in zip("xyz", c[name].T):
@@ -332,6 +374,34 @@ class RunLog:
         except ImportError as err:
             raise GaussimError("contact_forces() needs pandas: pip install 'gaussim[analysis]'") from err
         return pd.DataFrame(self.contact_records())
+
+    def forces_between(self, a: str, b: str) -> np.ndarray:
+        """The total contact force on body ``a`` from body or obstacle ``b`` at each step, world frame,
+        shape (N, 3) [N]: row k is ``StepReport.forces_between(a, b)`` of the step from ``t[k]`` to
+        ``t[k + 1]`` (zero when they do not touch); ``forces_between(b, a)`` is its opposite.
+
+        Raises:
+            InvalidOptions: ``a`` is no body of the log (the message lists them).
+        """
+        if a not in self.bodies:
+            raise InvalidOptions("body", f"no body '{a}' in this log; its bodies: {', '.join(self.bodies)}")
+        body, other = np.array(self.contact_body, dtype=str), np.array(self.contact_other, dtype=str)
+        # per contact: +1 when its force is on a from b, -1 when on b from a (the reaction)
+        sign = np.where((body == a) & (other == b), 1.0, np.where((body == b) & (other == a), -1.0, 0.0))
+        c = self.contact_arrays()
+        rows = np.flatnonzero(sign[c["id"]])
+        total = np.zeros((self.steps, 3))
+        np.add.at(total, c["step"][rows], sign[c["id"][rows], None] * c["force"][rows])
+        return total
+
+    def body_pairs(self) -> list[tuple[str, str]]:
+        """The pairs (body, other body or obstacle) of the log's contacts, each once (in the order of
+        the contact first seen, whichever its sides' order)."""
+        pairs: dict[tuple[str, str], None] = {}
+        for a, b in zip(self.contact_body, self.contact_other):
+            if (b, a) not in pairs:
+                pairs[a, b] = None
+        return list(pairs)
 
     def warnings(self) -> list[str]:
         """What makes the run's motion less accurate than its options promise: contacts sinking
@@ -356,8 +426,9 @@ class RunLog:
         return found
 
     def summary(self) -> str:
-        """A plain-text summary: run, solver and per-contact force statistics, and a WARNING line for
-        each of :meth:`warnings`."""
+        """A plain-text summary: run and solver statistics, a WARNING line for each of
+        :meth:`warnings`, the force between each pair of bodies (or body and obstacle), and each
+        contact's force statistics, grouped by pair."""
         c, s = self.contact_arrays(), self.solver_arrays()
         wall_time = self.wall_time
         failed = int(np.sum(~np.isin(s["status"], ACCEPTED)))
@@ -374,21 +445,45 @@ class RunLog:
             f" QPs: {int(s['qps'].sum())}, steps not converged: {failed}",
         ]
         if self.contact_names:
-            lines.append("")
-            lines.append(
-                f"{'contact':<30} {'steps':>6} {'mean fn [N]':>12} {'max fn [N]':>11}"
-                f" {'max |ft|/fn':>12} {'min gap [mm]':>13}"
-            )
-            for i, name in enumerate(self.contact_names):
+            lines += self._force_lines(c)
+        return "\n".join(lines)
+
+    def _force_lines(self, c: dict[str, np.ndarray]) -> list[str]:
+        """The summary's force tables: the total force between each pair of bodies (or body and
+        obstacle) over the steps they touch, then each contact's statistics, grouped by pair."""
+        pairs = self.body_pairs()
+        sides = list(zip(self.contact_body, self.contact_other))
+        width = max(30, *(len(n) + 2 for n in self.contact_names), *(len(f"{a} from {b}") for a, b in pairs))
+        lines = [
+            "",
+            f"{'force on a body from':<{width}} {'steps':>6} {'mean |F| [N]':>13} {'max |F| [N]':>12}",
+        ]
+        for a, b in pairs:
+            if a == b:  # a body's own links: forces on each of them, not one force
+                continue
+            ids = [i for i, pair in enumerate(sides) if pair in ((a, b), (b, a))]
+            touching = np.unique(c["step"][np.isin(c["id"], ids)])
+            norms = np.linalg.norm(self.forces_between(a, b)[touching], axis=1)
+            label = f"{a} from {b}"
+            lines.append(f"{label:<{width}} {len(touching):>6} {norms.mean():>13.3f} {norms.max():>12.3f}")
+        lines += [
+            "",
+            f"{'contact':<{width}} {'steps':>6} {'mean fn [N]':>12} {'max fn [N]':>11}"
+            f" {'max |ft|/fn':>12} {'min gap [mm]':>13}",
+        ]
+        for a, b in pairs:
+            if len(pairs) > 1:
+                lines.append(f"{a} from {b}:" if a != b else f"{a} from its own links:")
+            for i in (i for i, pair in enumerate(sides) if pair in ((a, b), (b, a))):
                 mine = c["id"] == i
                 fn = np.einsum("ij,ij->i", c["force"][mine], c["normal"][mine])
                 ft = np.linalg.norm(c["force"][mine] - fn[:, None] * c["normal"][mine], axis=1)
                 ratio = np.max(np.where(fn > 1e-9, ft / np.maximum(fn, 1e-300), 0.0))
                 lines.append(
-                    f"{name:<30} {int(mine.sum()):>6} {fn.mean():>12.3f} {fn.max():>11.3f} {ratio:>12.3f}"
-                    f" {1e3 * c['gap'][mine].min():>13.4f}"
+                    f"{self.contact_names[i]:<{width}} {int(mine.sum()):>6} {fn.mean():>12.3f}"
+                    f" {fn.max():>11.3f} {ratio:>12.3f} {1e3 * c['gap'][mine].min():>13.4f}"
                 )
-        return "\n".join(lines)
+        return lines
 
 
 class RunLogWriter:
@@ -519,18 +614,19 @@ def _options(path: Path, options: object) -> Options:
         raise RunLogError(f"{path}: options.{err}") from err
 
 
-def _check_version(path: Path, version: object, supported: int) -> None:
-    """Raise RunLogError unless ``version`` (an array or a number) is a format this gaussim reads."""
+def _check_version(path: Path, version: object, oldest: int, newest: int) -> None:
+    """Raise RunLogError unless ``version`` (an array or a number) is a format this gaussim reads, one of
+    ``oldest`` to ``newest``."""
     if version is None:
         raise RunLogError(f"{path}: not a gaussim run log (no format_version)")
     value = np.asarray(version)
     number = value.shape == () and value.dtype.kind == "i"
-    if not (number and 1 <= int(value) <= supported):
-        newer = number and int(value) > supported
+    if not (number and oldest <= int(value) <= newest):
+        newer = number and int(value) > newest
         raise RunLogError(
             f"{path}: format_version {shown(value.tolist())} is "
             + ("newer than this gaussim reads" if newer else "unknown")
-            + f" (it reads format {supported})"
+            + f" (it reads formats {oldest} to {newest})"
             + ("; upgrade gaussim" if newer else "")
         )
 
@@ -568,6 +664,38 @@ def _check_layout(path: Path, data: dict[str, np.ndarray], keys: tuple[str, ...]
             raise RunLogError(f"{path}: damaged run log: '{steps}' refers to steps the log does not hold")
 
 
+def _held(keys: tuple[str, ...], bodied: bool) -> tuple[str, ...]:
+    """The ``keys`` a log holds: all of them, or (a log from before BODIES_SINCE) all but BODY_ENTRIES."""
+    return keys if bodied else tuple(k for k in keys if k not in BODY_ENTRIES)
+
+
+def _one_robot_sides(robot: str, scene_text: str, data: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The contact_body and contact_other of a log from before BODIES_SINCE, which is of one robot:
+    each contact's force acts on it, from an obstacle of its scene or from another of its geometries."""
+    obstacles = _declared_obstacles(scene_text)
+    if obstacles is None:  # no scene file's log: an obstacle is what no contact has as its geometry
+        obstacles = set(map(str, data["contact_obstacle"])) - set(map(str, data["contact_geometry"]))
+    other = [str(o) if o in obstacles else robot for o in data["contact_obstacle"]]
+    return {
+        "contact_body": np.array([robot] * len(other), dtype=str),
+        "contact_other": np.array(other, dtype=str),
+    }
+
+
+def _declared_obstacles(scene_text: str) -> set[str] | None:
+    """The obstacles a one-robot scene file declares (its [ground] and [[obstacles]]), or None for a
+    text that is no such file."""
+    try:
+        data = tomllib.loads(scene_text)
+    except tomllib.TOMLDecodeError:
+        return None
+    listed = data.get("obstacles", [])
+    if "robot" not in data or not isinstance(listed, list):
+        return None
+    names = {o["name"] for o in listed if isinstance(o, dict) and isinstance(o.get("name"), str)}
+    return names | ({"ground"} if "ground" in data else set())
+
+
 def _read_directory(path: Path) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
     """The header and the chunks of a log directory, concatenated (up to the first chunk missing)."""
     try:
@@ -576,7 +704,9 @@ def _read_directory(path: Path) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         raise RunLogError(f"{path}: not a gaussim run log directory (no readable {HEADER}: {err})") from err
     if not isinstance(header, dict):
         raise RunLogError(f"{path}: {HEADER}: not a JSON object")
-    _check_version(path / HEADER, header.get("format_version"), DIRECTORY_VERSION)
+    _check_version(
+        path / HEADER, header.get("format_version"), OLDEST_VERSION["directory"], DIRECTORY_VERSION
+    )
     for key, kind in (
         ("robot", str),
         ("scene_text", str),
@@ -590,6 +720,11 @@ def _read_directory(path: Path) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
             )
     if not (header.get("wall_time") is None or isinstance(header["wall_time"], (int, float))):
         raise RunLogError(f"{path / HEADER}: 'wall_time' must be a number or null")
+    bodies = header.get("bodies")
+    if header["format_version"] >= BODIES_SINCE["directory"] and not (
+        isinstance(bodies, list) and bodies and all(isinstance(b, str) for b in bodies)
+    ):
+        raise RunLogError(f"{path / HEADER}: 'bodies' must be a list of body names, got {shown(bodies)}")
     numbers = sorted(int(m.group(1)) for p in path.iterdir() if (m := CHUNK.fullmatch(p.name)))
     contiguous = next((k for k, n in enumerate(numbers) if n != k), len(numbers))
     chunks = [_read_npz(path / f"chunk-{k:06d}.npz") for k in range(contiguous)]

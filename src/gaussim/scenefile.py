@@ -1,14 +1,26 @@
 """Scene files: a TOML description of what to simulate, validated with errors that name the key.
 
+One robot:
     [robot]        name = "solo12" | urdf = "path.urdf", package_dirs = [...], floating_base = bool
     [initial]      configuration = "standing" | q = [...];  v = [...];  ground_clearance = 0.01
+    [control]      type = "zero" | "constant" (tau = [...]) | "pd" (target = name | [...], kp, kd)
+or several bodies, one table each (in place of [robot], [initial] and [control]):
+    [[bodies]]     name; robot = "solo12" | urdf | mjcf | sdf = "path" (package_dirs, floating for
+                   a URDF) | shape = "box" (size = [x, y, z]) | "sphere" (radius) | "cylinder" |
+                   "capsule" (radius, length) | "mesh" (path, scale) with mass or density;
+                   position, rpy: a floating body's start pose, a fixed-base robot's placement;
+                   configuration = name | [...] (nq_b), velocity = [...] (nv_b), ground_clearance;
+                   self_collision, friction, restitution, contype, conaffinity, color = [r, g, b, a]
+    [bodies.control]  as [control], for the body it follows (its own joints)
+                   (the other sections then name frames and geometries "body/name": "solo/FL_FOOT_0")
+then:
     [ground]       friction, restitution, height, normal
     [[obstacles]]  type = "box" | "sphere", name, size | radius, position, rpy, friction, restitution
-    [contacts]     pairs = [["FL_FOOT_0", "ground"], ["a_0", "b_0"], ...]  (default: every geometry x
-                   obstacle); friction, restitution: of the pairs of two robot geometries
+    [contacts]     pairs = [["FL_FOOT_0", "ground"], ["a_0", "b_0"], ["solo/*", "crate"], ...]
+                   (default "auto": see gaussim.Scene); friction, restitution: of the pairs of two
+                   geometries where neither side declares a material
     [limits]       enabled = true
     [[bilaterals]] type = "anchor", frame, position, rpy  |  type = "loop", frames = [a, b], orientation
-    [control]      type = "zero" | "constant" (tau = [...]) | "pd" (target = name | [...], kp, kd)
     [simulation]   duration = 2.0
     [options]      any field of gaussim.Options (dt, scheme, friction_mode, ...)
 
@@ -20,21 +32,52 @@ from __future__ import annotations
 import re
 import tomllib
 from dataclasses import dataclass, fields
+from functools import partial
 from pathlib import Path
 from typing import Any, NoReturn
 
 import numpy as np
 import pinocchio as pin
 
-from .control import Controller, PDHold, constant_torque, zero_torque
-from .exceptions import GaussimError, InvalidOptions, shown
+from .control import Command, Controller, PDHold, command, constant_torque, zero_torque
+from .exceptions import GaussimError, InvalidOptions, InvalidRobot, shown
 from .options import Options, is_real
 from .robot import Robot, load_robot
 from .scene import Anchor, Box, Ground, LoopClosure, Scene, Sphere
-from .state import State
+from .state import BodyState, State
+from .world import SHAPES, Body, FreeBody, Material, World, pose
 
 SECTIONS = {
     "robot": {"name", "urdf", "package_dirs", "floating_base"},
+    "bodies": {
+        "name",
+        "robot",
+        "urdf",
+        "mjcf",
+        "sdf",
+        "package_dirs",
+        "floating",
+        "shape",
+        "size",
+        "radius",
+        "length",
+        "path",
+        "scale",
+        "mass",
+        "density",
+        "position",
+        "rpy",
+        "configuration",
+        "velocity",
+        "ground_clearance",
+        "self_collision",
+        "friction",
+        "restitution",
+        "contype",
+        "conaffinity",
+        "color",
+        "control",
+    },
     "initial": {"configuration", "q", "v", "ground_clearance"},
     "ground": {"friction", "restitution", "height", "normal"},
     "obstacles": {"type", "name", "size", "radius", "position", "rpy", "friction", "restitution"},
@@ -45,6 +88,19 @@ SECTIONS = {
     "simulation": {"duration"},
     "options": {f.name for f in fields(Options)},
 }
+# what a body is made from: a robot (by name or file) or a shape
+ROBOT_SOURCES = ("robot", "urdf", "mjcf", "sdf")
+# the dimensions each shape takes (the first ones required)
+SHAPE_DIMENSIONS = {
+    "box": ("size",),
+    "sphere": ("radius",),
+    "cylinder": ("radius", "length"),
+    "capsule": ("radius", "length"),
+    "mesh": ("path", "scale"),
+}
+# the keys of a [[bodies]] table that only a robot, or only a shape, takes
+ROBOT_KEYS = ("package_dirs", "floating")
+SHAPE_KEYS = ("size", "radius", "length", "path", "scale", "mass", "density")
 # The largest joint torque a scene may command [N m] (Talos's strongest joint gives 300): beyond it the
 # QP's rows span hundreds of orders of magnitude and ProxQP stops without a motion (tau = 1e300)
 MAX_TORQUE = 1e6
@@ -66,10 +122,10 @@ class SceneSpec:
     Attributes:
         path: the scene file.
         text: its text (stored in run logs, so that a run can be reproduced).
-        scene: the robot and its constraints.
+        scene: the bodies and their constraints.
         options: the step options.
-        initial: the initial state.
-        controller: joint torques as a function of the state.
+        initial: the initial state of every body (``initial.body("crate")``).
+        controller: joint torques as a function of the state (per body: ``{body: tau_b}``).
         duration: simulated time [s].
     """
 
@@ -84,6 +140,18 @@ class SceneSpec:
     @property
     def robot(self) -> Robot:
         return self.scene.robot
+
+
+@dataclass
+class _BodyEntry:
+    """A [[bodies]] table read: its body, and what its initial state and control take from it."""
+
+    key: str
+    name: str
+    body: Body
+    section: dict[str, Any]
+    position: np.ndarray | None
+    rpy: np.ndarray | None
 
 
 def load_scene(path: str | Path, **overrides: Any) -> SceneSpec:
@@ -164,8 +232,10 @@ class _Reader:
         return value
 
     def build(self, text: str, overrides: dict[str, Any]) -> SceneSpec:
-        robot = self.robot()
-        obstacles = [self.obstacle(i, o) for i, o in enumerate(self.list("obstacles"))]
+        entries = self.bodies() if "bodies" in self.data else None
+        robot = self.robot() if entries is None else None
+        bodies = None if entries is None else {e.name: e.body for e in entries}
+        obstacles = [self.obstacle(i, o) for i, o in enumerate(self.tables("obstacles"))]
         ground = self.ground()
         contacts_section = self.table("contacts")
         contacts = contacts_section.get("pairs")
@@ -184,10 +254,14 @@ class _Reader:
                         f"contacts.pairs[{k}]", f"must be [geometry, obstacle] (two names), got {shown(pair)}"
                     )
         limits = self.boolean("limits.enabled", self.table("limits").get("enabled", False))
-        bilaterals = [self.bilateral(i, b, robot) for i, b in enumerate(self.list("bilaterals"))]
-        try:
-            scene = Scene(
+        listed = self.tables("bilaterals")
+        # the robot whose frames the bilaterals name: the one robot, or the bodies merged
+        framed = robot or (self.scene_part(lambda: World(bodies).robot) if listed else None)  # type: ignore[arg-type]
+        bilaterals = [self.bilateral(i, b, framed) for i, b in enumerate(listed)]  # type: ignore[arg-type]
+        scene = self.scene_part(
+            lambda: Scene(
                 robot,
+                bodies=bodies,
                 ground=ground,
                 obstacles=obstacles,
                 contacts=None if contacts is None else [tuple(p) for p in contacts],
@@ -195,34 +269,51 @@ class _Reader:
                 bilaterals=bilaterals,
                 self_contact=self_contact,
             )
-        except InvalidOptions as err:
-            owner = re.match(r"\w*", err.field)[0]  # type: ignore[index]
-            place = SCENE_FIELDS.get(owner, owner) + err.field[len(owner) :]
-            raise SceneFileError(self.path, place, str(err)[len(err.field) + 2 :]) from err
-        except GaussimError as err:  # an unknown geometry or obstacle of a pair
-            raise SceneFileError(self.path, "contacts.pairs", str(err)) from err
+        )
         options = self.options(overrides)
         duration = self.number("simulation.duration", self.table("simulation").get("duration", 1.0))
         if duration <= 0:
             self.fail("simulation.duration", f"must be > 0, got {duration}")
-        initial = self.initial(scene)
-        controller = self.controller(robot, options.dt)
+        if entries is None:
+            assert robot is not None
+            initial = self.initial(scene)
+            controller = self.controller("control", self.table("control"), robot, options.dt)
+        else:
+            initial = self.initial_of_bodies(scene, entries)
+            controller = self.controllers(scene, entries, options.dt)
         return SceneSpec(self.path, text, scene, options, initial, controller, duration)
 
-    def wrap(self, key: str, build, owned: bool = False):  # type: ignore[no-untyped-def]
-        """Run ``build``; a GaussimError it raises is prefixed with the file and key (``owned``: the
-        error's field starts with the owner's name, which ``key`` replaces)."""
+    def scene_part(self, build):  # type: ignore[no-untyped-def]
+        """Run ``build`` (the Scene, or its bodies merged); an error it raises is told where it sits in
+        the file (the bodies' own fields are checked as they are read)."""
+        try:
+            return build()
+        except InvalidOptions as err:
+            owner = re.match(r"\w*", err.field)[0]  # type: ignore[index]
+            place = SCENE_FIELDS.get(owner, owner) + err.field[len(owner) :]
+            raise SceneFileError(self.path, place, str(err)[len(err.field) + 2 :]) from err
+        except InvalidRobot as err:  # a body that cannot join the others
+            raise SceneFileError(self.path, "bodies", str(err)) from err
+        except GaussimError as err:  # an unknown geometry or obstacle of a pair
+            raise SceneFileError(self.path, "contacts.pairs", str(err)) from err
+
+    def wrap(self, key: str, build, owner: str | None = None, aliases: dict[str, str] | None = None):  # type: ignore[no-untyped-def]
+        """Run ``build``; a GaussimError it raises is prefixed with the file and key (an error's field
+        that starts with ``owner`` has it replaced by ``key``, and is renamed by ``aliases``)."""
         try:
             return build()
         except SceneFileError:
             raise
         except InvalidOptions as err:
-            field = err.field.split(".", 1)[-1] if owned else err.field
+            field = err.field
+            if owner is not None and field.startswith(owner + "."):
+                field = field[len(owner) + 1 :]
+            field = (aliases or {}).get(field, field)
             raise SceneFileError(self.path, f"{key}.{field}", str(err)[len(err.field) + 2 :]) from err
         except GaussimError as err:
             raise SceneFileError(self.path, key, str(err)) from err
 
-    def list(self, name: str) -> list[Any]:
+    def tables(self, name: str) -> list[Any]:
         value = self.data.get(name, [])
         if not isinstance(value, list):
             self.fail(name, f"must be an array of tables ([[{name}]]), got {type(value).__name__}")
@@ -235,25 +326,159 @@ class _Reader:
         floating = section.get("floating_base")
         if floating is not None:
             self.boolean("robot.floating_base", floating)
-        dirs = section.get("package_dirs", [])
-        if not (isinstance(dirs, list) and all(isinstance(d, str) for d in dirs)):
-            self.fail("robot.package_dirs", f"must be a list of folder names, got {shown(dirs)}")
-        dirs = [str(self.path.parent / d) for d in dirs]
+        dirs = self.folders("robot.package_dirs", section.get("package_dirs", []))
         if "urdf" in section:
-            target = self.path.parent / self.string("robot.urdf", section["urdf"])
-            if not target.is_file():
-                self.fail("robot.urdf", f"no such file: {target}")
-            return self.wrap(
-                "robot.urdf", lambda: load_robot(target, package_dirs=dirs, floating_base=floating)
+            return self.load("robot.urdf", self.file("robot.urdf", section["urdf"]), dirs, floating)
+        return self.load("robot.name", self.string("robot.name", section["name"]), dirs, floating)
+
+    def folders(self, key: str, dirs: Any) -> list[str]:
+        if not (isinstance(dirs, list) and all(isinstance(d, str) for d in dirs)):
+            self.fail(key, f"must be a list of folder names, got {shown(dirs)}")
+        return [str(self.path.parent / d) for d in dirs]
+
+    def file(self, key: str, value: Any) -> Path:
+        """``value``, a path relative to the scene file, of a file that exists."""
+        target = self.path.parent / self.string(key, value)
+        if not target.is_file():
+            self.fail(key, f"no such file: {target}")
+        return target
+
+    def load(self, key: str, source: str | Path, dirs: list[str], floating: bool | None) -> Robot:
+        return self.wrap(key, lambda: load_robot(source, package_dirs=dirs, floating_base=floating))
+
+    def bodies(self) -> list[_BodyEntry]:
+        for section in ("robot", "initial", "control"):
+            if section in self.data:
+                self.fail(
+                    section,
+                    "a scene of [[bodies]] gives each body's robot, initial state and control in its "
+                    "own table ([robot], [initial] and [control] are the one-robot form)",
+                )
+        listed = self.tables("bodies")
+        if not listed:
+            self.fail("bodies", "give at least one [[bodies]] table")
+        entries: list[_BodyEntry] = []
+        for i, entry in enumerate(listed):
+            body = self.body(i, entry)
+            twin = next((e for e in entries if e.name == body.name), None)
+            if twin is not None:
+                self.fail(f"{body.key}.name", f"'{body.name}' is also the name of {twin.key}")
+            entries.append(body)
+        return entries
+
+    def body(self, i: int, entry: Any) -> _BodyEntry:
+        key = f"bodies[{i}]"
+        section = self.table("bodies", entry, key)
+        if "name" not in section:
+            self.fail(f"{key}.name", "missing: every body has a name")
+        name = self.string(f"{key}.name", section["name"])
+        if not name or "/" in name:
+            self.fail(f"{key}.name", f"must be a non-empty text without '/', got {shown(name)}")
+        sources = [k for k in (*ROBOT_SOURCES, "shape") if k in section]
+        if len(sources) != 1:
+            self.fail(
+                key,
+                "give exactly one of robot (a name), urdf, mjcf, sdf (a file) or shape"
+                + (f", got {', '.join(sources)}" if sources else ""),
             )
-        name = self.string("robot.name", section["name"])
-        return self.wrap("robot.name", lambda: load_robot(name, package_dirs=dirs, floating_base=floating))
+        position, rpy = (
+            self.array(f"{key}.{k}", section[k], 3) if k in section else None for k in ("position", "rpy")
+        )
+        source: Robot | FreeBody
+        if sources[0] == "shape":
+            source = self.shape(key, name, section)
+        else:
+            source = self.robot_of(key, sources[0], section)
+        placement = None
+        if isinstance(source, Robot) and not source.floating and (position is not None or rpy is not None):
+            x, y, z = np.zeros(3) if position is None else position
+            placement = pose(x, y, z, rpy=None if rpy is None else list(rpy))
+        material = None
+        if "friction" in section or "restitution" in section:
+            friction, restitution = (
+                self.number(f"{key}.{k}", section[k]) if k in section else None
+                for k in ("friction", "restitution")
+            )
+            material = self.wrap(key, lambda: Material(friction, restitution), owner="material")
+        masks = [self.mask(f"{key}.{k}", section.get(k, 1)) for k in ("contype", "conaffinity")]
+        color: tuple[float, float, float, float] | None = None
+        if "color" in section:
+            rgba = self.array(f"{key}.color", section["color"])
+            if len(rgba) not in (3, 4) or np.any((rgba < 0) | (rgba > 1)):
+                self.fail(f"{key}.color", f"must be [r, g, b] or [r, g, b, a] in [0, 1], got {shown(rgba)}")
+            r, g, b, a = map(float, np.r_[rgba, 1.0][:4])  # opaque unless told
+            color = (r, g, b, a)
+        body = Body(
+            source,
+            placement,
+            self_collision=self.boolean(f"{key}.self_collision", section.get("self_collision", False)),
+            material=material,
+            contype=masks[0],
+            conaffinity=masks[1],
+            color=color,
+        )
+        return _BodyEntry(key, name, body, section, position, rpy)
+
+    def mask(self, key: str, value: Any) -> int:
+        if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+            self.fail(key, f"must be an integer bit mask >= 0, got {shown(value)}")
+        return value
+
+    def robot_of(self, key: str, kind: str, section: dict[str, Any]) -> Robot:
+        """The robot of a [[bodies]] table: by ``robot`` name, or from its urdf, mjcf or sdf file."""
+        wrong = next((k for k in SHAPE_KEYS if k in section), None)
+        if wrong is not None:
+            self.fail(f"{key}.{wrong}", "a robot's mass and geometry are its model's; only a shape takes it")
+        floating = section.get("floating")
+        if floating is not None:
+            self.boolean(f"{key}.floating", floating)
+        dirs = self.folders(f"{key}.package_dirs", section.get("package_dirs", []))
+        where = f"{key}.{kind}"
+        source = self.string(where, section[kind]) if kind == "robot" else self.file(where, section[kind])
+        return self.load(where, source, dirs, floating)
+
+    def shape(self, key: str, name: str, section: dict[str, Any]) -> FreeBody:
+        """The free body of a [[bodies]] table that gives a ``shape``."""
+        kind = section["shape"]
+        if kind not in SHAPES:
+            self.fail(f"{key}.shape", f"{shown(kind)} is not one of {', '.join(SHAPES)}")
+        wrong = next((k for k in ROBOT_KEYS if k in section), None)
+        if wrong is not None:
+            self.fail(f"{key}.{wrong}", "a shape is a free body: only a robot takes it")
+        dimensions = SHAPE_DIMENSIONS[kind]
+        required = dimensions[:1] if kind == "mesh" else dimensions
+        needs = " and ".join(required)
+        for k in ("size", "radius", "length", "path", "scale"):
+            if k in section and k not in dimensions:
+                self.fail(f"{key}.{k}", f"a {kind} has {', '.join(dimensions)}, not a {k}")
+        for k in required:
+            if k not in section:
+                self.fail(f"{key}.{k}", f"missing: a {kind} needs {needs}")
+        mass, density = (
+            self.number(f"{key}.{k}", section[k]) if k in section else None for k in ("mass", "density")
+        )
+        if kind == "box":
+            size = self.array(f"{key}.size", section["size"], 3)
+            build = lambda: FreeBody.box(name, list(size), mass=mass, density=density)  # noqa: E731
+        elif kind == "sphere":
+            radius = self.number(f"{key}.radius", section["radius"])
+            build = lambda: FreeBody.sphere(name, radius, mass=mass, density=density)  # noqa: E731
+        elif kind == "mesh":
+            path = self.file(f"{key}.path", section["path"])
+            scale = self.number(f"{key}.scale", section.get("scale", 1.0))
+            build = lambda: FreeBody.mesh(name, str(path), scale=scale, mass=mass, density=density)  # noqa: E731
+        else:
+            radius = self.number(f"{key}.radius", section["radius"])
+            length = self.number(f"{key}.length", section["length"])
+            make = FreeBody.cylinder if kind == "cylinder" else FreeBody.capsule
+            build = lambda: make(name, radius, length, mass=mass, density=density)  # noqa: E731
+        return self.wrap(key, build, owner=name, aliases={"mesh": "path"})
 
     def ground(self) -> Ground | None:
         if "ground" not in self.data:
             return None
         section = self.table("ground")
-        return self.wrap("ground", lambda: Ground(**section), owned=True)
+        return self.wrap("ground", lambda: Ground(**section), owner="ground")
 
     def obstacle(self, i: int, entry: Any) -> Box | Sphere:
         key = f"obstacles[{i}]"
@@ -268,10 +493,10 @@ class _Reader:
         for required in ("name", dimension):
             if required not in section:
                 self.fail(f"{key}.{required}", f"missing: a {kind} needs a name and a {dimension}")
-        self.string(f"{key}.name", section["name"])
+        name = self.string(f"{key}.name", section["name"])
         if kind == "box":
-            return self.wrap(key, lambda: Box(rotation=pin.rpy.rpyToMatrix(rpy), **section), owned=True)
-        return self.wrap(key, lambda: Sphere(**section), owned=True)
+            return self.wrap(key, lambda: Box(rotation=pin.rpy.rpyToMatrix(rpy), **section), owner=name)
+        return self.wrap(key, lambda: Sphere(**section), owner=name)
 
     def bilateral(self, i: int, entry: Any, robot: Robot) -> Anchor | LoopClosure:
         key = f"bilaterals[{i}]"
@@ -317,11 +542,44 @@ class _Reader:
         v = self.array("initial.v", section.get("v", np.zeros(robot.model.nv)), robot.model.nv)
         if "ground_clearance" in section:
             clearance = self.number("initial.ground_clearance", section["ground_clearance"])
-            q = self.wrap("initial.ground_clearance", lambda: place_on_ground(scene, q, clearance))
-        return State(0.0, q, v)
+            q = self.wrap("initial", lambda: place_on_ground(scene, q, clearance))
+        return State(0.0, q, v, scene.world)
 
-    def controller(self, robot: Robot, dt: float) -> Controller:
-        section = self.table("control")
+    def initial_of_bodies(self, scene: Scene, entries: list[_BodyEntry]) -> State:
+        """The world's initial state: each body's configuration, its start pose when it floats, its
+        velocity; then each ``ground_clearance`` applied, in the order of the tables."""
+        q, v = scene.robot.neutral(), np.zeros(scene.robot.model.nv)
+        for e in entries:
+            layout, key, section = scene.bodies[e.name], e.key, e.section
+            robot = layout.robot
+            configuration = section.get("configuration", "neutral")
+            if isinstance(configuration, str):
+                q_b = self.wrap(f"{key}.configuration", partial(robot.configuration, configuration))
+            else:
+                q_b = self.array(f"{key}.configuration", configuration, robot.model.nq)
+            if layout.floating and e.position is not None:
+                q_b[:3] = e.position
+            if layout.floating and e.rpy is not None:
+                q_b[3:7] = pin.Quaternion(pin.rpy.rpyToMatrix(e.rpy)).coeffs()
+            q[layout.q] = q_b
+            v[layout.v] = self.array(f"{key}.velocity", section.get("velocity", v[layout.v]), robot.model.nv)
+        for e in entries:
+            if "ground_clearance" in e.section:
+                clearance = self.number(f"{e.key}.ground_clearance", e.section["ground_clearance"])
+                q = self.wrap(e.key, partial(place_on_ground, scene, q, clearance, e.name))
+        return State(0.0, q, v, scene.world)
+
+    def controllers(self, scene: Scene, entries: list[_BodyEntry], dt: float) -> Controller:
+        """The controller of a scene of bodies: each ``[bodies.control]``'s on its body's state."""
+        own = {
+            e.name: self.controller(f"{e.key}.control", control, scene.bodies[e.name].robot, dt)
+            for e in entries
+            if (control := self.table("control", e.section.get("control", {}), f"{e.key}.control"))
+        }
+        return _per_body(own) if own else zero_torque
+
+    def controller(self, key: str, section: dict[str, Any], robot: Robot, dt: float) -> Controller:
+        """The ``[control]`` table ``section`` (at ``key``), for ``robot``'s joints."""
         kind = section.get("type", "zero")
         nv = robot.model.nv
         actuated = slice(6, nv) if robot.floating else slice(0, nv)
@@ -329,26 +587,45 @@ class _Reader:
             return zero_torque
         if kind == "constant":
             n = nv - 6 if robot.floating else nv
-            tau = self.array("control.tau", section.get("tau"), n)
+            tau = self.array(f"{key}.tau", section.get("tau"), n)
             if np.abs(tau).max(initial=0.0) > MAX_TORQUE:
                 self.fail(
-                    "control.tau", f"beyond any actuator (|tau| <= {MAX_TORQUE:g} N m), got {shown(tau)}"
+                    f"{key}.tau", f"beyond any actuator (|tau| <= {MAX_TORQUE:g} N m), got {shown(tau)}"
                 )
             return constant_torque(tau)
         if kind == "pd":
             target = section.get("target", "neutral")
             if isinstance(target, str):
-                q_ref = self.wrap("control.target", lambda: robot.configuration(target))
+                q_ref = self.wrap(f"{key}.target", lambda: robot.configuration(target))
             else:
-                q_ref = self.array("control.target", target, robot.model.nq)
-            kp = self.number("control.kp", section.get("kp", 0.0))
-            kd = self.number("control.kd", section.get("kd", 0.0))
+                q_ref = self.array(f"{key}.target", target, robot.model.nq)
+            kp = self.number(f"{key}.kp", section.get("kp", 0.0))
+            kd = self.number(f"{key}.kd", section.get("kd", 0.0))
             if kp < 0 or kd < 0:
-                self.fail("control", f"gains must be >= 0, got kp={kp}, kd={kd}")
-            implicit = self.boolean("control.implicit", section.get("implicit", True))
+                self.fail(key, f"gains must be >= 0, got kp={kp}, kd={kd}")
+            implicit = self.boolean(f"{key}.implicit", section.get("implicit", True))
             return PDHold(robot.model, q_ref, kp, kd, actuated, dt if implicit else None)
-        self.fail("control.type", f"{shown(kind)} is not one of zero, constant, pd")
+        self.fail(f"{key}.type", f"{shown(kind)} is not one of zero, constant, pd")
         raise AssertionError  # unreachable
+
+
+def _per_body(controllers: dict[str, Controller]) -> Controller:
+    """One controller of the bodies' own: each called on its body's state, their torques and damping
+    given per body (``{body: tau_b}``)."""
+
+    def control(state: State | BodyState) -> Command:
+        assert isinstance(state, State)
+        tau: dict[str, Any] = {}
+        damping: dict[str, Any] = {}
+        for name, controller in controllers.items():
+            out = command(controller(state.body(name)))
+            if out.tau is not None:
+                tau[name] = out.tau
+            if out.damping is not None:
+                damping[name] = out.damping
+        return Command(tau or None, damping or None)
+
+    return control
 
 
 def _is_number(value: Any) -> bool:
@@ -356,23 +633,28 @@ def _is_number(value: Any) -> bool:
     return isinstance(value, (int, float, np.integer, np.floating)) and is_real(value)
 
 
-def place_on_ground(scene: Scene, q: np.ndarray, clearance: float) -> np.ndarray:
+def place_on_ground(scene: Scene, q: np.ndarray, clearance: float, body: str | None = None) -> np.ndarray:
     """Shift a floating base vertically so that its lowest declared contact with the ground is
-    ``clearance`` above it [m]."""
+    ``clearance`` above it [m]: the base of ``body`` (default: the first body, the one robot's)."""
     from .collision import ContactDetector
 
-    robot = scene.robot
-    if not robot.floating:
+    layout = scene.world.body(body) if body is not None else next(iter(scene.bodies.values()))
+    if not layout.floating:
         raise InvalidOptions("ground_clearance", "needs a floating-base robot")
     grounds = [o for o in scene.obstacles if isinstance(o, Ground)]
     if not grounds:
         raise InvalidOptions("ground_clearance", "needs a [ground]")
+    robot = scene.robot
     data = robot.model.createData()
     pin.forwardKinematics(robot.model, data, q)
     contacts = ContactDetector(scene, margin=1e3).detect(data)
-    gaps = [gap for gap, obstacle in zip(contacts.gap, contacts.obstacle) if obstacle == grounds[0].name]
+    gaps = [
+        gap
+        for gap, geometry, obstacle in zip(contacts.gap, contacts.geometry, contacts.obstacle)
+        if obstacle == grounds[0].name and scene.world.body_of(geometry) == layout.name
+    ]
     if not gaps:
         raise InvalidOptions("ground_clearance", "no declared contact pair involves the ground")
     q = q.copy()
-    q[:3] += (clearance - min(gaps)) * np.asarray(grounds[0].normal)
+    q[layout.q.start : layout.q.start + 3] += (clearance - min(gaps)) * np.asarray(grounds[0].normal)
     return q
