@@ -215,6 +215,57 @@ def _unpacked(packed, m, nv):  # type: ignore[no-untyped-def]
     )
 
 
+def pyramid_rows(
+    joint_jacobians: np.ndarray,
+    masks: np.ndarray,
+    contacts: Contacts,
+    ctx: Context,
+    drift: np.ndarray,
+    iterate: tuple[np.ndarray, np.ndarray, np.ndarray],
+    cone: tuple[np.ndarray, np.ndarray, bool],
+) -> tuple[np.ndarray, ...]:
+    """Every contact's rows at ``ctx``'s level (:func:`_pyramids`, compiled): (rows (R, nv), bound (R,),
+    the packed buffer :class:`ContactBatch` reads, starts (m + 1,), sliding contacts or None, their
+    friction's generalized force or None).
+
+    Args:
+        joint_jacobians, masks: what :func:`point_jacobians` reads.
+        drift: Jdot v of the contacts at the acceleration level, else zeros, (m, 3).
+        iterate: the lagged (slip (m, 3), stops (m,), normal forces (m,)) of the friction iteration.
+        cone: (cos, sin) of the pyramid's facet directions, and whether the basis is fixed (the plain
+            pyramid, no De Saxce shift).
+    """
+    m, nv, options = len(contacts), len(ctx.v), ctx.options
+    most = m * len(cone[0])  # at most m facets rows
+    rows, bound = np.empty((most, nv)), np.empty(most)
+    packed, starts = np.empty(3 * m * nv + 3 * most + 6 * m), np.empty(m + 1, np.int64)
+    total, sliding, force = _pyramids(
+        joint_jacobians,
+        masks,
+        contacts.joint,
+        contacts.other_joint,
+        contacts.point,
+        ctx.v,
+        ctx.x_free,
+        drift,
+        contacts.normal,
+        contacts.gap,
+        contacts.friction,
+        contacts.restitution,
+        *iterate,
+        LEVELS[ctx.level],
+        *cone,
+        (options.dt, options.stabilisation, options.restitution_threshold),
+        rows,
+        bound,
+        packed,
+        starts,
+    )
+    if total < most:  # frictionless or sliding contacts: fewer rows
+        rows, bound, packed = rows[:total], bound[:total], packed[: 3 * m * nv + 3 * total + 6 * m]
+    return rows, bound, packed, starts, sliding, force
+
+
 @njit(cache=True)
 def _pyramids(  # type: ignore[no-untyped-def]
     joint_jacobians,
@@ -367,7 +418,7 @@ class ContactModule(ConstraintModule[ContactBatch]):
         contacts = ctx.contacts
         if not len(contacts):
             return None
-        level, options = ctx.level, ctx.options
+        level = ctx.level
         lagged: FrictionIterate = ctx.lagged.get(id(self), _FIRST_PASS)
         if level != "velocity":
             J = point_jacobians(ctx.data, self.masks, contacts.joint, contacts.other_joint, contacts.point)
@@ -379,37 +430,15 @@ class ContactModule(ConstraintModule[ContactBatch]):
         m = len(contacts)
         no_slip, no_stops, no_force, no_drift = self._blank(m)
         drift = _drifts(ctx, contacts, self.radii) if level == "acceleration" else no_drift
-        nv, most = len(ctx.v), m * self.facets  # at most m facets rows
-        rows, bound = np.empty((most, nv)), np.empty(most)
-        packed, starts = np.empty(3 * m * nv + 3 * most + 6 * m), np.empty(m + 1, np.int64)
-        total, sliding, force = _pyramids(
-            self._jacobians(ctx.data),
-            self.masks,
-            contacts.joint,
-            contacts.other_joint,
-            contacts.point,
-            ctx.v,
-            ctx.x_free,
-            drift,
-            contacts.normal,
-            contacts.gap,
-            contacts.friction,
-            contacts.restitution,
+        cone = (self.cos, self.sin, self.mode == "pyramid")
+        iterate = (
             no_slip if lagged.slip is None else lagged.slip,
             no_stops if lagged.stops is None else lagged.stops,
             no_force if lagged.normal is None else lagged.normal,
-            LEVELS[level],
-            self.cos,
-            self.sin,
-            self.mode == "pyramid",
-            (options.dt, options.stabilisation, options.restitution_threshold),
-            rows,
-            bound,
-            packed,
-            starts,
         )
-        if total < most:  # frictionless or sliding contacts: fewer rows
-            rows, bound, packed = rows[:total], bound[:total], packed[: 3 * m * nv + 3 * total + 6 * m]
+        rows, bound, packed, starts, sliding, force = pyramid_rows(
+            self._jacobians(ctx.data), self.masks, contacts, ctx, drift, iterate, cone
+        )
         # contacts with a full pyramid refine their De Saxce shift at the velocity and impulse levels
         shifts = level != "acceleration" and self.mode != "pyramid"
 
