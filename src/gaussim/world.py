@@ -9,6 +9,7 @@ notion of bodies, and the bodies that do not touch one another evolve as they wo
 
 from __future__ import annotations
 
+import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
@@ -438,7 +439,8 @@ def _robot(name: str, spec: Body) -> Robot:
                 f"bodies.{name}.placement", "a free body is placed by its configuration (Simulator.reset)"
             )
         return source.robot()
-    robot = as_robot(source, name)
+    # a robot keeps its own name (inspect, logs); an in-memory model is named after its body
+    robot = as_robot(source, None if isinstance(source, Robot | str | os.PathLike) else name)
     if spec.placement is not None:
         if robot.floating:
             raise InvalidOptions(
