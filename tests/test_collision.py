@@ -12,6 +12,7 @@ import pytest
 import gaussim
 from gaussim.bench.cases import two_boxes
 from gaussim.collision import PATCH_MIN_EXTENT, PATCH_TOLERANCE, ContactDetector
+from gaussim.collision.ground import GroundHulls
 
 from .conftest import at_height, run
 
@@ -75,7 +76,7 @@ def test_a_sphere_on_ground_matches_coal(normal):
     ball = gaussim.load_robot("ball", floating_base=True)
     ground = gaussim.Ground(normal=normal, height=-2.0)
     detector = ContactDetector(gaussim.Scene(ball, ground=ground), 10.0)
-    assert detector.others == [] and len(detector.hulls.pairs) == 1
+    assert [type(r) for r in detector.routines] == [GroundHulls] and len(detector.routines[0].pairs) == 1
     pair = detector.pairs[0]
     for data in _random_poses(ball, 50, seed=1):
         contacts = detector.detect(data)
@@ -144,9 +145,9 @@ def _checking_skips(detector: ContactDetector, data: pin.Data) -> list[bool]:
         needed = cover(*args)
         looks.append(not needed)
         if not needed:
-            clearance = detector.clearance
+            clearance = detector.schedule.clearance
             assert len(detector.detect(data)) == 0, "a skipped detection hid a contact"
-            detector.clearance = clearance  # the skipping goes on as it would have
+            detector.schedule.clearance = clearance  # the skipping goes on as it would have
         return needed
 
     detector.cover = checked  # type: ignore[method-assign]
@@ -200,7 +201,7 @@ def test_a_state_from_elsewhere_is_detected_afresh(ball):
     contact at once: the detector forgets what the flight let it skip."""
     sim = gaussim.Simulator(gaussim.Scene(ball, ground=gaussim.Ground()))
     state = run(sim, sim.reset(at_height(ball, 5.0)), 20)
-    assert not sim.last_step.contacts and sim.detector.clearance > 4.0
+    assert not sim.last_step.contacts and sim.detector.schedule.clearance > 4.0
     landed = gaussim.State(state.t, at_height(ball, RADIUS - 1e-4), np.zeros(ball.model.nv))
     sim.step(landed)
     assert len(sim.last_step.contacts) == 1 and sim.last_step.contacts[0].normal_force > 0
@@ -214,7 +215,7 @@ def test_detect_always_looks(box):
     q = box.neutral()
     q[2] = 5.0
     pin.forwardKinematics(model, data, q)
-    assert len(detector.detect(data)) == 0 and detector.clearance > 4.0
+    assert len(detector.detect(data)) == 0 and detector.schedule.clearance > 4.0
     q[2] = float(np.asarray(box.collision_model.geometryObjects[0].geometry.halfSide)[2])
     pin.forwardKinematics(model, data, q)
     assert len(detector.detect(data)) == 4
@@ -226,12 +227,12 @@ def test_the_reach_of_the_free_motion_bounds_the_travel(solo12):
     pair; near the ground (clearance within twice that of the base margin) the exact one."""
     feet = [(f"{leg}_FOOT_0", "ground") for leg in FEET]
     sim = gaussim.Simulator(gaussim.Scene(solo12, ground=gaussim.Ground(), contacts=feet))
-    coarse, exact = (ContactDetector(sim.scene, sim.options.contact_margin) for _ in range(2))
+    coarse, exact = (ContactDetector(sim.scene, sim.options.contact_margin).schedule for _ in range(2))
     rng, dt, q = np.random.default_rng(3), sim.options.dt, solo12.configuration("standing")
     for _ in range(50):
         v = rng.normal(size=solo12.model.nv)
-        sim.dynamics.free_motion(q, v, np.zeros(12), dt)  # the first call poses the problem; then ABA
-        x = sim.dynamics.free_motion(q, v, rng.normal(size=12), dt)
+        sim.dynamics.free_motion(q, v, sim.actuation.torque(np.zeros(12)), dt)  # poses the problem; then ABA
+        x = sim.dynamics.free_motion(q, v, sim.actuation.torque(rng.normal(size=12)), dt)
         reach = sim.dynamics.reach
         assert reach == pytest.approx(np.abs(v).sum() + np.abs(x).sum(), rel=1e-12)
         for clearance, same in ((100.0, False), (coarse.base_margin + 1e-3, True)):
