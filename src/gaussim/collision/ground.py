@@ -15,7 +15,7 @@ import pinocchio as pin
 from numba import njit
 
 from .contacts import PATCH_MIN_EXTENT, PATCH_TOLERANCE, Piece, one_pair
-from .pairs import Pair
+from .pairs import JointPlacements, Pair
 
 # A flat face on the ground is supported by the vertices extreme along these many directions of
 # the tangent plane (every 360/n degrees): the corners of a box, the outline of a sole.
@@ -74,15 +74,14 @@ class GroundHulls:
         self.index = np.array(index, dtype=int)
         self.pairs = [pairs[k] for k in index]
         self.joints = [pair.joint for pair in self.pairs]
+        self.placements = JointPlacements(self.joints)
         self.hulls = _hulls(self.pairs)
         self.directions = [_support_directions(np.asarray(p.obstacle.normal)) for p in self.pairs]  # type: ignore[union-attr]
-        self._data: pin.Data | None = None
-        self._views: tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...]] = ((), ())
 
     def detect(self, data: pin.Data, margin: float) -> tuple[list[Piece], float]:
         """The contacts of the hulls within ``margin`` [m] of the ground at the placements held in
         ``data``, and the least gap of all the hulls [m]."""
-        one, wide, least = touching(*self._placements(data), self.hulls, margin, self.index)
+        one, wide, least = touching(*self.placements(data), self.hulls, margin, self.index)
         pieces = [one] if len(one[0]) else []
         for h in wide.tolist():
             points, gaps = self._on_ground(h, data.oMi[self.joints[h]].homogeneous, margin)
@@ -103,18 +102,6 @@ class GroundHulls:
             return world[deepest : deepest + 1], heights[deepest : deepest + 1]
         chosen = sorted(set(np.argmax(world @ self.directions[hull].T, axis=0).tolist()))
         return world[chosen], heights[chosen]
-
-    def _placements(self, data: pin.Data) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...]]:
-        """(rotations, translations) of the hulls' joints: views of Pinocchio's arrays inside
-        ``data.oMi`` itself, which follow every kinematics pass on that data (made once per data)."""
-        if self._data is not data:
-            oMi = data.oMi
-            self._views = (
-                tuple(oMi[j].rotation for j in self.joints),
-                tuple(oMi[j].translation for j in self.joints),
-            )
-            self._data = data  # keeps the memory the views read alive
-        return self._views
 
 
 def touching(

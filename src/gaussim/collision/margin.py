@@ -72,11 +72,10 @@ class MarginSchedule:
 
 def _pair_levers(model: pin.Model, pair: Pair) -> np.ndarray:
     """How fast (at most) the pair's two bounding spheres approach per unit |v_k|, shape (nv,)."""
-    levers = _speed_levers(model, pair.joint, pair.local.act(pair.center), pair.radius)
+    levers = _speed_levers(model, pair.joint, pair.center, pair.radius)
     if pair.other_local is None:
         return levers
-    other = pair.other_local.act(pair.obstacle_local_center)
-    return levers + _speed_levers(model, pair.other_joint, other, pair.obstacle_radius)
+    return levers + _speed_levers(model, pair.other_joint, pair.obstacle_center, pair.obstacle_radius)
 
 
 def _speed_levers(model: pin.Model, joint: int, center: np.ndarray, radius: float) -> np.ndarray:

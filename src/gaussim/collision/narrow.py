@@ -9,14 +9,14 @@ import pinocchio as pin
 from ..exceptions import ContactError
 from ..linalg import finite
 from .contacts import PATCH_MIN_EXTENT, PATCH_TOLERANCE, Piece, one_pair
-from .pairs import Pair
+from .pairs import JointPlacements, Pair
 
 
 class NarrowPhase:
     """coal's narrow phase (the deepest point, the normal and the gap) and its contact patch (the
     points within PATCH_TOLERANCE of the support plane), pair by pair: a patch narrower than
-    PATCH_MIN_EXTENT is one point, a wider one contributes its points. Pairs whose bounding spheres
-    are farther apart than the margin skip coal.
+    PATCH_MIN_EXTENT is one point, a wider one contributes its points. Only the pairs whose bounding
+    spheres are within the margin reach coal (:class:`BoundingSpheres`, all pairs at once).
 
     Args:
         pairs: the declared pairs of the scene.
@@ -35,19 +35,22 @@ class NarrowPhase:
         self.patch_request.setPatchTolerance(PATCH_TOLERANCE)
         self.result = coal.CollisionResult()
         self.patch_result = coal.ContactPatchResult(self.patch_request)
+        self.spheres = BoundingSpheres(self.pairs)
 
     def detect(self, data: pin.Data, margin: float) -> tuple[list[Piece], float]:
         """The contacts of the pairs within ``margin`` [m] at the placements held in ``data``, and a
         lower bound on every pair's gap [m]."""
         if self.request.security_margin != margin:
             self.request.security_margin = self.retry_request.security_margin = margin
+        apart = self.spheres.gaps(data)
+        far = apart > margin
+        clearance = float(apart[far].min(initial=np.inf))
         pieces: list[Piece] = []
-        clearance = np.inf
-        for k, pair in zip(self.index, self.pairs):
-            hit, least = self.collide(pair, data)
+        for i in np.flatnonzero(~far).tolist():
+            hit, least = self.collide(self.pairs[i], data)
             clearance = min(clearance, least)
             if hit is not None:
-                pieces.append(one_pair(k, *hit))
+                pieces.append(one_pair(self.index[i], *hit))
         return pieces, clearance
 
     def collide(
@@ -57,13 +60,7 @@ class NarrowPhase:
         None when the pair is farther apart than the margin; and a lower bound on its gap [m]."""
         placement = data.oMi[pair.joint] * pair.local
         if pair.other_local is not None:
-            other = data.oMi[pair.other_joint] * pair.other_local
-            pair.obstacle_tf = coal.Transform3s(other)
-            pair.obstacle_center = other.act(pair.obstacle_local_center)
-        if pair.obstacle_radius < np.inf:  # coal's half-space test is as cheap as a bounding-sphere test
-            apart = _sphere_gap(pair, placement)
-            if apart > self.request.security_margin:
-                return None, apart
+            pair.obstacle_tf = coal.Transform3s(data.oMi[pair.other_joint] * pair.other_local)
         for request in (self.request, self.retry_request):
             self.result.clear()
             if not coal.collide(
@@ -124,8 +121,29 @@ def _request(variant: coal.GJKVariant) -> coal.CollisionRequest:
     return request
 
 
-def _sphere_gap(pair: Pair, placement: pin.SE3) -> float:
-    """The gap of the pair's bounding spheres, a lower bound on its own [m] (far pairs skip the
-    narrow phase)."""
-    distance = np.linalg.norm(placement.act(pair.center) - pair.obstacle_center)
-    return float(distance - pair.radius - pair.obstacle_radius)
+class BoundingSpheres:
+    """The broad phase: the gaps of the P pairs' bounding spheres, lower bounds on their own, all at
+    once (a pile of objects has a pair for every two of them, most of them far apart).
+
+    Args:
+        pairs: the P pairs; a ground's sphere is infinite (its pairs always reach coal, whose
+            half-space test is as cheap).
+    """
+
+    def __init__(self, pairs: list[Pair]) -> None:
+        sides = np.array([[p.joint, p.other_joint] for p in pairs], dtype=int).reshape(-1, 2)
+        # the joints whose placements are read, and where each pair's two sides find theirs
+        joints, side = np.unique(sides, return_inverse=True)
+        self.placements, self.side = JointPlacements(joints.tolist()), side.reshape(-1, 2)
+        self.centers = np.array([[p.center, p.obstacle_center] for p in pairs]).reshape(-1, 2, 3)
+        self.radius = np.array([p.radius for p in pairs])
+        self.obstacle_radius = np.array([p.obstacle_radius for p in pairs])
+
+    def gaps(self, data: pin.Data) -> np.ndarray:
+        """The spheres' gaps at the joint placements held in ``data``, shape (P,) [m] (-inf against a
+        ground)."""
+        rotations, translations = self.placements(data)
+        R, p = np.array(rotations)[self.side], np.array(translations)[self.side]  # (P, 2, 3, 3), (P, 2, 3)
+        world = np.einsum("psij,psj->psi", R, self.centers) + p
+        d = world[:, 0] - world[:, 1]
+        return np.sqrt(np.einsum("pi,pi->p", d, d)) - self.radius - self.obstacle_radius

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import coal
 import numpy as np
+import pinocchio as pin
 
 from ..scene import Box, ContactPair, Ground, Scene, Sphere
 
@@ -20,11 +21,9 @@ class Pair:
         other_joint, other_local: the joint carrying that geometry (else 0, the world) and its
             placement in that joint's frame (else None).
         obstacle_tf: the obstacle's placement in the world (a robot geometry's is set per step).
-        center, radius: the geometry's bounding sphere, in the shape's frame, (3,) [m], [m].
-        obstacle_local_center, obstacle_radius: the obstacle's, in its shape's frame (3,) [m]; a
-            ground's radius is infinite.
-        obstacle_center: the obstacle's bounding-sphere centre in the world (a robot geometry's is
-            set per step) (3,) [m].
+        center, radius: the geometry's bounding sphere, in the frame of ``joint``, (3,) [m], [m].
+        obstacle_center, obstacle_radius: the obstacle's, in the frame of ``other_joint`` (the world
+            for a fixed obstacle) (3,) [m]; a ground's radius is infinite.
         friction, restitution: the pair's coefficients.
     """
 
@@ -45,23 +44,23 @@ class Pair:
             self.obstacle_shape = convex(other.geometry)
             self.other_joint, self.other_local = int(other.parentJoint), other.placement
             self.obstacle_tf = coal.Transform3s()
+            frame = other.placement  # where the obstacle sits in the frame of other_joint
         else:
             obstacle = scene.obstacles[pair.obstacle]  # type: ignore[index]
             self.obstacle = obstacle
             self.obstacle_name = obstacle.name
             self.obstacle_shape = obstacle.shape()
             self.obstacle_tf = coal.Transform3s(obstacle.placement())
+            frame = obstacle.placement()
+        self.center = self.local.act(np.asarray(self.shape.aabb_center))
         self.radius = self.shape.aabb_radius
-        self.center = np.asarray(self.shape.aabb_center)
         if isinstance(self.obstacle, Ground):
             self.obstacle_radius = np.inf
             self.obstacle_center = np.zeros(3)
         else:
             self.obstacle_shape.computeLocalAABB()
             self.obstacle_radius = self.obstacle_shape.aabb_radius
-            self.obstacle_local_center = np.asarray(self.obstacle_shape.aabb_center)
-            if self.obstacle is not None:
-                self.obstacle_center = self.obstacle.placement().act(self.obstacle_local_center)
+            self.obstacle_center = frame.act(np.asarray(self.obstacle_shape.aabb_center))
         self.names = [f"{self.name}#0"]  # contact names "name#k", grown on demand
 
     def contact_names(self, count: int) -> list[str]:
@@ -76,3 +75,29 @@ def convex(shape: coal.CollisionGeometry) -> coal.CollisionGeometry:
     shape = shape.convex if isinstance(shape, coal.BVHModelBase) else shape
     shape.computeLocalAABB()
     return shape
+
+
+class JointPlacements:
+    """The placements of some joints in the world as (rotations (3, 3), translations (3,)): views of
+    Pinocchio's arrays inside ``data.oMi`` itself, which follow every kinematics pass on that data
+    (made once per data).
+
+    Args:
+        joints: the joints, in the order their placements are given.
+    """
+
+    def __init__(self, joints: list[int]) -> None:
+        self.joints = joints
+        self._data: pin.Data | None = None
+        self._views: tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...]] = ((), ())
+
+    def __call__(self, data: pin.Data) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...]]:
+        """The joints' (rotations, translations) in ``data``."""
+        if self._data is not data:
+            oMi = data.oMi
+            self._views = (
+                tuple(oMi[j].rotation for j in self.joints),
+                tuple(oMi[j].translation for j in self.joints),
+            )
+            self._data = data  # keeps the memory the views read alive
+        return self._views
