@@ -12,6 +12,8 @@ import pytest
 import gaussim
 from gaussim.bench.cases import two_boxes
 from gaussim.collision import PATCH_MIN_EXTENT, PATCH_TOLERANCE, ContactDetector
+from gaussim.collision.ground import GroundHulls
+from gaussim.collision.narrow import NarrowPhase
 
 from .conftest import at_height, run
 
@@ -75,7 +77,7 @@ def test_a_sphere_on_ground_matches_coal(normal):
     ball = gaussim.load_robot("ball", floating_base=True)
     ground = gaussim.Ground(normal=normal, height=-2.0)
     detector = ContactDetector(gaussim.Scene(ball, ground=ground), 10.0)
-    assert detector.others == [] and len(detector.hulls.pairs) == 1
+    assert [type(r) for r in detector.routines] == [GroundHulls] and len(detector.routines[0].pairs) == 1
     pair = detector.pairs[0]
     for data in _random_poses(ball, 50, seed=1):
         contacts = detector.detect(data)
@@ -133,6 +135,86 @@ def test_box_on_box_face_to_face_gives_a_finite_contact(tmp_path):
     assert np.all(np.abs(contacts.gap) < 1e-9)
 
 
+def _sphere(shape: coal.CollisionGeometry, placement: pin.SE3) -> tuple[np.ndarray, float]:
+    """The world centre and radius of coal's bounding sphere of ``shape`` at ``placement``."""
+    shape = shape.convex if isinstance(shape, coal.BVHModelBase) else shape
+    shape.computeLocalAABB()
+    return placement.act(np.asarray(shape.aabb_center)), shape.aabb_radius
+
+
+def test_the_broad_phase_bounds_every_gap_and_sends_only_near_pairs_to_coal(monkeypatch):
+    """Free objects of every shape, a pendulum's bob (off its joint) and a table at random poses: the
+    broad phase's gaps are the bounding spheres' at Pinocchio's geometry placements, never more than
+    coal's distance, and coal sees exactly the pairs within the margin (and every pair with the
+    ground)."""
+    shapes = [
+        gaussim.FreeBody.box("box", (0.2, 0.1, 0.05), mass=1.0),
+        gaussim.FreeBody.sphere("ball", 0.06, mass=1.0),
+        gaussim.FreeBody.capsule("capsule", 0.03, 0.15, mass=1.0),
+        gaussim.FreeBody.cylinder("can", 0.05, 0.1, mass=1.0),
+    ]
+    table = gaussim.Box("table", size=(0.3, 0.3, 0.1), position=(0.2, 0.0, 0.05))
+    bodies: dict[str, object] = {body.name: body for body in shapes}
+    bodies["pendulum"] = gaussim.Body(gaussim.load_robot("pendulum"), placement=gaussim.pose(z=1.1))
+    scene = gaussim.Scene(bodies=bodies, ground=gaussim.Ground(), obstacles=[table])
+    margin = 0.05
+    detector = ContactDetector(scene, margin)
+    (narrow,) = [r for r in detector.routines if isinstance(r, NarrowPhase)]
+    robot, rng = scene.robot, np.random.default_rng(4)
+    model, data, geometry_data = robot.model, robot.model.createData(), robot.collision_model.createData()
+    collide, seen = NarrowPhase.collide, []
+
+    def counted(self, pair, data):
+        seen.append(pair.name)
+        return collide(self, pair, data)
+
+    monkeypatch.setattr(NarrowPhase, "collide", counted)
+    compared = near = 0
+    for _ in range(200):
+        q = robot.neutral()
+        for layout in scene.bodies.values():
+            part = q[layout.q]
+            if not layout.floating:  # the pendulum, swinging through the objects
+                part[:] = rng.uniform(-0.6, 0.6, len(part))
+                continue
+            part[:3] = rng.uniform((-0.3, -0.3, 0.0), (0.3, 0.3, 0.4))
+            part[3:7] = pin.Quaternion(*rng.normal(size=4)).normalized().coeffs()
+        pin.updateGeometryPlacements(model, data, robot.collision_model, geometry_data, q)
+        seen.clear()
+        detector.detect(data)
+        apart = narrow.spheres.gaps(data)
+        for pair, gap in zip(narrow.pairs, apart):
+            if pair.obstacle_radius == np.inf:  # the ground: coal's half-space test
+                assert gap == -np.inf and pair.name in seen
+                continue
+            a = robot.collision_model.getGeometryId(pair.geometry)
+            center, radius = _sphere(pair.shape, geometry_data.oMg[a])
+            if pair.other_local is None:
+                placement, other_shape = table.placement(), table.shape()
+            else:
+                b = robot.collision_model.getGeometryId(pair.obstacle_name)
+                placement, other_shape = geometry_data.oMg[b], pair.obstacle_shape
+            other_center, other_radius = _sphere(other_shape, placement)
+            assert gap == pytest.approx(
+                np.linalg.norm(center - other_center) - radius - other_radius, abs=1e-12
+            )
+            result = coal.DistanceResult()
+            distance = coal.distance(
+                pair.shape,
+                coal.Transform3s(geometry_data.oMg[a]),
+                pair.obstacle_shape,
+                coal.Transform3s(placement),
+                coal.DistanceRequest(),
+                result,
+            )
+            if distance > 0:
+                assert gap <= distance + 1e-12
+                compared += 1
+            assert (pair.name in seen) == (gap <= margin)
+            near += gap <= margin
+    assert compared > 1000 and 100 < near < compared, (compared, near)
+
+
 def _checking_skips(detector: ContactDetector, data: pin.Data) -> list[bool]:
     """Make ``detector`` check each detection the step skips by one at the same placements (``data``,
     the step's: it must find nothing); returns a list that gets True for each skipped detection and
@@ -144,9 +226,9 @@ def _checking_skips(detector: ContactDetector, data: pin.Data) -> list[bool]:
         needed = cover(*args)
         looks.append(not needed)
         if not needed:
-            clearance = detector.clearance
+            clearance = detector.schedule.clearance
             assert len(detector.detect(data)) == 0, "a skipped detection hid a contact"
-            detector.clearance = clearance  # the skipping goes on as it would have
+            detector.schedule.clearance = clearance  # the skipping goes on as it would have
         return needed
 
     detector.cover = checked  # type: ignore[method-assign]
@@ -200,7 +282,7 @@ def test_a_state_from_elsewhere_is_detected_afresh(ball):
     contact at once: the detector forgets what the flight let it skip."""
     sim = gaussim.Simulator(gaussim.Scene(ball, ground=gaussim.Ground()))
     state = run(sim, sim.reset(at_height(ball, 5.0)), 20)
-    assert not sim.last_step.contacts and sim.detector.clearance > 4.0
+    assert not sim.last_step.contacts and sim.detector.schedule.clearance > 4.0
     landed = gaussim.State(state.t, at_height(ball, RADIUS - 1e-4), np.zeros(ball.model.nv))
     sim.step(landed)
     assert len(sim.last_step.contacts) == 1 and sim.last_step.contacts[0].normal_force > 0
@@ -214,7 +296,7 @@ def test_detect_always_looks(box):
     q = box.neutral()
     q[2] = 5.0
     pin.forwardKinematics(model, data, q)
-    assert len(detector.detect(data)) == 0 and detector.clearance > 4.0
+    assert len(detector.detect(data)) == 0 and detector.schedule.clearance > 4.0
     q[2] = float(np.asarray(box.collision_model.geometryObjects[0].geometry.halfSide)[2])
     pin.forwardKinematics(model, data, q)
     assert len(detector.detect(data)) == 4
@@ -226,7 +308,7 @@ def test_the_reach_of_the_free_motion_bounds_the_travel(solo12):
     pair; near the ground (clearance within twice that of the base margin) the exact one."""
     feet = [(f"{leg}_FOOT_0", "ground") for leg in FEET]
     sim = gaussim.Simulator(gaussim.Scene(solo12, ground=gaussim.Ground(), contacts=feet))
-    coarse, exact = (ContactDetector(sim.scene, sim.options.contact_margin) for _ in range(2))
+    coarse, exact = (ContactDetector(sim.scene, sim.options.contact_margin).schedule for _ in range(2))
     rng, dt, q = np.random.default_rng(3), sim.options.dt, solo12.configuration("standing")
     for _ in range(50):
         v = rng.normal(size=solo12.model.nv)

@@ -306,7 +306,7 @@ def test_velocity_scheme_closes_a_fast_approach_at_any_step(ball, dt):
     run(sim, sim.reset(at_height(ball, RADIUS + 1.0)), round(2.0 / dt), each=lambda s: lowest.append(s.q[2]))
     assert min(lowest) - RADIUS > -1e-9
     assert abs(lowest[-1] - RADIUS) < 1e-6
-    assert sim.detector.margin <= 3 * (sim.options.contact_margin + G * dt**2)
+    assert sim.detector.schedule.margin <= 3 * (sim.options.contact_margin + G * dt**2)
 
 
 def _slips_reference(J, slip, starts, x, normal, mu, tolerance):

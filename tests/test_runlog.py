@@ -194,9 +194,9 @@ def test_cli_simulation_failure_exits_1_and_keeps_the_log(tmp_path):
 def test_cli_contact_failure_exits_1_and_keeps_the_log(tmp_path, monkeypatch, capsys):
     """Detection that gives no usable contact midway is a simulation failure, not bad input."""
     from gaussim.cli import main
-    from gaussim.collision import ContactDetector
+    from gaussim.collision.narrow import NarrowPhase
 
-    collide = ContactDetector._collide
+    collide = NarrowPhase.collide
     calls = []
 
     def failing(self, pair, data):  # the 30th narrow phase fails, as coal's NaN normal did
@@ -207,7 +207,7 @@ def test_cli_contact_failure_exits_1_and_keeps_the_log(tmp_path, monkeypatch, ca
             )
         return collide(self, pair, data)
 
-    monkeypatch.setattr(ContactDetector, "_collide", failing)
+    monkeypatch.setattr(NarrowPhase, "collide", failing)
     out = tmp_path / "r.npz"
     assert main(["run", str(SCENES / "box_stack.toml"), "--out", str(out), "--quiet"]) == 1
     stderr = capsys.readouterr().err

@@ -1,0 +1,77 @@
+"""The contact record the detection fills, and what a contact patch is."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+# Surface points within this distance of the support plane belong to a contact patch [m].
+PATCH_TOLERANCE = 1e-3
+# A contact patch narrower than this is one point (the rounded foot of a mesh hull touches on a
+# ring of nearby vertices; several points there would only add redundant rows) [m].
+PATCH_MIN_EXTENT = 2e-2
+
+
+@dataclass
+class Contacts:
+    """The m contact points of one step, as arrays (one entry per point).
+
+    Attributes:
+        names: ``"geometry/obstacle#k"``, stable while a patch keeps its size.
+        geometry, obstacle: robot collision geometry and obstacle of each point.
+        joint: Pinocchio joint carrying the robot geometry, shape (m,).
+        other_joint: joint carrying the obstacle when it is a robot geometry, else 0 (the world), (m,).
+        point: points on the robot surface, world frame, shape (m, 3) [m].
+        normal: unit normals from the obstacle towards the robot, shape (m, 3).
+        gap: signed distances along the normal, negative when penetrating, shape (m,) [m].
+        friction, restitution: coefficients of the obstacle, shape (m,).
+    """
+
+    names: list[str]
+    geometry: list[str]
+    obstacle: list[str]
+    joint: np.ndarray
+    other_joint: np.ndarray
+    point: np.ndarray
+    normal: np.ndarray
+    gap: np.ndarray
+    friction: np.ndarray
+    restitution: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+    def select(self, keep: np.ndarray) -> Contacts:
+        """The contacts where the boolean mask ``keep`` (m,) is true."""
+        chosen = np.flatnonzero(keep).tolist()
+        return Contacts(
+            [self.names[i] for i in chosen],
+            [self.geometry[i] for i in chosen],
+            [self.obstacle[i] for i in chosen],
+            self.joint[keep],
+            self.other_joint[keep],
+            self.point[keep],
+            self.normal[keep],
+            self.gap[keep],
+            self.friction[keep],
+            self.restitution[keep],
+        )
+
+
+NO_CONTACTS = Contacts(
+    [], [], [], np.zeros(0, int), np.zeros(0, int), *(np.zeros((0, 3)),) * 2, *(np.zeros(0),) * 3
+)
+
+
+# Contact points a routine found, k of them, before the driver gathers them into Contacts: the
+# declared pair of each (its index in Scene.pairs) (k,), the points on the robot surface, world frame
+# (k, 3) [m], the unit normals from the obstacle towards the robot (k, 3), the gaps (k,) [m]. A plain
+# tuple: a step builds one per touching pair.
+Piece = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+
+
+def one_pair(pair: int, normal: np.ndarray, point: np.ndarray, gap: np.ndarray) -> Piece:
+    """The :data:`Piece` of one pair's points (k, 3) and gaps (k,), all with the same normal (3,)."""
+    count = len(point)
+    return np.full(count, pair), point, np.repeat(normal[None, :], count, axis=0), gap

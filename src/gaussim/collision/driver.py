@@ -1,0 +1,124 @@
+"""The detection driver: each declared pair goes to the routine of its geometry-pair type, and the
+points the routines find are gathered into one :class:`~.contacts.Contacts` in the declared order."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Protocol
+
+import coal
+import numpy as np
+import pinocchio as pin
+
+from ..scene import Scene
+from .contacts import NO_CONTACTS, Contacts, Piece
+from .ground import GroundHulls
+from .margin import MarginSchedule
+from .narrow import NarrowPhase
+from .pairs import Pair
+
+
+class Routine(Protocol):
+    """A routine family: built once from the pairs it answers (``index`` into the declared pairs)."""
+
+    def detect(self, data: pin.Data, margin: float) -> tuple[list[Piece], float]:
+        """The contacts of its pairs within ``margin`` [m] at the placements held in ``data``, and a
+        lower bound on every one of its pairs' gaps [m]."""
+        ...
+
+
+# The routine of each (robot geometry, obstacle) shape type, looked up along the geometry shape's
+# class hierarchy; every other pair goes through coal's narrow phase.
+ROUTINES: dict[tuple[type, type], Callable[[list[Pair], list[int]], Routine]] = {
+    (coal.Box, coal.Halfspace): GroundHulls,
+    (coal.ConvexBase, coal.Halfspace): GroundHulls,
+    (coal.Sphere, coal.Halfspace): GroundHulls,
+}
+
+
+def routine_of(pair: Pair) -> Callable[[list[Pair], list[int]], Routine]:
+    """The routine that answers ``pair``: the first of ROUTINES for its shape types, else coal's."""
+    for kind in type(pair.shape).__mro__:
+        routine = ROUTINES.get((kind, type(pair.obstacle_shape)))
+        if routine is not None:
+            return routine
+    return NarrowPhase
+
+
+class ContactDetector:
+    """Finds the contact points of the scene's declared pairs that are closer than the margin.
+
+    A polyhedron or a sphere on a ground plane goes to :class:`~.ground.GroundHulls` (one compiled
+    pass for all of them), every other pair to :class:`~.narrow.NarrowPhase` (coal). The
+    :class:`~.margin.MarginSchedule` widens the margin to what a step can travel and says when a step
+    need not look (:meth:`cover`); :meth:`detect` itself always looks.
+
+    Args:
+        scene: the scene whose ``pairs`` are detected.
+        margin: the base margin [m] (``Options.contact_margin``).
+    """
+
+    def __init__(self, scene: Scene, margin: float) -> None:
+        self.pairs = [Pair(scene, p) for p in scene.pairs]
+        self.schedule = MarginSchedule(scene.robot.model, self.pairs, margin)
+        groups: dict[Callable[[list[Pair], list[int]], Routine], list[int]] = {}
+        for k, pair in enumerate(self.pairs):
+            groups.setdefault(routine_of(pair), []).append(k)
+        order = [*dict.fromkeys(ROUTINES.values()), NarrowPhase]
+        self.routines = [routine(self.pairs, groups[routine]) for routine in order if routine in groups]
+        self.friction = np.array([pair.friction for pair in self.pairs])
+        self.restitution = np.array([pair.restitution for pair in self.pairs])
+        self.joint = np.array([pair.joint for pair in self.pairs], dtype=int)
+        self.other_joint = np.array([pair.other_joint for pair in self.pairs], dtype=int)
+        self._layouts: dict[bytes, tuple] = {}  # what does not move, per set of touching pairs
+
+    def forget(self) -> None:
+        """Detect afresh at the next step (see :meth:`.MarginSchedule.forget`)."""
+        self.schedule.forget()
+
+    def cover(
+        self, v: np.ndarray, x: np.ndarray, dt: float, x_scale: float, reach: float | None = None
+    ) -> bool:
+        """Whether a pair may be within the margin after this step (see :meth:`.MarginSchedule.cover`)."""
+        return self.schedule.cover(v, x, dt, x_scale, reach)
+
+    def detect(self, data: pin.Data) -> Contacts:
+        """Contacts at the placements held in ``data`` (after forward kinematics), in the order of the
+        declared pairs; the least gap of all, a lower bound for the pairs coal answers, becomes the
+        schedule's clearance."""
+        pieces: list[Piece] = []
+        least = []
+        for routine in self.routines:
+            found, bound = routine.detect(data, self.schedule.margin)
+            pieces += found
+            least.append(bound)
+        self.schedule.clearance = min(least, default=np.inf)
+        if not pieces:
+            return NO_CONTACTS
+        if len(pieces) == 1:
+            owner, points, normals, gaps = pieces[0]
+        else:
+            owner, points, normals, gaps = (np.concatenate([p[i] for p in pieces]) for i in range(4))
+            order = np.argsort(owner, kind="stable")  # the declared order of the pairs
+            owner, points, normals, gaps = owner[order], points[order], normals[order], gaps[order]
+        key = owner.tobytes()
+        if key not in self._layouts:
+            if len(self._layouts) > 1024:  # many pairs touching in ever new combinations
+                self._layouts.clear()
+            self._layouts[key] = self._layout(owner)
+        names, geometry, obstacle, joint, other_joint, friction, restitution = self._layouts[key]
+        return Contacts(
+            names, geometry, obstacle, joint, other_joint, points, normals, gaps, friction, restitution
+        )
+
+    def _layout(self, owner: np.ndarray) -> tuple:
+        """What the contacts of pairs ``owner`` (one entry per point, sorted) have that does not move."""
+        pairs, counts = np.unique(owner, return_counts=True)
+        chosen = [self.pairs[k] for k in owner.tolist()]
+        arrays = [self.joint[owner], self.other_joint[owner], self.friction[owner], self.restitution[owner]]
+        for array in arrays:
+            array.flags.writeable = False  # shared by every step with these pairs touching
+        names = [
+            name for k, n in zip(pairs.tolist(), counts.tolist()) for name in self.pairs[k].contact_names(n)
+        ]
+        return (names, [pair.geometry for pair in chosen], [pair.obstacle_name for pair in chosen], *arrays)

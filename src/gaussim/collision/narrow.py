@@ -1,0 +1,149 @@
+"""coal's narrow phase and contact patch, for the pairs no specialised routine answers."""
+
+from __future__ import annotations
+
+import coal
+import numpy as np
+import pinocchio as pin
+
+from ..exceptions import ContactError
+from ..linalg import finite
+from .contacts import PATCH_MIN_EXTENT, PATCH_TOLERANCE, Piece, one_pair
+from .pairs import JointPlacements, Pair
+
+
+class NarrowPhase:
+    """coal's narrow phase (the deepest point, the normal and the gap) and its contact patch (the
+    points within PATCH_TOLERANCE of the support plane), pair by pair: a patch narrower than
+    PATCH_MIN_EXTENT is one point, a wider one contributes its points. Only the pairs whose bounding
+    spheres are within the margin reach coal (:class:`BoundingSpheres`, all pairs at once).
+
+    Args:
+        pairs: the declared pairs of the scene.
+        index: which of them this routine answers.
+    """
+
+    def __init__(self, pairs: list[Pair], index: list[int]) -> None:
+        self.index = index
+        self.pairs = [pairs[k] for k in index]
+        self.request = _request(coal.GJKVariant.DefaultGJK)
+        # coal 3.0's default GJK/EPA returns a NaN normal and a depth of -DBL_MAX for two boxes face
+        # to face within ~1e-11 rad (measured: a box resting on a box); the Nesterov-accelerated
+        # GJK answers those, and is the retry of any non-finite answer
+        self.retry_request = _request(coal.GJKVariant.NesterovAcceleration)
+        self.patch_request = coal.ContactPatchRequest()
+        self.patch_request.setPatchTolerance(PATCH_TOLERANCE)
+        self.result = coal.CollisionResult()
+        self.patch_result = coal.ContactPatchResult(self.patch_request)
+        self.spheres = BoundingSpheres(self.pairs)
+
+    def detect(self, data: pin.Data, margin: float) -> tuple[list[Piece], float]:
+        """The contacts of the pairs within ``margin`` [m] at the placements held in ``data``, and a
+        lower bound on every pair's gap [m]."""
+        if self.request.security_margin != margin:
+            self.request.security_margin = self.retry_request.security_margin = margin
+        apart = self.spheres.gaps(data)
+        far = apart > margin
+        clearance = float(apart[far].min(initial=np.inf))
+        pieces: list[Piece] = []
+        for i in np.flatnonzero(~far).tolist():
+            hit, least = self.collide(self.pairs[i], data)
+            clearance = min(clearance, least)
+            if hit is not None:
+                pieces.append(one_pair(self.index[i], *hit))
+        return pieces, clearance
+
+    def collide(
+        self, pair: Pair, data: pin.Data
+    ) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray] | None, float]:
+        """coal's narrow phase and contact patch for one pair: (normal, points (k, 3), gaps (k,)), or
+        None when the pair is farther apart than the margin; and a lower bound on its gap [m]."""
+        placement = data.oMi[pair.joint] * pair.local
+        if pair.other_local is not None:
+            pair.obstacle_tf = coal.Transform3s(data.oMi[pair.other_joint] * pair.other_local)
+        for request in (self.request, self.retry_request):
+            self.result.clear()
+            if not coal.collide(
+                pair.shape, placement, pair.obstacle_shape, pair.obstacle_tf, request, self.result
+            ):
+                return None, request.security_margin
+            # copies: coal's arrays are views into its result, which the next pair overwrites
+            contact = self.result.getContact(0)
+            normal = -contact.normal.copy()  # coal's normal points from the robot to the obstacle
+            gap = contact.penetration_depth
+            if finite(normal) and np.isfinite(gap):
+                break
+        else:
+            raise ContactError(
+                f"coal returned a non-finite contact for pair '{pair.name}' (normal {normal}, gap {gap}) "
+                "with both GJK variants tried",
+                pair.name,
+            )
+        patch = self._patch(pair, placement, normal, gap)
+        if patch is None:
+            return (normal, contact.getNearestPoint1().copy()[None, :], np.array([gap])), gap
+        return (normal, patch, np.full(len(patch), gap)), gap
+
+    def _patch(self, pair: Pair, placement: pin.SE3, normal: np.ndarray, gap: float) -> np.ndarray | None:
+        """The points (k, 3) of the pair's contact patch on the robot's surface when it spans more than
+        PATCH_MIN_EXTENT, ordered by their place on the robot's body, else None (one point)."""
+        patch_result = self.patch_result
+        coal.computeContactPatch(
+            pair.shape,
+            placement,
+            pair.obstacle_shape,
+            pair.obstacle_tf,
+            self.result,
+            self.patch_request,
+            patch_result,
+        )
+        if not patch_result.numContactPatches():
+            return None
+        patch = patch_result.getContactPatch(0)
+        size = patch.size()
+        if size < 2:
+            return None
+        # patch points lie midway between the surfaces: move them onto the robot's
+        middle = np.array([patch.getPoint(i) for i in range(size)]) + normal * (gap / 2)
+        if np.ptp(middle, axis=0).max() <= PATCH_MIN_EXTENT:
+            return None
+        # coal orders a patch's points arbitrarily: order them by their place on the robot's body so
+        # that a contact keeps its name from step to step
+        local = np.round((middle - placement.translation) @ placement.rotation, 4)
+        return middle[np.lexsort(local.T[::-1])]
+
+
+def _request(variant: coal.GJKVariant) -> coal.CollisionRequest:
+    """A request for one contact with GJK ``variant`` (its security margin is set per detection)."""
+    request = coal.CollisionRequest()
+    request.num_max_contacts = 1
+    request.gjk_variant = variant
+    return request
+
+
+class BoundingSpheres:
+    """The broad phase: the gaps of the P pairs' bounding spheres, lower bounds on their own, all at
+    once (a pile of objects has a pair for every two of them, most of them far apart).
+
+    Args:
+        pairs: the P pairs; a ground's sphere is infinite (its pairs always reach coal, whose
+            half-space test is as cheap).
+    """
+
+    def __init__(self, pairs: list[Pair]) -> None:
+        sides = np.array([[p.joint, p.other_joint] for p in pairs], dtype=int).reshape(-1, 2)
+        # the joints whose placements are read, and where each pair's two sides find theirs
+        joints, side = np.unique(sides, return_inverse=True)
+        self.placements, self.side = JointPlacements(joints.tolist()), side.reshape(-1, 2)
+        self.centers = np.array([[p.center, p.obstacle_center] for p in pairs]).reshape(-1, 2, 3)
+        self.radius = np.array([p.radius for p in pairs])
+        self.obstacle_radius = np.array([p.obstacle_radius for p in pairs])
+
+    def gaps(self, data: pin.Data) -> np.ndarray:
+        """The spheres' gaps at the joint placements held in ``data``, shape (P,) [m] (-inf against a
+        ground)."""
+        rotations, translations = self.placements(data)
+        R, p = np.array(rotations)[self.side], np.array(translations)[self.side]  # (P, 2, 3, 3), (P, 2, 3)
+        world = np.einsum("psij,psj->psi", R, self.centers) + p
+        d = world[:, 0] - world[:, 1]
+        return np.sqrt(np.einsum("pi,pi->p", d, d)) - self.radius - self.obstacle_radius
