@@ -271,3 +271,42 @@ def test_a_refused_answer_is_solved_again_to_a_tighter_tolerance():
     c = solution.certificate
     assert c.converged and c.restarted and c.relative_kkt_residual <= KKT_RTOL * options.eps_abs, c
     assert np.all(p.C @ solution.x >= p.l - 1e-9)
+
+
+@pytest.mark.parametrize(
+    "saved", ["pile_wrong_sign_multiplier.npz", "pile_wrong_sign_multiplier_full_rank.npz"]
+)
+def test_an_answer_with_a_wrong_sign_multiplier_is_certified_by_nonnegative_ones(saved):
+    """QPs saved from 20 free bodies settling in a bin (120 unknowns; 284 contact rows of rank 119,
+    and 320 rows of rank 120): ProxQP's answer (and its cold restarts, at eps_abs and at eps_abs /
+    KKT_RTOL) holds a multiplier of -9e-6 N s (-7.6e-6 N s), the active-set solve of its 176 active
+    rows fails (they are too dependent), and the run stopped there with a SolverError. Its x is
+    optimal all the same: nonnegative multipliers of the rows at their bound certify it, and it is
+    ProxQP's certified solution at eps_abs = 1e-12 (to 5e-10 in the norm of M)."""
+    problem = _saved_problem(saved)
+    options = gaussim.Options()
+    solver = GaussSolver(options)
+    p, (x, z) = problem, _proxqp_alone(solver, problem)
+    assert z.min() < -KKT_RTOL * options.eps_abs, "ProxQP's answer is now certified: nothing to rescue"
+    candidate = np.empty(len(x)), np.empty(len(z))
+    assert (
+        active_set_candidate(
+            p.H, p.g, p.A, p.b, p.C, p.l, x, z, options.eps_abs, ACTIVE_SET_FLOOR, *candidate
+        )[0]
+        == 0
+    )
+    solution = solver.solve(problem)
+    c = solution.certificate
+    assert c.status is Status.MULTIPLIERS_CERTIFIED and c.restarted and c.converged, c
+    lam, slack = solution.lambda_in, p.C @ solution.x - p.l
+    assert lam.min() >= 0 and slack.min() > -1e-10
+    assert np.abs(p.H @ solution.x + p.g - p.C.T @ lam).max() < 1e-10  # stationarity
+    assert np.abs(lam * slack).max() < 1e-10  # complementarity
+    tight = solver._new(*_sides(p)[0])
+    tight.settings.eps_abs = tight.settings.eps_duality_gap_abs = 1e-12
+    _initialise(tight, p, *_sides(p)[1:])
+    tight.solve()
+    x_tight, z_tight = tight.results.x, -tight.results.z
+    assert kkt_residuals(p.H, p.g, p.A, p.b, p.C, p.l, x_tight, np.zeros(0), z_tight)[1] < 1e-11
+    difference = solution.x - x_tight  # in the norm of M [sqrt(kg) m/s]: its rotations are light
+    assert np.sqrt(difference @ p.H @ difference) < 1e-9

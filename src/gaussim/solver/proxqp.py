@@ -86,7 +86,9 @@ class GaussSolver:
            largest; see :mod:`.active_set`): ProxQP may stop at a relative residual the check refuses
            where the active set is exact;
         3. a cold start at eps_abs / KKT_RTOL: ProxQP's own test passes at residuals the check's
-           relative one can exceed.
+           relative one can exceed;
+        4. that answer's x with nonnegative multipliers of gaussim's (:meth:`_remultiplied`), where
+           ProxQP's, one choice among many of dependent rows, have a wrong sign.
 
         Else the cold start's answer, its status KKT_CHECK_FAILED when ProxQP said solved."""
         p = problem
@@ -109,6 +111,12 @@ class GaussSolver:
         tight.certificate.restarted = True
         if self._certified(tight):
             return tight
+        rescued = self._remultiplied(problem, tight)
+        if rescued is not None:
+            rescued.certificate.iterations = tight.certificate.iterations
+            rescued.certificate.outer_iterations = tight.certificate.outer_iterations
+            rescued.certificate.restarted = True
+            return rescued
         if solution.certificate.converged:
             solution.certificate.status = Status.KKT_CHECK_FAILED
         return solution
@@ -144,6 +152,40 @@ class GaussSolver:
             x, multipliers = candidate[0].copy(), candidate[1].copy()
         certificate = Certificate(_FROM_LAST[how], 0, primal, dual, gap, residual, relative)
         return Solution(x, multipliers, len(p.b), certificate)
+
+    def _remultiplied(self, problem: GaussProblem, solution: Solution) -> Solution | None:
+        """``solution``'s x with multipliers of gaussim's making, when the KKT check certifies them as
+        it does ProxQP's answers, else None. With more dependent rows than unknowns (a pile's
+        contacts), the multipliers of x are one choice among many and ProxQP's may hold a wrong sign
+        where x itself is optimal. Nonnegative ones are the least-squares solution of the stationarity
+        A^T lambda_eq + C_k^T lambda_k = H x + g over lambda_k >= 0, k the rows within the check's
+        tolerance of their bound (the others' are 0): a small bounded QP, solved by ProxQP at
+        eps_abs / KKT_RTOL."""
+        p, x, tolerance = problem, solution.x, KKT_RTOL * self.options.eps_abs
+        near = np.flatnonzero(p.C @ x - p.l <= tolerance)
+        n_eq, k = len(p.b), len(near)
+        E = np.vstack([p.A, p.C[near]]).T  # (nv, n_eq + k): each row's force direction
+        stationarity = p.H @ x + p.g
+        # solved for lambda / |H x + g|: a least-squares residual is the square root of the QP's
+        # accuracy, which is then relative to 1
+        size = max(float(np.abs(stationarity).max(initial=0.0)), np.finfo(float).tiny)
+        multipliers = np.zeros(n_eq + len(p.l))
+        if n_eq + k:
+            qp = self._new(n_eq + k, 0, k)
+            qp.settings.eps_abs = qp.settings.eps_duality_gap_abs = self.options.eps_abs / KKT_RTOL
+            signs = np.hstack([np.zeros((k, n_eq)), np.eye(k)])  # lambda_k >= 0, lambda_eq free
+            bounds = (signs, np.zeros(k), np.full(k, np.inf)) if k else (None, None, None)
+            qp.init(E.T @ E, -(E.T @ stationarity) / size, None, None, *bounds)
+            qp.solve()
+            multipliers[:n_eq] = size * qp.results.x[:n_eq]
+            multipliers[n_eq + near] = size * np.maximum(qp.results.x[n_eq:], 0.0)  # its bound, met to eps
+        residual, relative, primal, dual, gap = kkt_residuals(
+            p.H, p.g, p.A, p.b, p.C, p.l, x, multipliers[:n_eq], multipliers[n_eq:]
+        )
+        if not relative <= tolerance:
+            return None
+        certificate = Certificate(Status.MULTIPLIERS_CERTIFIED, 0, primal, dual, gap, residual, relative)
+        return Solution(x.copy(), multipliers, n_eq, certificate)
 
     def _run(self, problem: GaussProblem, cap: int | None = None) -> Solution:
         """Solve with at most ``cap`` outer iterations (default and largest: Options.max_iter)."""
