@@ -90,3 +90,59 @@ def test_a_custom_constraint_is_checked_once():
         gaussim.Simulator(scene, constraints=[plane])
     with pytest.raises(gaussim.FrameNotFound, match="no frame 'hand'"):
         example.AbovePlane(ball, "hand", height=0.1)
+
+
+def _page_holds(page: Path, names: list[str]) -> None:
+    """The replay page's scene tree (its controls, once its scripts ran) has a node for each name."""
+    from gaussim.viewer import page_dom
+
+    for wait_ms in (4000, 12000, 30000):  # software WebGL on a loaded 2-core machine can take longer
+        dom = page_dom(page, wait_ms=wait_ms)
+        if ">visuals<" in dom:
+            break
+    missing = [name for name in names if f">{name}<" not in dom]
+    assert not missing, f"the replay page draws no {missing}"
+
+
+def _replay(out: Path, bodies: list[str]) -> gaussim.RunLog:
+    """The example's run log (every step) and replay page (every body)."""
+    log = gaussim.RunLog.load(out.with_suffix(".npz"))
+    assert log.complete and log.steps > 0
+    _page_holds(out.with_suffix(".html"), bodies)
+    return log
+
+
+def test_solo_pushes_crate(tmp_path):
+    out = tmp_path / "push"
+    stdout = _run(
+        str(EXAMPLES / "solo_pushes_crate.py"), "--duration", "0.8", "--distance", "0.02", "--out", str(out)
+    )
+    moved = float(stdout.split("crate displacement: ")[1].split(" m")[0])
+    assert moved > 0.03, stdout  # pushed 8 cm in 0.8 s
+    log = _replay(out, ["solo", "crate"])
+    assert {"crate/box/ground"} <= set(
+        log.contact_geometry[i] + "/" + log.contact_obstacle[i] for i in range(len(log.contact_names))
+    )
+
+
+def test_panda_sweeps_cube(tmp_path):
+    out = tmp_path / "sweep"
+    stdout = _run(str(EXAMPLES / "panda_sweeps_cube.py"), "--duration", "1.0", "--out", str(out))
+    travel = float(stdout.split("cube travel: ")[1].split(" m")[0])
+    assert travel > 0.1, stdout
+    log = _replay(out, ["arm", "cube", "table"])
+    assert any(name.startswith("arm/panda_") and "/cube/box" in name for name in log.contact_names)
+
+
+def test_bin_pile(tmp_path):
+    out = tmp_path / "pile"
+    stdout = _run(str(EXAMPLES / "bin_pile.py"), "--duration", "0.05", "--out", str(out))
+    assert "every object inside the bin: True" in stdout and "uncertified QP: 0" in stdout
+    _replay(out, ["box0", "ball1", "capsule2", "ball19", "floor", "wall_x+"])
+
+
+def test_solo_bump(tmp_path):
+    out = tmp_path / "bump"
+    stdout = _run(str(EXAMPLES / "solo_bump.py"), "--duration", "0.5", "--apart", "0.45", "--out", str(out))
+    assert "first touch at t = " in stdout, stdout
+    _replay(out, ["left", "right"])
