@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from functools import cache
 
 import numpy as np
+from numba import njit
 
 from .constraints.base import ConstraintModule, Rows
 
@@ -25,6 +26,9 @@ class GaussProblem:
         A, b: equality rows (n_eq, nv), (n_eq,).
         C, l: inequality rows (n_in, nv), lower bounds (n_in,) (upper bounds are +inf).
         blocks: (module, rows, the slice of its multipliers in [lambda_eq; lambda_in]).
+        applied: the generalized force the modules apply outside the QP (in g), shape (nv,), or None.
+        source: for an island's problem (:meth:`island`), the problem it was cut from and its
+            equality and inequality rows there (the row names are the source's).
     """
 
     H: np.ndarray
@@ -34,10 +38,22 @@ class GaussProblem:
     C: np.ndarray
     l: np.ndarray
     blocks: list[tuple[ConstraintModule, Rows, slice]]
+    applied: np.ndarray | None = None
+    source: tuple[GaussProblem, np.ndarray, np.ndarray] | None = None
 
     def labels(self, equality: bool) -> list[str]:
         """Row names of the equality or inequality rows, in order."""
+        if self.source is not None:
+            source, eq, ineq = self.source
+            names = source.labels(equality)
+            return [names[i] for i in (eq if equality else ineq)]
         return [label for _, rows, _ in self.blocks if rows.equality == equality for label in rows.labels()]
+
+    def island(self, cols: np.ndarray, eq: np.ndarray, ineq: np.ndarray) -> GaussProblem:
+        """The problem on the coordinates ``cols`` and the equality and inequality rows ``eq``,
+        ``ineq`` (an island: no other row reads those coordinates, and H couples them to no other)."""
+        H, g, A, b, C, l = _cut(self.H, self.g, self.A, self.b, self.C, self.l, cols, eq, ineq)
+        return GaussProblem(H, g, A, b, C, l, [], None, (self, eq, ineq))
 
 
 def assemble(H: np.ndarray, g: np.ndarray, parts: list[tuple[ConstraintModule, Rows]]) -> GaussProblem:
@@ -47,15 +63,16 @@ def assemble(H: np.ndarray, g: np.ndarray, parts: list[tuple[ConstraintModule, R
     inequalities: list[tuple[ConstraintModule, Rows]] = []
     for part in parts:  # one pass: this runs every QP
         (equalities if part[1].equality else inequalities).append(part)
-    blocks, end = [], 0
+    blocks, end, applied = [], 0, None
     for module, rows in equalities + inequalities:  # the order of [lambda_eq; lambda_in]
         first, end = end, end + len(rows.bound)
         blocks.append((module, rows, slice(first, end)))
         if rows.force is not None:
             g = g - rows.force
+            applied = rows.force if applied is None else applied + rows.force
     A, b = _stack(equalities, len(g))
     C, l = _stack(inequalities, len(g))
-    return GaussProblem(H, g, A, b, C, l, blocks)
+    return GaussProblem(H, g, A, b, C, l, blocks, applied)
 
 
 def _stack(chosen: list[tuple[ConstraintModule, Rows]], nv: int) -> tuple[np.ndarray, np.ndarray]:
@@ -64,6 +81,23 @@ def _stack(chosen: list[tuple[ConstraintModule, Rows]], nv: int) -> tuple[np.nda
     if not chosen:
         return _none(nv)
     return np.vstack([rows.J for _, rows in chosen]), np.concatenate([rows.bound for _, rows in chosen])
+
+
+@njit(cache=True)
+def _cut(H, g, A, b, C, l, cols, eq, ineq):  # type: ignore[no-untyped-def]
+    """(H, g, A, b, C, l) on the coordinates ``cols`` and the rows ``eq``, ``ineq``."""
+    n = len(cols)
+    H_, A_, C_ = np.empty((n, n)), np.empty((len(eq), n)), np.empty((len(ineq), n))
+    for j in range(n):
+        for k in range(n):
+            H_[j, k] = H[cols[j], cols[k]]
+    for i in range(len(eq)):
+        for k in range(n):
+            A_[i, k] = A[eq[i], cols[k]]
+    for i in range(len(ineq)):
+        for k in range(n):
+            C_[i, k] = C[ineq[i], cols[k]]
+    return H_, g[cols], A_, b[eq], C_, l[ineq]
 
 
 @cache

@@ -86,13 +86,14 @@ class FloatingBases:
         return len(self.velocity)
 
     def untouched(self, *reports: object) -> np.ndarray:
-        """Which bases are rigid and in no row of the blocks of these step reports (a report or None
-        each), shape (k,): free flight, where :mod:`.integrator` turns them by the midpoint rule."""
+        """Which bases are rigid and take no reaction from the blocks of these step reports (a report
+        or None each): no row with a nonzero multiplier reads them, shape (k,). Free flight, where
+        :mod:`.integrator` turns them by the midpoint rule (a contact within its margin that the step
+        does not reach leaves its body free)."""
         free = self.rigid.copy()
         for report in reports:
-            for _, rows, _ in getattr(report, "blocks", ()):
-                for k, i in enumerate(self.velocity.tolist()):
-                    free[k] = free[k] and not np.any(rows.J[:, i : i + 6])
+            for _, rows, multipliers in getattr(report, "blocks", ()):
+                _unloaded(rows.J, multipliers, self.velocity, free)
         return free
 
     def frame_acceleration(self, v: np.ndarray) -> np.ndarray:
@@ -353,3 +354,18 @@ def point_drifts(
     return np.array(
         [pin.getFrameClassicalAcceleration(model, data, j, M, LWA).linear for j, M in zip(joints, placements)]
     )
+
+
+@njit(cache=True)
+def _unloaded(J, multipliers, velocity, free):  # type: ignore[no-untyped-def]
+    """Clear ``free[k]`` for each base k (its velocity at ``velocity[k]``) that a row of J with a
+    nonzero multiplier reads."""
+    for r in range(len(multipliers)):
+        if multipliers[r] == 0.0:
+            continue
+        for k in range(len(velocity)):
+            if free[k]:
+                for i in range(velocity[k], velocity[k] + 6):
+                    if J[r, i] != 0.0:
+                        free[k] = False
+                        break

@@ -1,5 +1,6 @@
 """Stages 3 and 4, the constraint rows and the Gauss solve: every module's rows at one level, the QP
-over them (ProxQP, certified), and the multipliers that are the reactions."""
+over them (one per island of bodies that touch, ProxQP, certified), and the multipliers that are the
+reactions."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ from .constraints.base import ConstraintModule, Context, Level, Rows
 from .dynamics import Dynamics
 from .options import Options
 from .report import StepReport
-from .solver import GaussSolver
+from .solver.islands import IslandSolver
 
 Parts = list[tuple[ConstraintModule, Rows]]
 
@@ -24,8 +25,8 @@ class GaussStage:
         self, model: pin.Model, data: pin.Data, modules: list[ConstraintModule], options: Options
     ) -> None:
         self.model, self.data, self.modules, self.options = model, data, modules, options
-        self.solvers: dict[Level, GaussSolver] = {
-            level: GaussSolver(options) for level in ("velocity", "impulse", "acceleration")
+        self.solvers: dict[Level, IslandSolver] = {
+            level: IslandSolver(model, options) for level in ("velocity", "impulse", "acceleration")
         }
 
     def context(
@@ -74,10 +75,9 @@ class GaussStage:
                 return ctx.x_free
             problem = assemble(M, g, parts)
             mark("assembly")
-            solution = self.solvers[ctx.level].solve(problem)
+            x, lam, certificates = self.solvers[ctx.level].solve(problem, ctx.x_free)
             mark("solve")
-            report.certificates += (solution.certificate,)
-            x, lam = solution.x, solution.multipliers
+            report.certificates += certificates
             blocks = [(module, rows, lam[part]) for module, rows, part in problem.blocks]
             refine = False
             for module, rows, multipliers in blocks:

@@ -51,6 +51,9 @@ class Status(enum.Enum):
     ACTIVE_SET_CERTIFIED = "GAUSSIM_ACTIVE_SET_CERTIFIED"
     """So does the solution on the previous solution's active set, one linear solve: ProxQP was not
     called."""
+    FREE_MOTION_CERTIFIED = "GAUSSIM_FREE_MOTION_CERTIFIED"
+    """The free motion meets every row (to eps_abs by the KKT check, no reaction): ProxQP was not
+    called."""
     MULTIPLIERS_CERTIFIED = "GAUSSIM_MULTIPLIERS_CERTIFIED"
     """ProxQP's x with nonnegative multipliers of gaussim's making, where ProxQP's (one choice among
     many, of dependent rows) had a wrong sign."""
@@ -73,6 +76,7 @@ CONVERGED = (
     Status.PREVIOUS_SOLUTION_CERTIFIED,
     Status.ACTIVE_SET_CERTIFIED,
     Status.MULTIPLIERS_CERTIFIED,
+    Status.FREE_MOTION_CERTIFIED,
 )
 # The statuses that say the problem has no solution: no restart can help.
 PRIMAL_INFEASIBLE = (Status.PRIMAL_INFEASIBLE, Status.SOLVED_CLOSEST_PRIMAL_FEASIBLE)

@@ -48,22 +48,27 @@ class GaussSolver:
         self._candidate = self._last  # the buffers of the active-set candidate (see _warm)
         self._warned = False  # about an iterate kept by on_failure='report'
 
-    def solve(self, problem: GaussProblem) -> Solution:
-        """Solve the Gauss problem; raise :class:`SolverError` as ``Options.on_failure`` says."""
-        solution = self._solve(problem)
+    def solve(self, problem: GaussProblem, x_free: np.ndarray | None = None) -> Solution:
+        """Solve the Gauss problem, whose unconstrained minimum is ``x_free`` when given; raise
+        :class:`SolverError` as ``Options.on_failure`` says."""
+        solution = self._solve(problem, x_free)
         self._last = solution.x, solution.multipliers  # where the next solve starts (see _warm)
         return solution
 
-    def _solve(self, problem: GaussProblem) -> Solution:
+    def _solve(self, problem: GaussProblem, x_free: np.ndarray | None) -> Solution:
         p = problem
         dims, equalities, inequalities = _sides(p)
+        if dims == self._dims:
+            warm = self._warm(problem, *self._last, 0.0)
+            if warm is not None:
+                return warm
+        free = None if x_free is None else _free_motion(problem, x_free, self.options.eps_abs)
+        if free is not None:
+            return free
         if dims != self._dims:
             self._fresh(p, dims, equalities, inequalities)
             solution = self._run(problem)
         else:
-            warm = self._warm(problem, *self._last, 0.0)
-            if warm is not None:
-                return warm
             self._qp.update(p.H, p.g, *equalities, *inequalities)  # the upper bounds stay +inf
             solution = self._run(problem, WARM_START_ITERATIONS)
         if self._certified(solution):  # converged, finite and certified: nothing more to check
@@ -277,6 +282,21 @@ def _read(H, g, A, b, C, l, x, y, z):  # type: ignore[no-untyped-def]
     x, multipliers = x.copy(), np.empty(n_eq + n_in)
     multipliers[:n_eq], multipliers[n_eq:] = -y[:n_eq], -z[:n_in]
     return (x, multipliers, *kkt_residuals(H, g, A, b, C, l, x, multipliers[:n_eq], multipliers[n_eq:]))
+
+
+def _free_motion(problem: GaussProblem, x_free: np.ndarray, tolerance: float) -> Solution | None:
+    """The free motion, with no reaction, where it meets every row (a contact within its margin that
+    the step does not reach: exactly the motion of the body alone), when the KKT check certifies it to
+    ``tolerance``; else None."""
+    p, none = problem, np.zeros(len(problem.b) + len(problem.l))
+    n_eq = len(p.b)
+    residual, relative, primal, dual, gap = kkt_residuals(
+        p.H, p.g, p.A, p.b, p.C, p.l, x_free, none[:n_eq], none[n_eq:]
+    )
+    if not relative <= tolerance:
+        return None
+    certificate = Certificate(Status.FREE_MOTION_CERTIFIED, 0, primal, dual, gap, residual, relative)
+    return Solution(x_free.copy(), none, n_eq, certificate)
 
 
 def _sides(p: GaussProblem) -> tuple[tuple[int, int, int], tuple, tuple]:

@@ -1,0 +1,169 @@
+"""Islands: the Gauss problem split into the independent problems of the bodies that touch.
+
+The model's trees (the subtrees hanging from the universe: a free body, a robot) share no entries of
+M; a row couples the trees whose velocities it reads. The connected components of that graph, the
+islands, are independent QPs: each is solved on its own coordinates and rows, warm-started from its
+own last solution, so a step's cost grows with the bodies in contact, not with their square or cube;
+a tree that no row reads keeps its free motion (the minimum of its part of the functional).
+"""
+
+from __future__ import annotations
+
+from collections import OrderedDict
+
+import numpy as np
+import pinocchio as pin
+from numba import njit
+
+from ..assembly import GaussProblem
+from ..options import Options
+from .certificate import Certificate
+from .proxqp import GaussSolver
+
+# How many islands' solvers (QP objects and last solutions) are kept for warm starts: islands form and
+# split as bodies touch and part.
+KEPT_SOLVERS = 256
+
+
+def trees(model: pin.Model) -> np.ndarray:
+    """The tree of each velocity coordinate, shape (nv,): the index of its joint's ancestor among the
+    universe's children (0, 1, ... in joint order)."""
+    root = np.zeros(model.njoints, dtype=np.int64)
+    count = 0
+    for j in range(1, model.njoints):
+        parent = model.parents[j]
+        if parent == 0:
+            root[j], count = count, count + 1
+        else:
+            root[j] = root[parent]
+    tree = np.zeros(model.nv, dtype=np.int64)
+    for j in range(1, model.njoints):
+        joint = model.joints[j]
+        tree[joint.idx_v : joint.idx_v + joint.nv] = root[j]
+    return tree
+
+
+class IslandSolver:
+    """Solves a Gauss problem island by island (see the module's docstring)."""
+
+    def __init__(self, model: pin.Model, options: Options) -> None:
+        self.options = options
+        self.tree = trees(model)
+        self.n_trees = int(self.tree.max(initial=-1)) + 1
+        self._none = np.zeros(model.nv)  # no force applied outside the QP
+        self._solvers: OrderedDict[tuple[int, ...] | None, GaussSolver] = OrderedDict()
+
+    def solve(
+        self, problem: GaussProblem, x_free: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, tuple[Certificate, ...]]:
+        """(x, the multipliers [lambda_eq; lambda_in], one certificate per island) of ``problem``,
+        whose unconstrained minimum is ``x_free``."""
+        p = problem
+        if self.n_trees > 1:
+            applied = self._none if p.applied is None else p.applied
+            island_of_tree, island_of_row, n = islands(p.A, p.C, applied, self.tree, self.n_trees)
+            # several islands, or one that leaves a tree out; and no row that reads no coordinate
+            if (n > 1 or island_of_tree.min() < 0) and n and island_of_row.min(initial=0) >= 0:
+                return self._split(p, x_free, island_of_tree, island_of_row, n)
+        solution = self._solver(None).solve(problem, x_free)
+        return solution.x, solution.multipliers, (solution.certificate,)
+
+    def _split(
+        self,
+        p: GaussProblem,
+        x_free: np.ndarray,
+        island_of_tree: np.ndarray,
+        island_of_row: np.ndarray,
+        n: int,
+    ) -> tuple[np.ndarray, np.ndarray, tuple[Certificate, ...]]:
+        """:meth:`solve` island by island."""
+        x, multipliers = x_free.copy(), np.zeros(len(p.b) + len(p.l))
+        n_eq, certificates = len(p.b), []
+        cols, col_start = members(island_of_tree[self.tree], n)
+        rows, row_start = members(island_of_row, n)
+        trees, tree_start = members(island_of_tree, n)
+        for i in range(n):
+            c, r = cols[col_start[i] : col_start[i + 1]], rows[row_start[i] : row_start[i + 1]]
+            eq, ineq = r[r < n_eq], r[r >= n_eq] - n_eq
+            key = tuple(trees[tree_start[i] : tree_start[i + 1]].tolist())
+            solution = self._solver(key).solve(p.island(c, eq, ineq), x_free[c])
+            x[c] = solution.x
+            multipliers[r] = solution.multipliers
+            certificates.append(solution.certificate)
+        return x, multipliers, tuple(certificates)
+
+    def _solver(self, key: tuple[int, ...] | None) -> GaussSolver:
+        """The solver of the island of trees ``key`` (None: the whole problem), last used first."""
+        solver = self._solvers.pop(key, None) or GaussSolver(self.options)
+        self._solvers[key] = solver
+        if len(self._solvers) > KEPT_SOLVERS:
+            self._solvers.popitem(last=False)
+        return solver
+
+
+@njit(cache=True)
+def _root(parent, t):  # type: ignore[no-untyped-def]
+    while parent[t] != t:
+        parent[t] = parent[parent[t]]
+        t = parent[t]
+    return t
+
+
+@njit(cache=True)
+def islands(A, C, applied, tree, n_trees):  # type: ignore[no-untyped-def]
+    """(the island of each tree, -1 for a tree no row reads; the island of each row of [A; C], -1
+    for a row that reads no coordinate; the number of islands). The trees of ``applied`` (nv,), the
+    force the modules apply outside the QP, are islands too."""
+    parent = np.arange(n_trees)
+    touched = np.zeros(n_trees, dtype=np.bool_)
+    n_eq, nv = A.shape[0], len(tree)
+    first = np.full(n_eq + C.shape[0], -1)
+    for r in range(len(first)):
+        last = -1
+        for k in range(nv):
+            value = A[r, k] if r < n_eq else C[r - n_eq, k]
+            if value == 0.0 or tree[k] == last:
+                continue
+            last = tree[k]
+            touched[last] = True
+            if first[r] < 0:
+                first[r] = last
+            else:
+                a, b = _root(parent, first[r]), _root(parent, last)
+                if a != b:
+                    parent[max(a, b)] = min(a, b)
+    for k in range(nv):
+        if applied[k] != 0.0:
+            touched[tree[k]] = True
+    island_of_root = np.full(n_trees, -1)
+    island_of_tree = np.full(n_trees, -1)
+    n = 0
+    for t in range(n_trees):
+        if touched[t]:
+            r = _root(parent, t)
+            if island_of_root[r] < 0:
+                island_of_root[r], n = n, n + 1
+            island_of_tree[t] = island_of_root[r]
+    island_of_row = np.full(len(first), -1)
+    for r in range(len(first)):
+        if first[r] >= 0:
+            island_of_row[r] = island_of_tree[first[r]]
+    return island_of_tree, island_of_row, n
+
+
+@njit(cache=True)
+def members(labels, n):  # type: ignore[no-untyped-def]
+    """(the indices of labels 0, ..., n - 1 in label order, ascending within each; where each label's
+    run starts, (n + 1,)); labels < 0 are left out."""
+    start = np.zeros(n + 1, dtype=np.int64)
+    for label in labels:
+        if label >= 0:
+            start[label + 1] += 1
+    for i in range(n):
+        start[i + 1] += start[i]
+    order, fill = np.empty(start[n], dtype=np.int64), start[:n].copy()
+    for k in range(len(labels)):
+        if labels[k] >= 0:
+            order[fill[labels[k]]] = k
+            fill[labels[k]] += 1
+    return order, start

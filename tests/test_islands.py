@@ -1,0 +1,127 @@
+"""Islands: the Gauss problem split into the independent problems of the bodies that touch."""
+
+import numpy as np
+import pytest
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+import gaussim
+from gaussim import FreeBody, pose
+from gaussim.assembly import GaussProblem
+from gaussim.solver import GaussSolver, kkt_residual
+from gaussim.solver.islands import IslandSolver, islands, members, trees
+
+# Two runs of the same physics through different but equal models agree to this [m, m/s]: round-off
+# differences decide between two certified answers (the active set's or ProxQP's), which differ within
+# the QP's tolerance (eps_abs 1e-9 on the stationarity) divided by the contact's conditioning.
+SAME = 1e-7
+# One QP a step: the accurate friction's fixed-point iteration, whose tolerance is looser, runs over all
+# islands at once.
+OPTIONS = gaussim.Options(friction_mode="pyramid")
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_islands_are_the_connected_components_of_trees_and_rows(seed):
+    """The islands of random row patterns are scipy's connected components of the graph whose nodes
+    are the trees and whose edges join the trees one row reads."""
+    rng = np.random.default_rng(seed)
+    n_trees = int(rng.integers(1, 12))
+    tree = np.sort(rng.integers(0, n_trees, size=int(rng.integers(n_trees, 40))))
+    tree = np.unique(tree, return_inverse=True)[1]  # every tree holds a coordinate
+    n_trees, nv = int(tree.max()) + 1, len(tree)
+    rows = np.zeros((int(rng.integers(1, 15)), nv))
+    for r in range(len(rows)):
+        rows[r, rng.choice(nv, size=int(rng.integers(1, 3)), replace=False)] = rng.normal(size=1)
+    n_eq = int(rng.integers(0, len(rows)))
+    A, C = rows[:n_eq], rows[n_eq:]
+    applied = np.zeros(nv)
+    applied[rng.integers(0, nv)] = 1.0
+    island_of_tree, island_of_row, n = islands(A, C, applied, tree, n_trees)
+
+    edges = [(tree[k], tree[j]) for row in rows for k in np.flatnonzero(row) for j in np.flatnonzero(row)]
+    i, j = np.array(edges).T
+    graph = coo_matrix((np.ones(len(i)), (i, j)), shape=(n_trees, n_trees))
+    _, component = connected_components(graph, directed=False)
+    touched = np.zeros(n_trees, bool)
+    touched[tree[np.flatnonzero(np.abs(rows).sum(0))]] = True
+    touched[tree[np.flatnonzero(applied)]] = True
+    assert (island_of_tree >= 0).tolist() == touched.tolist()
+    assert n == len(np.unique(component[touched]))
+    for a in range(n_trees):  # the same partition of the touched trees
+        for b in range(n_trees):
+            if touched[a] and touched[b]:
+                assert (island_of_tree[a] == island_of_tree[b]) == (component[a] == component[b])
+    for r, row in enumerate(rows):
+        assert island_of_row[r] == island_of_tree[tree[np.flatnonzero(row)[0]]]
+    order, start = members(island_of_tree, n)
+    for island in range(n):
+        expected = np.flatnonzero(island_of_tree == island)
+        assert order[start[island] : start[island + 1]].tolist() == expected.tolist()
+
+
+def _world(n):
+    bodies = {f"b{i}": FreeBody.box(f"b{i}", (0.1, 0.1, 0.1), mass=1.0 + i) for i in range(n)}
+    return gaussim.Scene(bodies=bodies, ground=gaussim.Ground()).robot.model
+
+
+def test_the_islands_solution_is_the_whole_problems():
+    """Three free bodies, rows on two of them (one row joins body 0 and body 2): the islands' x and
+    multipliers solve the whole QP (gaussim's KKT check on it) and equal ProxQP's on the whole."""
+    model = _world(4)
+    assert trees(model).tolist() == [0] * 6 + [1] * 6 + [2] * 6 + [3] * 6
+    rng = np.random.default_rng(3)
+    blocks = []
+    for _ in range(4):
+        root = rng.normal(size=(6, 6))
+        blocks.append(root @ root.T + 6 * np.eye(6))
+    H = np.zeros((24, 24))
+    for b, block in enumerate(blocks):
+        H[6 * b : 6 * b + 6, 6 * b : 6 * b + 6] = block
+    x_free = rng.normal(size=24)
+    g = -H @ x_free
+    C = np.zeros((7, 24))
+    C[0:3, 0:6] = rng.normal(size=(3, 6))
+    C[3, 0:6], C[3, 12:18] = rng.normal(size=6), rng.normal(size=6)
+    C[4:7, 6:12] = rng.normal(size=(3, 6))
+    l = C @ x_free + 0.5  # every row violated by the free motion: all active
+    A, b = np.zeros((1, 24)), np.zeros(1)
+    A[0, 7] = 1.0
+    problem = GaussProblem(H, g, A, b, C, l, [])
+
+    x, multipliers, certificates = IslandSolver(model, gaussim.Options()).solve(problem, x_free)
+    assert len(certificates) == 2 and all(c.converged for c in certificates)
+    assert kkt_residual(problem, x, multipliers[:1], multipliers[1:]) < 1e-8
+    np.testing.assert_array_equal(x[18:], x_free[18:])  # body 3: no row, its free motion
+    whole = GaussSolver(gaussim.Options()).solve(problem)
+    np.testing.assert_allclose(x, whole.x, atol=1e-7)
+    np.testing.assert_allclose(multipliers, whole.multipliers, atol=1e-6)
+
+
+def test_bodies_landing_far_apart_evolve_as_each_alone():
+    """A box tumbling onto the ground and a ball rolling, far apart in one world: one QP each (their
+    islands) while both touch, and each follows its own run through the landing, the contacts and the
+    friction."""
+    shapes = {
+        "box": FreeBody.box("box", (0.2, 0.3, 0.1), mass=1.5),
+        "ball": FreeBody.sphere("ball", 0.1, mass=0.7),
+    }
+    starts = {
+        "box": (pose(z=0.3, rpy=(0.4, 0.2, 0.1)), [0.5, 0.0, 0.0, 2.0, -3.0, 1.0]),
+        "ball": (pose(x=3.0, z=0.15), [1.0, -0.5, 0.0, 0.0, 0.0, 4.0]),
+    }
+    ground = gaussim.Ground()
+    together = gaussim.Simulator(gaussim.Scene(bodies=shapes, ground=ground), OPTIONS)
+    state = together.reset({k: s[0] for k, s in starts.items()}, {k: s[1] for k, s in starts.items()})
+    alone = {}
+    for name, body in shapes.items():
+        sim = gaussim.Simulator(gaussim.Scene(bodies={name: body}, ground=ground), OPTIONS)
+        alone[name] = (sim, sim.reset({name: starts[name][0]}, {name: starts[name][1]}))
+    solved = 0
+    for _ in range(400):
+        state = together.step(state)
+        solved += len(together.last_step.certificates) == 2
+        for name, (sim, own) in alone.items():
+            alone[name] = (sim, sim.step(own))
+            np.testing.assert_allclose(state.body(name).q, alone[name][1].q, rtol=0, atol=SAME)
+            np.testing.assert_allclose(state.body(name).v, alone[name][1].v, rtol=0, atol=SAME)
+    assert solved > 100  # both touched the ground
