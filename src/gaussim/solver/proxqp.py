@@ -184,13 +184,7 @@ class GaussSolver:
             qp.solve()
             multipliers[:n_eq] = size * qp.results.x[:n_eq]
             multipliers[n_eq + near] = size * np.maximum(qp.results.x[n_eq:], 0.0)  # its bound, met to eps
-        residual, relative, primal, dual, gap = kkt_residuals(
-            p.H, p.g, p.A, p.b, p.C, p.l, x, multipliers[:n_eq], multipliers[n_eq:]
-        )
-        if not relative <= tolerance:
-            return None
-        certificate = Certificate(Status.MULTIPLIERS_CERTIFIED, 0, primal, dual, gap, residual, relative)
-        return Solution(x.copy(), multipliers, n_eq, certificate)
+        return _checked(problem, x.copy(), multipliers, Status.MULTIPLIERS_CERTIFIED, tolerance)
 
     def _run(self, problem: GaussProblem, cap: int | None = None) -> Solution:
         """Solve with at most ``cap`` outer iterations (default and largest: Options.max_iter)."""
@@ -288,15 +282,22 @@ def _free_motion(problem: GaussProblem, x_free: np.ndarray, tolerance: float) ->
     """The free motion, with no reaction, where it meets every row (a contact within its margin that
     the step does not reach: exactly the motion of the body alone), when the KKT check certifies it to
     ``tolerance``; else None."""
-    p, none = problem, np.zeros(len(problem.b) + len(problem.l))
-    n_eq = len(p.b)
+    none = np.zeros(len(problem.b) + len(problem.l))
+    return _checked(problem, x_free.copy(), none, Status.FREE_MOTION_CERTIFIED, tolerance)
+
+
+def _checked(
+    problem: GaussProblem, x: np.ndarray, multipliers: np.ndarray, status: Status, tolerance: float
+) -> Solution | None:
+    """(x, multipliers) as a solution of ``status`` when the KKT check's relative residual certifies
+    it to ``tolerance``, else None."""
+    p, n_eq = problem, len(problem.b)
     residual, relative, primal, dual, gap = kkt_residuals(
-        p.H, p.g, p.A, p.b, p.C, p.l, x_free, none[:n_eq], none[n_eq:]
+        p.H, p.g, p.A, p.b, p.C, p.l, x, multipliers[:n_eq], multipliers[n_eq:]
     )
     if not relative <= tolerance:
         return None
-    certificate = Certificate(Status.FREE_MOTION_CERTIFIED, 0, primal, dual, gap, residual, relative)
-    return Solution(x_free.copy(), none, n_eq, certificate)
+    return Solution(x, multipliers, n_eq, Certificate(status, 0, primal, dual, gap, residual, relative))
 
 
 def _sides(p: GaussProblem) -> tuple[tuple[int, int, int], tuple, tuple]:
