@@ -146,12 +146,14 @@ def test_blocks_are_found(tmp_path: Path) -> None:
     page = tmp_path / "page.md"
     page.write_text(
         "text\n\n```python\nx = 1\n```\n\n<!-- not run: serves until Ctrl-C -->\n\n```bash\n"
-        "gaussim replay a.runlog\n```\n    indented = 'not a fenced block'\n"
+        "gaussim replay a.runlog\n```\n    indented = 'not a fenced block'\n\n"
+        "<!-- not run: -->\n```toml\n```\n"
     )
     found = blocks(page)
     assert [(b.language, b.text, b.opt_out) for b in found] == [
         ("python", "x = 1\n", None),
         ("bash", "gaussim replay a.runlog\n", "serves until Ctrl-C"),
+        ("toml", "\n", None),  # an opt-out must give its reason
     ]
 
 
