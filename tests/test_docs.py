@@ -12,6 +12,7 @@ or runs for minutes.
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import re
 import shlex
@@ -163,3 +164,14 @@ def test_readme_keeps_the_ci_test_command() -> None:
     command = ci[ci.index("# The README's test command, verbatim:") + 1]
     readme = [b.text.strip() for b in blocks(ROOT / "README.md") if b.language == "bash"]
     assert command in readme
+
+
+def test_roles_hook() -> None:
+    """The site's hook shows the docstrings' Sphinx roles as code (``~`` shortening the path)."""
+    spec = importlib.util.spec_from_file_location("docs_hooks", ROOT / "docs" / "hooks.py")
+    assert spec is not None and spec.loader is not None
+    hooks = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(hooks)
+    html = "a :class:<code>~gaussim.world.Material</code> and :func:<code>gaussim.run</code>, <code>x</code>"
+    shown = "a <code>Material</code> and <code>gaussim.run</code>, <code>x</code>"
+    assert hooks.on_page_content(html) == shown
