@@ -8,7 +8,9 @@ F = tau - b(q, v) under constraints minimises the Gauss functional
 (at the velocity level, Z(v+) = 1/2 (v+ - v_free)^T M (v+ - v_free) with v_free = v + dt M^-1 F).
 Each constraint module (contacts with Coulomb friction, joint limits, bilateral constraints, or a
 user's :class:`gaussim.constraints.ConstraintModule`) contributes linear rows to Omega; ProxQP solves
-the QP and its multipliers are the reactions. docs/FORMULATION.md states the formulation.
+the QP and its multipliers are the reactions. The documentation states the formulation (its page
+"The formulation", docs/FORMULATION.md in the source repository) and the API; the README says how to
+build and open it.
 """
 
 from .constraints import BilateralReaction, ContactForce, LimitReaction

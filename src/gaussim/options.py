@@ -28,10 +28,10 @@ class Options:
         friction_facets: number k of facets of the pyramid approximating the Coulomb cone (3 to 64).
         friction_mode: ``"pyramid"`` (Anitescu's convex relaxation, MuJoCo's: one QP whose contact
             velocity lies in the dual of the pyramid, so a sliding contact leaves the ground at the
-            normal speed mu*|slip| (on a facet direction; down to cos(pi/k) of that between facets) and
-            flies ballistically: a box sliding at v0 hops (mu*v0/(1 + mu^2))^2/(2 g), 32.6 mm at
+            normal speed mu |slip| (on a facet direction; down to cos(pi/k) of that between facets) and
+            flies ballistically: a box sliding at v0 hops (mu v0 / (1 + mu^2))^2 / (2 g), 32.6 mm at
             2 m/s and mu = 0.5, whatever dt), ``"accurate"`` (default: the pyramid is turned against the free
-            tangential velocity and its normal bound shifted by mu*|slip| of the current velocity, the
+            tangential velocity and its normal bound shifted by mu |slip| of the current velocity, the
             one-step De Saxce correction: no lift-off, no pyramid anisotropy while sliding) or
             ``"exact"`` (the De Saxce shift iterated to a fixed point within the step).
         friction_iterations: maximal number of QPs per step for ``"exact"`` friction and for sliding

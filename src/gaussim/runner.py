@@ -66,8 +66,8 @@ def run(
 
     Args:
         progress: a stream for a progress line (steps/s, simulated time, active contacts), or None.
-        checkpoint_seconds, checkpoint_steps: write a chunk this often [s], and when this many steps
-            are held.
+        checkpoint_seconds: write a chunk at least this often [s].
+        checkpoint_steps: write a chunk when this many steps are held.
         observer: called with the state and the report after every step (e.g. a live viewer,
             :func:`gaussim.viewer.follow`).
     """
