@@ -105,7 +105,11 @@ def main(argv: list[str] | None = None) -> int:
     bench.add_argument("--scheduler", help="run on a Dask cluster: its scheduler address")
     bench.add_argument("--no-peers", action="store_true", help="gaussim only")
     bench.add_argument("--list", action="store_true", help="list the cases and what their error measures")
-    bench.add_argument("--report", type=Path, help="markdown report (default: OUT/benchmarks.md)")
+    bench.add_argument(
+        "--report",
+        type=Path,
+        help="markdown report (default: OUT/benchmarks.md); with --scenes or --motion: its section there",
+    )
     mode = bench.add_mutually_exclusive_group()
     mode.add_argument(
         "--scenes", action="store_true", help="the speed suite instead: CASES are its scenes (see --list)"
@@ -207,9 +211,10 @@ def _bench_suite(args: argparse.Namespace) -> int:
     text = suite.markdown(records)
     print(text)
     if args.report:
-        with atomic_path(args.report) as tmp:
-            tmp.write_text(f"Made by `{command}`.\n\n{text}\n")
-        print(f"table: {args.report}")
+        from .bench.scenes import write_section
+
+        write_section(args.report, suite.TITLE, f"{suite.INTRO}\n\nMade by `{command}`.\n\n{text}")
+        print(f"table: section '{suite.TITLE}' of {args.report}")
     return 0
 
 

@@ -26,13 +26,13 @@ import time
 import warnings
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
-from functools import cache
 from pathlib import Path
 from types import ModuleType
 
 import numpy as np
 import pinocchio as pin
 
+from ..control import PDHold
 from ..exceptions import GaussimWarning
 from ..options import Options
 from ..robot import load_robot
@@ -151,8 +151,9 @@ def standing(name: str, contacts: str | None = None) -> Callable[..., Setup]:
             ground = next(o for o in scene.obstacles if isinstance(o, Ground))
             scene = Scene(spec.robot, ground=ground, contacts=contacts)
         hold = spec.controller
+        assert isinstance(hold, PDHold)  # the standing scenes' controller
         dt = dt or spec.options.dt
-        drive, damping = _pd(spec.robot.model, hold.q_ref, hold.kp, hold.kd, dt)  # type: ignore[union-attr]
+        drive, damping = _pd(spec.robot.model, hold.q_ref, hold.kp, hold.kd, dt)
         return Setup(scene, spec.initial.q.copy(), spec.initial.v.copy(), drive, damping, dt)
 
     return build
@@ -177,9 +178,7 @@ def panda_cube() -> Setup:
     begin = reach.copy()
     begin[0] = ex.SWEEP[0]
     angle = ex.CUBE_ANGLE
-    cube = pose(
-        x=ex.REACH * np.cos(angle), y=ex.REACH * np.sin(angle), z=ex.TABLE_TOP + ex.CUBE / 2 + 1e-4
-    )
+    cube = pose(x=ex.REACH * np.cos(angle), y=ex.REACH * np.sin(angle), z=ex.TABLE_TOP + ex.CUBE / 2 + 1e-4)
     q, v = _start(scene, {"arm": begin, "cube": cube})
     arm, duration, dt = scene.bodies["arm"].v, 2.0, 1e-3
     model, data = scene.robot.model, scene.robot.model.createData()
@@ -199,17 +198,26 @@ def panda_cube() -> Setup:
     return Setup(scene, q, v, drive, damping, dt)
 
 
+PILES = (1, 4, 16, 64)
+
+
+def _pile(n: int) -> Callable[[], Setup]:
+    return lambda: boxes(n)
+
+
 SCENES: dict[str, SceneCase] = {
     case.name: case
     for case in [
         SceneCase("box", "one box (0.1 m, 1 kg) resting on the ground", lambda: boxes(1, 1), quick=True),
         *(
-            SceneCase(f"pile_{n}", f"{n} boxes in 2-high columns on the ground", lambda n=n: boxes(n), n <= 4)
-            for n in (1, 4, 16, 64)
+            SceneCase(f"pile_{n}", f"{n} boxes in 2-high columns on the ground", _pile(n), n <= 4)
+            for n in PILES
         ),
         SceneCase("stack_3", "a 3-high stack of boxes", lambda: boxes(3, 3), quick=True),
         SceneCase("bin_pile", "20 mixed objects dropped into a bin (examples/bin_pile.py)", bin_pile),
-        SceneCase("solo12_feet", "Solo-12 standing, its four feet declared", standing("solo12_standing"), True),
+        SceneCase(
+            "solo12_feet", "Solo-12 standing, its four feet declared", standing("solo12_standing"), True
+        ),
         SceneCase(
             "solo12_all", "Solo-12 standing, every collision geometry", standing("solo12_standing", "auto")
         ),
@@ -350,9 +358,13 @@ def mjcf(scene: Scene, dt: float) -> MjcfScene:
             obstacles.append(f'<geom name="o{k}" type="plane" size="0 0 1" {where}/>')
         elif isinstance(o, Box):
             where = _frame(pin.SE3(np.asarray(o.rotation), np.asarray(o.position, float)))
-            obstacles.append(f'<geom name="o{k}" type="box" size="{_numbers(np.asarray(o.size) / 2)}" {where}/>')
+            obstacles.append(
+                f'<geom name="o{k}" type="box" size="{_numbers(np.asarray(o.size) / 2)}" {where}/>'
+            )
         elif isinstance(o, Sphere):
-            obstacles.append(f'<geom name="o{k}" type="sphere" size="{o.radius:.9g}" pos="{_numbers(o.position)}"/>')
+            obstacles.append(
+                f'<geom name="o{k}" type="sphere" size="{o.radius:.9g}" pos="{_numbers(o.position)}"/>'
+            )
     pairs = ""
     if explicit:
         elements = []
@@ -377,146 +389,6 @@ def mjcf(scene: Scene, dt: float) -> MjcfScene:
         f"<worldbody>{''.join(obstacles + by_joint.get(0, []) + world)}</worldbody>{pairs}</mujoco>"
     )
     return MjcfScene(xml, joints, names, explicit)
-
-
-class MuJoCo:
-    """A scene in MuJoCo: its state set from and read as Pinocchio's (q, v), a step under a torque."""
-
-    def __init__(self, setup: Setup) -> None:
-        import mujoco
-
-        self.mujoco = mujoco
-        self.spec = mjcf(setup.scene, setup.dt)
-        self.model = mujoco.MjModel.from_xml_string(self.spec.xml)
-        self.data = mujoco.MjData(self.model)
-        self.pin = setup.scene.robot.model
-        self.q_index, self.v_index = self._indices()
-        if setup.damping is not None:
-            self.model.dof_damping[self.v_index] = setup.damping
-        self.set_state(setup.q, setup.v)
-        mujoco.mj_forward(self.model, self.data)
-
-    def _indices(self) -> tuple[np.ndarray, np.ndarray]:
-        """MuJoCo's qpos and qvel indices of Pinocchio's q and v (free joints' quaternions aside)."""
-        q, v = np.zeros(self.pin.nq, int), np.zeros(self.pin.nv, int)
-        for j in range(1, self.pin.njoints):
-            joint = self.model.joint(self.spec.joints[j])
-            pj = self.pin.joints[j]
-            q[pj.idx_q : pj.idx_q + pj.nq] = joint.qposadr[0] + np.arange(pj.nq)
-            v[pj.idx_v : pj.idx_v + pj.nv] = joint.dofadr[0] + np.arange(pj.nv)
-        return q, v
-
-    def _free(self) -> list[tuple[int, int]]:
-        return [
-            (self.pin.joints[j].idx_q, self.pin.joints[j].idx_v)
-            for j in range(1, self.pin.njoints)
-            if self.pin.joints[j].shortname() == "JointModelFreeFlyer"
-        ]
-
-    def set_state(self, q: np.ndarray, v: np.ndarray) -> None:
-        qpos, qvel = q.copy(), v.copy()
-        for iq, iv in self._free():
-            qpos[iq + 3 : iq + 7] = np.roll(q[iq + 3 : iq + 7], 1)  # xyzw -> wxyz
-            qvel[iv : iv + 3] = pin.Quaternion(q[iq + 3 : iq + 7]).matrix() @ v[iv : iv + 3]
-        self.data.qpos[self.q_index] = qpos
-        self.data.qvel[self.v_index] = qvel
-
-    def state(self) -> tuple[np.ndarray, np.ndarray]:
-        """Pinocchio's (q, v) of MuJoCo's state."""
-        q, v = self.data.qpos[self.q_index].copy(), self.data.qvel[self.v_index].copy()
-        for iq, iv in self._free():
-            q[iq + 3 : iq + 7] = np.roll(q[iq + 3 : iq + 7], -1)  # wxyz -> xyzw
-            v[iv : iv + 3] = pin.Quaternion(q[iq + 3 : iq + 7]).matrix().T @ v[iv : iv + 3]
-        return q, v
-
-    def apply(self, tau: np.ndarray) -> None:
-        self.data.qfrc_applied[self.v_index] = tau
-
-    def step(self) -> None:
-        self.mujoco.mj_step(self.model, self.data)
-
-    def contacts(self) -> tuple[int, float]:
-        """(contact points, deepest penetration [m]) now."""
-        n = int(self.data.ncon)
-        return n, max(0.0, -float(self.data.contact.dist[:n].min())) if n else 0.0
-
-    def bodies(self) -> int:
-        """The scene's bodies: MuJoCo's bodies whose parent is the world."""
-        return int(np.count_nonzero(self.model.body_parentid[1:] == 0))
-
-
-# ---- PyBullet -------------------------------------------------------------------------------------
-
-
-class Bullet:
-    """A scene of free bodies (boxes, spheres, capsules, cylinders; ground and box obstacles) in
-    PyBullet: every pair collides (gaussim's automatic pairs of free bodies), each body and obstacle
-    has its friction (PyBullet multiplies the two sides': the obstacles get 1 and the bodies the pair's
-    coefficient, which every suite scene gives all pairs alike); restitution 0.
-
-    Raises:
-        ValueError: the scene holds a robot or a shape PyBullet is not given here.
-    """
-
-    def __init__(self, setup: Setup) -> None:
-        import pybullet as p
-
-        scene = setup.scene
-        sources = [layout.body.source for layout in scene.bodies.values()]
-        if not all(isinstance(s, FreeBody) and s.shape != "mesh" for s in sources):
-            raise ValueError("PyBullet runs scenes of primitive free bodies only")
-        frictions = {p_.friction for p_ in scene.pairs}
-        if len(frictions) > 1:
-            raise ValueError(f"PyBullet's product of frictions cannot give the pairs' {sorted(frictions)}")
-        mu = frictions.pop() if frictions else FRICTION
-        self.p, self.client = p, p.connect(p.DIRECT)
-        c = self.client
-        p.setGravity(*scene.gravity, physicsClientId=c)
-        p.setTimeStep(setup.dt, physicsClientId=c)
-        for o in scene.obstacles:
-            if isinstance(o, Ground):
-                shape = p.createCollisionShape(p.GEOM_PLANE, planeNormal=o.normal, physicsClientId=c)
-                uid = p.createMultiBody(0, shape, basePosition=o.height * np.asarray(o.normal), physicsClientId=c)
-            elif isinstance(o, Box):
-                shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=np.asarray(o.size) / 2, physicsClientId=c)
-                orientation = pin.Quaternion(np.asarray(o.rotation)).coeffs()
-                uid = p.createMultiBody(0, shape, basePosition=o.position, baseOrientation=orientation, physicsClientId=c)
-            else:
-                raise ValueError(f"{o.name}: PyBullet is given grounds and boxes only")
-            p.changeDynamics(uid, -1, lateralFriction=1.0, restitution=0.0, physicsClientId=c)
-        self.uids = []
-        for source, layout in zip(sources, scene.bodies.values()):
-            assert isinstance(source, FreeBody)
-            shape = self._shape(source)
-            q = setup.q[layout.q]
-            uid = p.createMultiBody(source.mass, shape, basePosition=q[:3], baseOrientation=q[3:7], physicsClientId=c)
-            inertia = np.diag(source._inertia)
-            p.changeDynamics(
-                uid, -1, lateralFriction=mu, restitution=0.0, localInertiaDiagonal=inertia, physicsClientId=c
-            )
-            self.uids.append(uid)
-
-    def _shape(self, body: FreeBody) -> int:
-        p, c = self.p, self.client
-        if body.shape == "box":
-            return p.createCollisionShape(p.GEOM_BOX, halfExtents=np.asarray(body.size) / 2, physicsClientId=c)
-        if body.shape == "sphere":
-            return p.createCollisionShape(p.GEOM_SPHERE, radius=body.size[0], physicsClientId=c)
-        kind = p.GEOM_CAPSULE if body.shape == "capsule" else p.GEOM_CYLINDER
-        return p.createCollisionShape(kind, radius=body.size[0], height=body.size[1], physicsClientId=c)
-
-    def step(self) -> None:
-        self.p.stepSimulation(physicsClientId=self.client)
-
-    def contacts(self) -> tuple[int, float]:
-        points = self.p.getContactPoints(physicsClientId=self.client)
-        return len(points), max((max(0.0, -c[8]) for c in points), default=0.0)
-
-    def bodies(self) -> int:
-        return len(self.uids)
-
-    def close(self) -> None:
-        self.p.disconnect(physicsClientId=self.client)
 
 
 # ---- the suite ------------------------------------------------------------------------------------
@@ -546,29 +418,20 @@ class Timing:
         }
 
 
-@cache
-def peers_installed() -> tuple[str, ...]:
-    found = []
-    for module in ("mujoco", "pybullet"):
-        try:
-            __import__(module)
-        except ImportError:
-            continue
-        found.append(module)
-    return tuple(found)
-
-
 def run_scene(case: SceneCase, steps: int, peers: Iterable[str] | None = None) -> dict:
     """Step ``case`` ``steps`` times with gaussim (default options at the scene's dt) and each peer,
     the engines in turn at every step, each timed alone (the drives, computed from each engine's own
     state, and the contact readings are not); returns the scene's record: per engine its
     :meth:`Timing.row`, and the bodies and declared pairs of the scene."""
+    from .peers import Bullet, MuJoCo, available
+
     setup = case.build()
     sim = Simulator(setup.scene, Options(dt=setup.dt))
     state = sim.reset(setup.q, setup.v)
-    engines: dict[str, object] = {}
+    engines: dict[str, MuJoCo | Bullet] = {}
     timings = {"gaussim": Timing(len(setup.scene.bodies), kkt_residual=0.0)}
-    for name in peers_installed() if peers is None else peers:
+    installed = [e for e in ("mujoco", "pybullet") if any(p.startswith(e) for p in available())]
+    for name in installed if peers is None else peers:
         try:
             engine = engines[name] = MuJoCo(setup) if name == "mujoco" else Bullet(setup)
             timings[name] = Timing(engine.bodies())
@@ -590,17 +453,18 @@ def run_scene(case: SceneCase, steps: int, peers: Iterable[str] | None = None) -
                 q, v = engine.state()
                 engine.apply(setup.drive(engine.data.time, q, v))
             tic = time.perf_counter()
-            engine.step()  # type: ignore[attr-defined]
+            engine.step()
             timings[name].seconds.append(time.perf_counter() - tic)
-            n, depth = engine.contacts()  # type: ignore[attr-defined]
+            n, depth = engine.contacts()
             timings[name].contacts.append(n)
             timings[name].penetration = max(timings[name].penetration, depth)
     for engine in engines.values():
         if isinstance(engine, Bullet):
             engine.close()
     mujoco_pairs = None
-    if isinstance(engines.get("mujoco"), MuJoCo):
-        spec = engines["mujoco"].spec  # type: ignore[attr-defined]
+    peer = engines.get("mujoco")
+    if isinstance(peer, MuJoCo):
+        spec = peer.spec
         mujoco_pairs = len(setup.scene.pairs) if spec.explicit_pairs else len(_default_pairs(setup.scene))
     return {
         "scene": case.name,
@@ -637,6 +501,35 @@ def run_suite(
     return records
 
 
+TITLE = "Scene suite for speed"
+INTRO = """Each scene is stepped by gaussim (default options, velocity scheme, dt 1 ms), MuJoCo (Newton,
+pyramidal cones, implicitfast, its default soft contacts) and PyBullet (scenes of primitive free bodies
+only), the engines in turn at every step in one process, from models generated from the same gaussim
+scene (`gaussim.bench.scenes.mjcf`: the same bodies, inertias, collision geometries or their convex
+hulls, friction and contact pairs). `us` is one step alone, median / p90 over the run (the first
+steps, which compile, left out); the ratio is gaussim's time over the peer's; contact points are the
+mean per step of each engine; penetration is gaussim's deepest and the KKT residual its largest (of
+the steps' certificates)."""
+
+
+def write_section(path: Path, title: str, text: str) -> None:
+    """Put ``text`` under the heading ``## title`` of the markdown file ``path``, replacing that
+    section (up to the next ``## `` heading) when there is one, else appending it."""
+    from ..files import atomic_path
+
+    old = path.read_text() if path.exists() else ""
+    heading = f"## {title}\n"
+    section = f"{heading}\n{text.strip()}\n"
+    if heading in old:
+        before, after = old.split(heading, 1)
+        rest = after.split("\n## ", 1)
+        new = before + section + ("\n## " + rest[1] if len(rest) > 1 else "")
+    else:
+        new = old.rstrip("\n") + ("\n\n" if old else "") + section
+    with atomic_path(path) as tmp:
+        tmp.write_text(new)
+
+
 def markdown(records: list[dict]) -> str:
     """The suite's table: a row per scene, per engine its median and p90 step [us], gaussim's ratio
     to each peer, contact points per step (mean), and gaussim's deepest penetration and KKT residual."""
@@ -648,7 +541,13 @@ def markdown(records: list[dict]) -> str:
     lines = ["| " + " | ".join(header) + " |", "|---|" + "---:|" * (len(header) - 1)]
     for r in records:
         g = r["engines"]["gaussim"]
-        cells = [r["scene"], str(r["bodies"]), str(r["nv"]), str(r["pairs"]), f"{g['us_median']:.0f} / {g['us_p90']:.0f}"]
+        cells = [
+            r["scene"],
+            str(r["bodies"]),
+            str(r["nv"]),
+            str(r["pairs"]),
+            f"{g['us_median']:.0f} / {g['us_p90']:.0f}",
+        ]
         counts = [f"{g['contacts']:.1f}"]
         for peer in peers:
             e = r["engines"].get(peer)
