@@ -213,7 +213,12 @@ def _bench_suite(args: argparse.Namespace) -> int:
     if args.report:
         from .bench.scenes import write_section
 
-        write_section(args.report, suite.TITLE, f"{suite.INTRO}\n\nMade by `{command}`.\n\n{text}")
+        made = f"Made by `{command}`" + (
+            " (short runs of a subset: the structure of the full run, timings indicative only)."
+            if args.quick
+            else "."
+        )
+        write_section(args.report, suite.TITLE, f"{suite.INTRO}\n\n{made}\n\n{text}")
         print(f"table: section '{suite.TITLE}' of {args.report}")
     return 0
 

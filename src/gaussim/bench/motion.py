@@ -255,10 +255,10 @@ rolling down a 20 deg incline (against the closed form of rolling without slippi
 sin(theta)), Solo-12 dropped from 0.3 m landing into its PD stance, four boxes settling into a pile.
 The error is the RMS over the run (sampled every 10 ms) of the distance of every body (each joint's
 origin: a free body's centre, each of a robot's links) to the reference: the closed form, else the
-engine's own run at dt 0.1 ms and its tightest solver settings (gaussim eps_abs 1e-10; MuJoCo
-tolerance 1e-12, 1000 iterations). Each engine sweeps its time step and its solver tolerance
-(`gaussim.bench.motion`); the row is its cheapest setting (wall time of its steps per simulated
-second) that meets the tolerance, and that time's ratio to gaussim's cheapest."""
+engine's own run at dt 0.1 ms (0.25 ms with `--quick`) and its tightest solver settings (gaussim
+eps_abs 1e-10; MuJoCo tolerance 1e-12, 1000 iterations). Each engine sweeps its time step and its
+solver tolerance (`gaussim.bench.motion`); the row is its cheapest setting (wall time of its steps
+per simulated second) that meets the tolerance, and that time's ratio to gaussim's cheapest."""
 
 
 def markdown(records: list[dict]) -> str:
