@@ -369,3 +369,39 @@ def test_a_recorder_absorbs_another_runs_steps():
     summary = first.summary()
     assert len(first.seconds) == steps == 30
     assert summary["iterations"] == iterations / steps and summary["penetration"] == deepest
+
+
+def test_the_scene_suite_runs_the_same_scene_in_every_engine(capsys):
+    """``gaussim bench --scenes --quick``: a row per scene whose cells match the header; MuJoCo's model,
+    generated from the gaussim scene, holds the same bodies and contact pairs and touches at as many
+    points (a box face on the ground: 4 each); gaussim's penetration and KKT residual are reported."""
+    from gaussim.bench.scenes import QUICK_STEPS, run_suite
+
+    records = run_suite(["box", "pile_4", "panda_cube"], quick=True, peers=["mujoco"])
+    for r in records:
+        gaussim, mujoco = r["engines"]["gaussim"], r["engines"]["mujoco"]
+        assert r["steps"] == QUICK_STEPS and mujoco["status"] == "ok", r
+        assert gaussim["bodies"] == mujoco["bodies"] == r["bodies"], r
+        assert r["mujoco_pairs"] == r["pairs"], r
+        assert round(gaussim["contacts"]) == round(mujoco["contacts"]) > 0, r
+        assert 0 <= gaussim["penetration"] < 1e-4 and gaussim["kkt_residual"] < 1e-6, r
+    assert main(["bench", "--scenes", "--quick", "--no-peers", "stack_3"]) == 0
+    table = [line for line in capsys.readouterr().out.splitlines() if line.startswith("|")]
+    assert len(table) == 3 and table[2].startswith("| stack_3 | 3 | 18 | 6 |")
+    assert len({line.count("|") for line in table}) == 1
+
+
+def test_matched_accuracy_on_motion_picks_the_cheapest_setting_that_meets_each_tolerance():
+    """The rolling ball against its closed form: gaussim's error falls with dt (first order) and the
+    table names, per tolerance, the cheapest run that meets it."""
+    from gaussim.bench.motion import TASKS, TOLERANCES, cheapest, markdown, run_task
+
+    record = run_task(TASKS["rolling_ball"], True, ["gaussim"], None)
+    runs = record["engines"]["gaussim"]["runs"]
+    errors = [runs[label]["error"] for label in ("dt=0.005", "dt=0.002", "dt=0.001")]
+    assert errors[0] > errors[1] > errors[2] and errors[2] < 1e-3
+    assert errors[0] / errors[2] == pytest.approx(5, rel=0.2)
+    for tolerance in TOLERANCES:
+        label, run = cheapest(runs, tolerance)  # type: ignore[misc]
+        assert run["error"] <= tolerance
+        assert f"| rolling_ball | {tolerance:g} | gaussim | closed form | {label} |" in markdown([record])

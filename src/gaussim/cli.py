@@ -105,7 +105,18 @@ def main(argv: list[str] | None = None) -> int:
     bench.add_argument("--scheduler", help="run on a Dask cluster: its scheduler address")
     bench.add_argument("--no-peers", action="store_true", help="gaussim only")
     bench.add_argument("--list", action="store_true", help="list the cases and what their error measures")
-    bench.add_argument("--report", type=Path, help="markdown report (default: OUT/benchmarks.md)")
+    bench.add_argument(
+        "--report",
+        type=Path,
+        help="markdown report (default: OUT/benchmarks.md); with --scenes or --motion: its section there",
+    )
+    mode = bench.add_mutually_exclusive_group()
+    mode.add_argument(
+        "--scenes", action="store_true", help="the speed suite instead: CASES are its scenes (see --list)"
+    )
+    mode.add_argument(
+        "--motion", action="store_true", help="matched accuracy on motion instead: CASES are its tasks"
+    )
 
     stability = commands.add_parser("stability", help="run the stability cases and write their table")
     stability.add_argument("--long", action="store_true", help="add the long cases (1e6 steps, tiny dt)")
@@ -142,6 +153,8 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _bench(args: argparse.Namespace) -> int:
+    if args.scenes or args.motion:
+        return _bench_suite(args)
     from .bench import CASES, run_bench
 
     if args.list:
@@ -171,6 +184,43 @@ def _bench(args: argparse.Namespace) -> int:
     report = args.report or args.out / "benchmarks.md"
     print(f"{len(records)} runs, {len(failed)} failed; tables and plots: {report}")
     return EXIT_FAILURE if failed else 0
+
+
+def _bench_suite(args: argparse.Namespace) -> int:
+    """``gaussim bench --scenes`` (the speed suite) or ``--motion`` (matched accuracy on motion): the
+    table on stdout, progress on stderr, and with ``--report`` a markdown file."""
+    if args.scenes:
+        from .bench import scenes as suite
+    else:
+        from .bench import motion as suite  # type: ignore[no-redef]
+    if args.list:
+        for name, case in suite.SCENES.items():
+            print(f"{name:14s} {case.about}")
+        return 0
+    unknown = sorted(set(args.cases) - set(suite.SCENES))
+    if unknown:
+        raise InvalidOptions("cases", f"unknown {unknown}; known: {', '.join(suite.SCENES)}")
+    flags = " --quick" if args.quick else ""
+    command = f"gaussim bench --{'scenes' if args.scenes else 'motion'}{flags} {' '.join(args.cases)}".strip()
+    records = suite.run_suite(
+        args.cases or None,
+        quick=args.quick,
+        peers=[] if args.no_peers else None,
+        progress=lambda line: print(line, file=sys.stderr, flush=True),
+    )
+    text = suite.markdown(records)
+    print(text)
+    if args.report:
+        from .bench.scenes import write_section
+
+        made = f"Made by `{command}`" + (
+            " (short runs of a subset: the structure of the full run, timings indicative only)."
+            if args.quick
+            else "."
+        )
+        write_section(args.report, suite.TITLE, f"{suite.INTRO}\n\n{made}\n\n{text}")
+        print(f"table: section '{suite.TITLE}' of {args.report}")
+    return 0
 
 
 def _stability(args: argparse.Namespace) -> int:

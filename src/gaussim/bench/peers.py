@@ -30,9 +30,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import pinocchio as pin
 
 from ..robot import Robot, load_robot
+from ..scene import Box, Ground
+from ..world import FreeBody
 from .cases import LANDING, G, standing_window
+from .scenes import FRICTION, Setup, mjcf
 
 FEET = ("FL", "FR", "HL", "HR")
 KP, KD = 5.0, 0.2  # robots/scenes/solo12_standing.toml's PD hold
@@ -417,6 +421,156 @@ PEERS: dict[str, Peer] = {
         },
     ),
 }
+
+
+# ---- the scene suite's peers (gaussim.bench.scenes) ------------------------------------------------
+
+
+class MuJoCo:
+    """A scene in MuJoCo: its state set from and read as Pinocchio's (q, v), a step under a torque."""
+
+    def __init__(self, setup: Setup) -> None:
+        import mujoco
+
+        self.mujoco = mujoco
+        self.spec = mjcf(setup.scene, setup.dt)
+        self.model = mujoco.MjModel.from_xml_string(self.spec.xml)
+        self.data = mujoco.MjData(self.model)
+        self.pin = setup.scene.robot.model
+        self.q_index, self.v_index = self._indices()
+        if setup.damping is not None:
+            self.model.dof_damping[self.v_index] = setup.damping
+        self.set_state(setup.q, setup.v)
+        mujoco.mj_forward(self.model, self.data)
+
+    def _indices(self) -> tuple[np.ndarray, np.ndarray]:
+        """MuJoCo's qpos and qvel indices of Pinocchio's q and v (free joints' quaternions aside)."""
+        q, v = np.zeros(self.pin.nq, int), np.zeros(self.pin.nv, int)
+        for j in range(1, self.pin.njoints):
+            joint = self.model.joint(self.spec.joints[j])
+            pj = self.pin.joints[j]
+            q[pj.idx_q : pj.idx_q + pj.nq] = joint.qposadr[0] + np.arange(pj.nq)
+            v[pj.idx_v : pj.idx_v + pj.nv] = joint.dofadr[0] + np.arange(pj.nv)
+        return q, v
+
+    def _free(self) -> list[tuple[int, int]]:
+        return [
+            (self.pin.joints[j].idx_q, self.pin.joints[j].idx_v)
+            for j in range(1, self.pin.njoints)
+            if self.pin.joints[j].shortname() == "JointModelFreeFlyer"
+        ]
+
+    def set_state(self, q: np.ndarray, v: np.ndarray) -> None:
+        qpos, qvel = q.copy(), v.copy()
+        for iq, iv in self._free():
+            qpos[iq + 3 : iq + 7] = np.roll(q[iq + 3 : iq + 7], 1)  # xyzw -> wxyz
+            qvel[iv : iv + 3] = pin.Quaternion(q[iq + 3 : iq + 7]).matrix() @ v[iv : iv + 3]
+        self.data.qpos[self.q_index] = qpos
+        self.data.qvel[self.v_index] = qvel
+
+    def state(self) -> tuple[np.ndarray, np.ndarray]:
+        """Pinocchio's (q, v) of MuJoCo's state."""
+        q, v = self.data.qpos[self.q_index].copy(), self.data.qvel[self.v_index].copy()
+        for iq, iv in self._free():
+            q[iq + 3 : iq + 7] = np.roll(q[iq + 3 : iq + 7], -1)  # wxyz -> xyzw
+            v[iv : iv + 3] = pin.Quaternion(q[iq + 3 : iq + 7]).matrix().T @ v[iv : iv + 3]
+        return q, v
+
+    def apply(self, tau: np.ndarray) -> None:
+        self.data.qfrc_applied[self.v_index] = tau
+
+    def step(self) -> None:
+        self.mujoco.mj_step(self.model, self.data)
+
+    def contacts(self) -> tuple[int, float]:
+        """(contact points, deepest penetration [m]) now."""
+        n = int(self.data.ncon)
+        return n, max(0.0, -float(self.data.contact.dist[:n].min())) if n else 0.0
+
+    def bodies(self) -> int:
+        """The scene's bodies: MuJoCo's bodies whose parent is the world."""
+        return int(np.count_nonzero(self.model.body_parentid[1:] == 0))
+
+
+class Bullet:
+    """A scene of free bodies (boxes, spheres, capsules, cylinders; ground and box obstacles) in
+    PyBullet: every pair collides (gaussim's automatic pairs of free bodies), each body and obstacle
+    has its friction (PyBullet multiplies the two sides': the obstacles get 1 and the bodies the pair's
+    coefficient, which every suite scene gives all pairs alike); restitution 0.
+
+    Raises:
+        ValueError: the scene holds a robot or a shape PyBullet is not given here.
+    """
+
+    def __init__(self, setup: Setup) -> None:
+        import pybullet as p
+
+        scene = setup.scene
+        sources = [layout.body.source for layout in scene.bodies.values()]
+        if not all(isinstance(s, FreeBody) and s.shape != "mesh" for s in sources):
+            raise ValueError("PyBullet runs scenes of primitive free bodies only")
+        frictions = {p_.friction for p_ in scene.pairs}
+        if len(frictions) > 1:
+            raise ValueError(f"PyBullet's product of frictions cannot give the pairs' {sorted(frictions)}")
+        mu = frictions.pop() if frictions else FRICTION
+        self.p, self.client = p, p.connect(p.DIRECT)
+        c = self.client
+        p.setGravity(*scene.gravity, physicsClientId=c)
+        p.setTimeStep(setup.dt, physicsClientId=c)
+        for o in scene.obstacles:
+            if isinstance(o, Ground):
+                shape = p.createCollisionShape(p.GEOM_PLANE, planeNormal=o.normal, physicsClientId=c)
+                uid = p.createMultiBody(
+                    0, shape, basePosition=o.height * np.asarray(o.normal), physicsClientId=c
+                )
+            elif isinstance(o, Box):
+                shape = p.createCollisionShape(
+                    p.GEOM_BOX, halfExtents=np.asarray(o.size) / 2, physicsClientId=c
+                )
+                orientation = pin.Quaternion(np.asarray(o.rotation)).coeffs()
+                uid = p.createMultiBody(
+                    0, shape, basePosition=o.position, baseOrientation=orientation, physicsClientId=c
+                )
+            else:
+                raise ValueError(f"{o.name}: PyBullet is given grounds and boxes only")
+            p.changeDynamics(uid, -1, lateralFriction=1.0, restitution=0.0, physicsClientId=c)
+        self.uids = []
+        for source, layout in zip(sources, scene.bodies.values()):
+            assert isinstance(source, FreeBody)
+            shape = self._shape(source)
+            q = setup.q[layout.q]
+            uid = p.createMultiBody(
+                source.mass, shape, basePosition=q[:3], baseOrientation=q[3:7], physicsClientId=c
+            )
+            inertia = np.diag(source._inertia)
+            p.changeDynamics(
+                uid, -1, lateralFriction=mu, restitution=0.0, localInertiaDiagonal=inertia, physicsClientId=c
+            )
+            self.uids.append(uid)
+
+    def _shape(self, body: FreeBody) -> int:
+        p, c = self.p, self.client
+        if body.shape == "box":
+            return p.createCollisionShape(
+                p.GEOM_BOX, halfExtents=np.asarray(body.size) / 2, physicsClientId=c
+            )
+        if body.shape == "sphere":
+            return p.createCollisionShape(p.GEOM_SPHERE, radius=body.size[0], physicsClientId=c)
+        kind = p.GEOM_CAPSULE if body.shape == "capsule" else p.GEOM_CYLINDER
+        return p.createCollisionShape(kind, radius=body.size[0], height=body.size[1], physicsClientId=c)
+
+    def step(self) -> None:
+        self.p.stepSimulation(physicsClientId=self.client)
+
+    def contacts(self) -> tuple[int, float]:
+        points = self.p.getContactPoints(physicsClientId=self.client)
+        return len(points), max((max(0.0, -c[8]) for c in points), default=0.0)
+
+    def bodies(self) -> int:
+        return len(self.uids)
+
+    def close(self) -> None:
+        self.p.disconnect(physicsClientId=self.client)
 
 
 def available() -> list[str]:
