@@ -11,6 +11,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..scene import Scene
+from .boxes import BoxPairs
 from .contacts import NO_CONTACTS, Contacts, Piece
 from .ground import GroundHulls
 from .margin import MarginSchedule
@@ -34,6 +35,7 @@ ROUTINES: dict[tuple[type, type], Callable[[list[Pair], list[int]], Routine]] = 
     (coal.ConvexBase, coal.Halfspace): GroundHulls,
     (coal.Sphere, coal.Halfspace): GroundHulls,
     (coal.Capsule, coal.Halfspace): GroundHulls,
+    (coal.Box, coal.Box): BoxPairs,
 }
 
 
