@@ -156,39 +156,41 @@ def _box_box(R, p, half, margin, normal, points):  # type: ignore[no-untyped-def
     (answer, gap, number of points), the normal and points written into ``normal`` (3,) and
     ``points`` (MAX_POINTS, 3)."""
     d = p[0] - p[1]
+    T = np.empty((2, 3, 3))  # T[s, a]: axis a of box s (contiguous)
+    T[0], T[1] = R[0].T, R[1].T
     best, axis_box, axis_index = -np.inf, -1, -1
     for s in range(2):
         for a in range(3):
-            axis = R[s][:, a]
-            separation = abs(d @ axis) - _reach(R, half, axis)
+            axis = T[s, a]
+            separation = abs(d @ axis) - _reach(T, half, axis)
             if separation > best:
                 best, axis_box, axis_index = separation, s, a
     edge_best = -np.inf
     for a in range(3):
         for b in range(3):
-            axis = np.cross(R[0][:, a], R[1][:, b])
+            axis = np.cross(T[0, a], T[1, b])
             length = np.sqrt(axis @ axis)
             if length < 1e-6:  # parallel edges: their axis is a face's
                 continue
             axis = axis / length
-            edge_best = max(edge_best, abs(d @ axis) - _reach(R, half, axis))
+            edge_best = max(edge_best, abs(d @ axis) - _reach(T, half, axis))
     lower = max(best, edge_best)
     if lower > margin:
         return FAR, lower, 0
     if edge_best > best + EDGE_PREFERENCE:
         return ASK_COAL, lower, 0
-    n = R[axis_box][:, axis_index].copy()
+    n = T[axis_box, axis_index].copy()
     if d @ n < 0:
         n = -n  # from box 1 towards box 0
-    robot_support = n @ p[0] - _extent(R[0], half[0], n)
-    other_support = n @ p[1] + _extent(R[1], half[1], n)
+    robot_support = n @ p[0] - _extent(T[0], half[0], n)
+    other_support = n @ p[1] + _extent(T[1], half[1], n)
     gap = robot_support - other_support
     # the reference face (of the axis' box, facing the other) and the other box's support set
     ref = axis_box
     inc = 1 - ref
     towards = -n if ref == 0 else n  # the reference face's outward normal
     centre = p[ref] + half[ref][axis_index] * towards
-    u, w = R[ref][:, (axis_index + 1) % 3], R[ref][:, (axis_index + 2) % 3]
+    u, w = T[ref, (axis_index + 1) % 3], T[ref, (axis_index + 2) % 3]
     hu, hw = half[ref][(axis_index + 1) % 3], half[ref][(axis_index + 2) % 3]
     polygon = _support_polygon(R[inc], p[inc], half[inc], -towards)
     if polygon.shape[0] == 0:
@@ -224,15 +226,15 @@ def _box_box(R, p, half, margin, normal, points):  # type: ignore[no-untyped-def
 
 
 @njit(cache=True)
-def _reach(R, half, axis):  # type: ignore[no-untyped-def]
-    """The sum of both boxes' half extents along unit ``axis``."""
-    return _extent(R[0], half[0], axis) + _extent(R[1], half[1], axis)
+def _reach(T, half, axis):  # type: ignore[no-untyped-def]
+    """The sum of both boxes' half extents along unit ``axis`` (their axes as rows ``T[s]``)."""
+    return _extent(T[0], half[0], axis) + _extent(T[1], half[1], axis)
 
 
 @njit(cache=True)
-def _extent(R, half, axis):  # type: ignore[no-untyped-def]
-    """A box's half extent along unit ``axis``."""
-    return half[0] * abs(R[:, 0] @ axis) + half[1] * abs(R[:, 1] @ axis) + half[2] * abs(R[:, 2] @ axis)
+def _extent(T, half, axis):  # type: ignore[no-untyped-def]
+    """A box's half extent along unit ``axis`` (its axes as rows of ``T``)."""
+    return half[0] * abs(T[0] @ axis) + half[1] * abs(T[1] @ axis) + half[2] * abs(T[2] @ axis)
 
 
 @njit(cache=True)
