@@ -142,8 +142,13 @@ def _box_pairs(
         i = near[k]
         for s in range(2):  # each box in the world: its joint's placement times its own
             Rj, pj = rotations[side[i, s]], translations[side[i, s]]
-            R[s] = Rj @ local_rotation[i, s]
-            p[s] = Rj @ local_translation[i, s] + pj
+            for a in range(3):  # loops: a BLAS call per 3 x 3 product costs more than its arithmetic
+                p[s, a] = pj[a]
+                for b in range(3):
+                    R[s, a, b] = 0.0
+                    p[s, a] += Rj[a, b] * local_translation[i, s, b]
+                    for c in range(3):
+                        R[s, a, b] += Rj[a, c] * local_rotation[i, s, c, b]
         if thin[i]:
             answer[k] = ASK_COAL
             continue
