@@ -1,9 +1,10 @@
 """Stage 2, contact detection (coal): per declared pair, the contact points, normals and gaps.
 
 The driver (:mod:`.driver`, after MJX's ``collision_driver.py``) sends each pair to the routine of
-its geometry-pair type: polyhedra and spheres on a ground plane to one compiled pass
-(:mod:`.ground`), every other pair to coal's narrow phase and contact patch, behind a
-bounding-sphere broad phase over all of them at once (:mod:`.narrow`).
+its geometry-pair type: polyhedra, spheres and capsules on a ground plane to one compiled pass
+(:mod:`.ground`), boxes against boxes to a compiled separating-axis test and face clipping
+(:mod:`.boxes`), every other pair to coal's narrow phase and contact patch (:mod:`.narrow`), the
+last two behind a bounding-sphere broad phase over all their pairs at once.
 :mod:`.margin` schedules the margin and says when a step need not look; :mod:`.contacts` holds the
 record the routines fill.
 """

@@ -11,6 +11,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..scene import Scene
+from .boxes import BoxPairs
 from .contacts import NO_CONTACTS, Contacts, Piece
 from .ground import GroundHulls
 from .margin import MarginSchedule
@@ -33,6 +34,8 @@ ROUTINES: dict[tuple[type, type], Callable[[list[Pair], list[int]], Routine]] = 
     (coal.Box, coal.Halfspace): GroundHulls,
     (coal.ConvexBase, coal.Halfspace): GroundHulls,
     (coal.Sphere, coal.Halfspace): GroundHulls,
+    (coal.Capsule, coal.Halfspace): GroundHulls,
+    (coal.Box, coal.Box): BoxPairs,
 }
 
 
@@ -48,7 +51,7 @@ def routine_of(pair: Pair) -> Callable[[list[Pair], list[int]], Routine]:
 class ContactDetector:
     """Finds the contact points of the scene's declared pairs that are closer than the margin.
 
-    A polyhedron or a sphere on a ground plane goes to :class:`~.ground.GroundHulls` (one compiled
+    A polyhedron, a sphere or a capsule on a ground plane goes to :class:`~.ground.GroundHulls` (one compiled
     pass for all of them), every other pair to :class:`~.narrow.NarrowPhase` (coal). The
     :class:`~.margin.MarginSchedule` widens the margin to what a step can travel and says when a step
     need not look (:meth:`cover`); :meth:`detect` itself always looks.

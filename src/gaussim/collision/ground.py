@@ -1,8 +1,9 @@
-"""Polyhedra and spheres against a ground plane (a half-space), all such pairs in one compiled pass.
+"""Polyhedra, spheres and capsules against a ground plane (a half-space), all such pairs in one compiled pass.
 
 The deepest vertex along the ground's normal is the exact closest point of a convex polyhedron to a
 half-space (the support point coal's narrow phase finds), and a sphere is the ball of its radius (its
-``rounding``) around a one-vertex hull, so these pairs need no narrow-phase call each.
+``rounding``) around a one-vertex hull, a capsule around a two-vertex one, so these pairs need no
+narrow-phase call each.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ import numpy as np
 import pinocchio as pin
 from numba import njit
 
-from .contacts import PATCH_MIN_EXTENT, PATCH_TOLERANCE, Piece, one_pair
+from .contacts import PATCH_MIN_EXTENT, PATCH_TOLERANCE, Piece
 from .pairs import JointPlacements, Pair
 
 # A flat face on the ground is supported by the vertices extreme along these many directions of
@@ -36,7 +37,9 @@ class Hulls(NamedTuple):
             (padded with copies of the first).
         first, neighbours: the edges of each hull as adjacency lists: the neighbours of vertex i of
             hull k are ``neighbours[k, first[k, i] : first[k, i + 1]]``, shapes (P, V + 1), (P, E).
-        rounding: the radius of a sphere (around its one vertex), else 0, shape (P,) [m].
+        rounding: the radius of a sphere (around its one vertex) or a capsule (around its two), else
+            0, shape (P,) [m].
+        directions: the SUPPORT_DIRECTIONS directions of each ground's plane, shape (P, D, 3).
         turn2: the squared turn of the ground normal seen from the body that keeps a one-point
             verdict, shape (P,).
         deepest: where each search for the deepest vertex starts (updated by each pass), (P,).
@@ -49,59 +52,43 @@ class Hulls(NamedTuple):
     first: np.ndarray
     neighbours: np.ndarray
     rounding: np.ndarray
+    directions: np.ndarray
     turn2: np.ndarray
     deepest: np.ndarray
     narrow_at: np.ndarray
 
 
 class GroundHulls:
-    """All the pairs of a polyhedron (a box or a mesh's convex hull) or a sphere with a ground plane.
+    """All the pairs of a polyhedron (a box or a mesh's convex hull), a sphere or a capsule with a
+    ground plane.
 
     A polyhedron touches at its deepest vertex alone while the vertices near the ground span less
     than PATCH_MIN_EXTENT. That verdict is computed with NARROW_SLACK more tolerance and kept while
     the ground normal seen from the body stays within ``turn`` of where it was decided: two vertices'
     heights differ by at most 2 r |u - u0| more when that normal moves from u0 to u (r: the largest
     distance of a vertex from their mean), so a turn that small cannot bring another vertex close.
-    A polyhedron that touches more widely touches at the vertices of its support outline, each with
-    its own gap (:meth:`_on_ground`).
+    A polyhedron that touches more widely touches at its vertices within PATCH_TOLERANCE of the
+    deepest one (or penetrating), reduced to the vertices of their support outline (the extreme ones
+    along SUPPORT_DIRECTIONS directions of the ground's plane), each with its own gap; the deepest
+    alone when they span less than PATCH_MIN_EXTENT.
 
     Args:
         pairs: the declared pairs of the scene.
-        index: which of them this routine answers, each a box, convex or sphere on a :class:`Ground`.
+        index: which of them this routine answers, each a box, convex, sphere or capsule on a
+            :class:`Ground`.
     """
 
     def __init__(self, pairs: list[Pair], index: list[int]) -> None:
         self.index = np.array(index, dtype=int)
         self.pairs = [pairs[k] for k in index]
-        self.joints = [pair.joint for pair in self.pairs]
-        self.placements = JointPlacements(self.joints)
+        self.placements = JointPlacements([pair.joint for pair in self.pairs])
         self.hulls = _hulls(self.pairs)
-        self.directions = [_support_directions(np.asarray(p.obstacle.normal)) for p in self.pairs]  # type: ignore[union-attr]
 
     def detect(self, data: pin.Data, margin: float) -> tuple[list[Piece], float]:
         """The contacts of the hulls within ``margin`` [m] of the ground at the placements held in
         ``data``, and the least gap of all the hulls [m]."""
-        one, wide, least = touching(*self.placements(data), self.hulls, margin, self.index)
-        pieces = [one] if len(one[0]) else []
-        for h in wide.tolist():
-            points, gaps = self._on_ground(h, data.oMi[self.joints[h]].homogeneous, margin)
-            pieces.append(one_pair(int(self.index[h]), self.hulls.plane[h, :3], points, gaps))
-        return pieces, least
-
-    def _on_ground(self, hull: int, placement: np.ndarray, margin: float) -> tuple[np.ndarray, np.ndarray]:
-        """Hull ``hull`` (its joint's placement (4, 4)) on the ground: its vertices within PATCH_TOLERANCE
-        of the deepest one (or penetrating), reduced to the vertices of their support outline: (points
-        (k, 3), gaps (k,)), each with its own gap; the deepest vertex alone when they span less than
-        PATCH_MIN_EXTENT."""
-        columns = self.hulls.columns[hull]
-        heights = self.hulls.plane[hull] @ placement @ columns
-        near = np.flatnonzero(heights <= max(0.0, min(margin, float(heights.min()) + PATCH_TOLERANCE)))
-        world, heights = (placement[:3] @ columns[:, near]).T, heights[near]
-        if np.ptp(world, axis=0).max() <= PATCH_MIN_EXTENT:
-            deepest = int(np.argmin(heights))
-            return world[deepest : deepest + 1], heights[deepest : deepest + 1]
-        chosen = sorted(set(np.argmax(world @ self.directions[hull].T, axis=0).tolist()))
-        return world[chosen], heights[chosen]
+        found, least = touching(*self.placements(data), self.hulls, margin, self.index)
+        return ([found] if len(found[0]) else []), least
 
 
 def touching(
@@ -110,17 +97,21 @@ def touching(
     hulls: Hulls,
     margin: float,
     index: np.ndarray,
-) -> tuple[Piece, np.ndarray, float]:
+) -> tuple[Piece, float]:
     """One compiled pass over the hulls (:func:`_ground_hulls`, which updates ``hulls.deepest`` and
     ``hulls.narrow_at``) at their joints' placements (P rotations (3, 3), translations (3,)), for the
     contacts within ``margin`` [m]; ``index``: the declared pair of each hull, shape (P,).
 
-    Returns: the hulls that touch at their deepest vertex alone (a :data:`Piece`), the hulls that
-    touch more widely (w,), and the least gap of all the hulls [m]."""
-    count = len(index)  # at most one point each: the kernel fills these and says how many
-    pairs, points, normals = np.empty(count, np.int64), np.empty((count, 3)), np.empty((count, 3))
-    gaps, wide = np.empty(count), np.empty(count, np.int64)
-    k, w, least = _ground_hulls(
+    Returns: the contacts of the hulls (a :data:`Piece`, hull by hull) and the least gap of all the
+    hulls [m]."""
+    count = len(index) * hulls.directions.shape[1]  # at most this many points: the kernel says how many
+    pairs, points, normals, gaps = (
+        np.empty(count, np.int64),
+        np.empty((count, 3)),
+        np.empty((count, 3)),
+        np.empty(count),
+    )
+    k, least = _ground_hulls(
         rotations,
         translations,
         hulls.plane,
@@ -131,17 +122,15 @@ def touching(
         hulls.narrow_at,
         hulls.turn2,
         hulls.rounding,
+        hulls.directions,
         margin,
         index,
         pairs,
         points,
         normals,
         gaps,
-        wide,
     )
-    if k < count:
-        pairs, points, normals, gaps = pairs[:k], points[:k], normals[:k], gaps[:k]
-    return (pairs, points, normals, gaps), wide[:w], least
+    return (pairs[:k], points[:k], normals[:k], gaps[:k]), least
 
 
 @njit(cache=True)
@@ -156,27 +145,27 @@ def _ground_hulls(
     narrow_at,
     turn2,
     rounding,
+    directions,
     margin,
     pair,
     pairs_out,
     points_out,
     normals_out,
     gaps_out,
-    wide_out,
 ):  # type: ignore[no-untyped-def]
     """The compiled pass of :func:`touching` (the arrays of :class:`Hulls`; updates ``deepest`` and
-    ``narrow_at``): fills the first k entries of the ``*_out`` arrays with the one-point contacts and
-    the first w of ``wide_out`` with the hulls that touch more widely; returns (k, w, the least gap
-    of all the hulls).
+    ``narrow_at``): fills the first k entries of the ``*_out`` arrays with the contacts, hull by hull;
+    returns (k, the least gap of all the hulls).
 
     The deepest vertex is found by descent along the hull's edges from the last one: a vertex no
     neighbour of which is deeper is the deepest of a convex polyhedron (a linear function has no
     other local minimum on its vertex graph)."""
     count, size = columns.shape[0], columns.shape[2]
-    gaps, points = np.empty(count), np.empty((count, 3))
-    narrow = np.zeros(count, np.bool_)
-    touching = np.zeros(count, np.bool_)
     c = np.empty(4)  # the ground seen from the joint: (n^T R, n^T p - height)
+    heights, world = np.empty(size), np.empty((size, 3))
+    chosen = np.zeros(size, np.bool_)
+    out = 0
+    least = np.inf
     for k in range(count):
         R, p, X = rotations[k], translations[k], columns[k]
         for j in range(3):
@@ -193,40 +182,77 @@ def _ground_hulls(
                 if height < lowest:
                     i, lowest, descending = j, height, True
                     break
-        deepest[k], gaps[k] = i, lowest - rounding[k]
-        for j in range(3):
-            points[k, j] = R[j, 0] * X[0, i] + R[j, 1] * X[1, i] + R[j, 2] * X[2, i] + p[j]
-            points[k, j] -= rounding[k] * plane[k, j]
-        touching[k] = gaps[k] <= margin
-        if not touching[k]:
+        deepest[k] = i
+        gap = lowest - rounding[k]
+        least = min(least, gap)
+        if gap > margin:
             continue
         turned = (c[0] - narrow_at[k, 0]) ** 2 + (c[1] - narrow_at[k, 1]) ** 2 + (c[2] - narrow_at[k, 2]) ** 2
-        if turned <= turn2[k]:  # False where no verdict was kept (NaN)
-            narrow[k] = True
-            continue
-        low, high = np.full(3, np.inf), np.full(3, -np.inf)
-        for i in range(size):
-            if (
-                c[0] * X[0, i] + c[1] * X[1, i] + c[2] * X[2, i] + c[3]
-                <= lowest + PATCH_TOLERANCE + NARROW_SLACK
-            ):
+        narrow = turned <= turn2[k]  # False where no verdict was kept (NaN)
+        if not narrow:
+            low, high = np.full(3, np.inf), np.full(3, -np.inf)
+            for v in range(size):
+                if (
+                    c[0] * X[0, v] + c[1] * X[1, v] + c[2] * X[2, v] + c[3]
+                    <= lowest + PATCH_TOLERANCE + NARROW_SLACK
+                ):
+                    for j in range(3):
+                        low[j], high[j] = min(low[j], X[j, v]), max(high[j], X[j, v])
+            narrow = (high - low).max() <= PATCH_MIN_EXTENT
+            for j in range(3):
+                narrow_at[k, j] = c[j] if narrow else np.nan
+        if narrow:
+            chosen[:] = False
+            chosen[i] = True
+            for j in range(3):
+                world[i, j] = R[j, 0] * X[0, i] + R[j, 1] * X[1, i] + R[j, 2] * X[2, i] + p[j]
+            heights[i] = gap
+        else:
+            _outline(c, R, p, X, rounding[k], directions[k], margin, gap, heights, world, chosen)
+        for v in range(size):
+            if chosen[v]:
+                pairs_out[out], gaps_out[out] = pair[k], heights[v]
                 for j in range(3):
-                    low[j], high[j] = min(low[j], X[j, i]), max(high[j], X[j, i])
-        narrow[k] = (high - low).max() <= PATCH_MIN_EXTENT
-        for j in range(3):
-            narrow_at[k, j] = c[j] if narrow[k] else np.nan
-    one = w = 0
-    least = np.inf
-    for k in range(count):
-        least = min(least, gaps[k])
-        if touching[k] and narrow[k]:
-            pairs_out[one], gaps_out[one] = pair[k], gaps[k]
-            points_out[one], normals_out[one] = points[k], plane[k, :3]
-            one += 1
-        elif touching[k]:
-            wide_out[w] = k
-            w += 1
-    return one, w, least
+                    points_out[out, j] = world[v, j] - rounding[k] * plane[k, j]
+                    normals_out[out, j] = plane[k, j]
+                out += 1
+    return out, least
+
+
+@njit(cache=True)
+def _outline(c, R, p, X, rounding, directions, margin, gap, heights, world, chosen):  # type: ignore[no-untyped-def]
+    """A hull touching widely (ground ``c`` seen from its joint at (R, p), vertices X, the least
+    ``gap``): marks in ``chosen`` its vertices within PATCH_TOLERANCE of the deepest (or penetrating)
+    that are extreme along ``directions``, or the deepest alone when they span at most
+    PATCH_MIN_EXTENT, with their gaps in ``heights`` and world points in ``world``."""
+    size = X.shape[1]
+    bound = max(0.0, min(margin, gap + PATCH_TOLERANCE))
+    low, high = np.full(3, np.inf), np.full(3, -np.inf)
+    deepest, lowest = -1, np.inf
+    for v in range(size):
+        heights[v] = c[0] * X[0, v] + c[1] * X[1, v] + c[2] * X[2, v] + c[3] - rounding
+        chosen[v] = False
+        if heights[v] <= bound:
+            for j in range(3):
+                world[v, j] = R[j, 0] * X[0, v] + R[j, 1] * X[1, v] + R[j, 2] * X[2, v] + p[j]
+                low[j], high[j] = min(low[j], world[v, j]), max(high[j], world[v, j])
+            if heights[v] < lowest:
+                deepest, lowest = v, heights[v]
+    if (high - low).max() <= PATCH_MIN_EXTENT:
+        chosen[deepest] = True
+        return
+    for d in range(directions.shape[0]):
+        best, reach = -1, -np.inf
+        for v in range(size):
+            if heights[v] <= bound:
+                along = (
+                    world[v, 0] * directions[d, 0]
+                    + world[v, 1] * directions[d, 1]
+                    + world[v, 2] * directions[d, 2]
+                )
+                if along > reach:
+                    best, reach = v, along
+        chosen[best] = True
 
 
 def _hulls(pairs: list[Pair]) -> Hulls:
@@ -252,8 +278,11 @@ def _hulls(pairs: list[Pair]) -> Hulls:
         first=first,
         neighbours=neighbours,
         rounding=np.array(
-            [float(p.shape.radius) if isinstance(p.shape, coal.Sphere) else 0.0 for p in pairs]
+            [float(p.shape.radius) if isinstance(p.shape, coal.Sphere | coal.Capsule) else 0.0 for p in pairs]
         ),
+        directions=np.array(
+            [_support_directions(np.asarray(p.obstacle.normal)) for p in pairs]  # type: ignore[union-attr]
+        ).reshape(len(pairs), SUPPORT_DIRECTIONS, 3),
         turn2=np.array([(NARROW_SLACK / (2.0 * r)) ** 2 if r > 0 else np.inf for r in reach]),
         deepest=np.zeros(len(pairs), dtype=np.int64),
         narrow_at=np.full((len(pairs), 3), np.nan),
@@ -270,11 +299,14 @@ def _support_directions(n: np.ndarray) -> np.ndarray:
 
 def _vertices(shape: coal.CollisionGeometry) -> tuple[np.ndarray, list[list[int]]]:
     """Vertices of a box or convex polyhedron in its own frame, shape (V, 3), and the vertices each
-    shares an edge with; else (a sphere) its centre (its radius is the hull's rounding)."""
+    shares an edge with; a capsule's segment (its radius is the hull's rounding); else (a sphere) its
+    centre (its radius is the hull's rounding)."""
     if isinstance(shape, coal.Box):
         half = np.asarray(shape.halfSide)
         corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=float)
         return corners * half, [[i ^ 1, i ^ 2, i ^ 4] for i in range(8)]  # corner i = 4 x + 2 y + z
+    if isinstance(shape, coal.Capsule):
+        return np.array([[0.0, 0.0, -shape.halfLength], [0.0, 0.0, shape.halfLength]]), [[1], [0]]
     if isinstance(shape, coal.ConvexBase):
         points = np.asarray(shape.points())
         return points, [list(shape.neighbors(i)) for i in range(len(points))]

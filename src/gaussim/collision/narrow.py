@@ -40,8 +40,7 @@ class NarrowPhase:
     def detect(self, data: pin.Data, margin: float) -> tuple[list[Piece], float]:
         """The contacts of the pairs within ``margin`` [m] at the placements held in ``data``, and a
         lower bound on every pair's gap [m]."""
-        if self.request.security_margin != margin:
-            self.request.security_margin = self.retry_request.security_margin = margin
+        self.use_margin(margin)
         apart = self.spheres.gaps(data)
         far = apart > margin
         clearance = float(apart[far].min(initial=np.inf))
@@ -52,6 +51,11 @@ class NarrowPhase:
             if hit is not None:
                 pieces.append(one_pair(self.index[i], *hit))
         return pieces, clearance
+
+    def use_margin(self, margin: float) -> None:
+        """Make :meth:`collide` find the contacts within ``margin`` [m]."""
+        if self.request.security_margin != margin:
+            self.request.security_margin = self.retry_request.security_margin = margin
 
     def collide(
         self, pair: Pair, data: pin.Data
