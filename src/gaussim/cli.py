@@ -137,7 +137,7 @@ def main(argv: list[str] | None = None) -> int:
     sweep.add_argument(
         "--position-noise",
         type=float,
-        help="with --seeds: std of each floating base's start x and y (world) [m] (default 1e-3)",
+        help="with --seeds: std of each floating base's start position along the ground [m] (default 1e-3)",
     )
     sweep.add_argument(
         "--velocity-noise",

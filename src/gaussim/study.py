@@ -14,9 +14,10 @@ added. VALUES are TOML values separated by commas: ``1,2,4``, ``1e-3,2e-3``, ``[
 0.5]``, ``pyramid,exact`` (a bare word is a string).
 
 Seeds: with ``seeds = N`` each combination runs N times, seeds 0 to N-1, its initial state perturbed
-by :func:`perturbed`: each floating base's start position moved along world x and y, then every
-initial velocity coordinate changed, by independent normal draws of standard deviations
-``Noise.position`` [m] and ``Noise.velocity`` [m/s or rad/s] from ``numpy.random.default_rng(seed)``.
+by :func:`perturbed`: each floating base's start position moved parallel to the ground (keeping its
+height above it), then every initial velocity coordinate changed, by normal draws of standard
+deviations ``Noise.position`` [m] and ``Noise.velocity`` [m/s or rad/s] from
+``numpy.random.default_rng(seed)``.
 
 The output folder holds ``runs.jsonl`` (a line per finished run: its values, seed, status and summary;
 a study started again skips the runs it holds, :mod:`gaussim.pool`), ``runs/ID`` (each run's log,
@@ -76,7 +77,8 @@ class Noise:
     """The perturbation of a seeded run's initial state (see the module docstring).
 
     Attributes:
-        position: standard deviation of each floating base's start position along world x and y [m].
+        position: standard deviation of each floating base's start position along each direction
+            parallel to the ground (or the world's x-y plane without one) [m].
         velocity: standard deviation added to each initial velocity coordinate [m/s or rad/s].
     """
 
@@ -282,9 +284,12 @@ def _place(data: dict[str, Any], key: str) -> tuple[Any, ...]:
     if element is not None:
         current = _container(data, place).get(field)
         if not (isinstance(current, list) and element < len(current)):
-            raise InvalidOptions(
-                where, f"the scene's {field} is {shown(current)}: it has no element [{element}] to vary"
+            what = (
+                f"the scene gives no {field}"
+                if current is None
+                else f"the scene's {field} is {shown(current)}"
             )
+            raise InvalidOptions(where, f"{what}: it has no element [{element}] to vary")
     return place
 
 
@@ -383,14 +388,22 @@ def _toml_value(value: Any) -> str:
 
 
 def perturbed(spec: SceneSpec, seed: int, noise: Noise) -> State:
-    """``spec``'s initial state perturbed by ``seed``: each floating base's position along world x and
-    y, body by body, then every velocity coordinate, drawn from ``numpy.random.default_rng(seed)``
-    with standard deviations ``noise.position`` [m] and ``noise.velocity`` [m/s or rad/s]."""
+    """``spec``'s initial state perturbed by ``seed``: each floating base's position moved parallel to
+    the ground (the first [ground]'s plane, else the world's x-y plane: a normal draw in 3D with its
+    component along the plane's normal removed), body by body, then every velocity coordinate changed,
+    drawn from ``numpy.random.default_rng(seed)`` with standard deviations ``noise.position`` [m] (per
+    direction in the plane) and ``noise.velocity`` [m/s or rad/s]. A body moved this way keeps its
+    height above the ground."""
+    from .scene import Ground
+
     rng = np.random.default_rng(seed)
+    grounds = [o for o in spec.scene.obstacles if isinstance(o, Ground)]
+    n = np.asarray(grounds[0].normal if grounds else (0.0, 0.0, 1.0))  # a unit normal
     q, v = spec.initial.q.copy(), spec.initial.v.copy()
     for layout in spec.scene.bodies.values():
         if layout.floating:
-            q[layout.q.start : layout.q.start + 2] += rng.normal(0.0, noise.position, 2)
+            shift = rng.normal(0.0, noise.position, 3)
+            q[layout.q.start : layout.q.start + 3] += shift - (shift @ n) * n
     v += rng.normal(0.0, noise.velocity, v.shape)
     return State(spec.initial.t, q, v, spec.initial.world)
 
