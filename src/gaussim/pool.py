@@ -60,7 +60,10 @@ def run_all(
     path.parent.mkdir(parents=True, exist_ok=True)
     done = {r["key"]: r for r in load(path) if "key" in r}
     remaining = [item for item in todo if key(item) not in done]
+    torn = path.exists() and path.stat().st_size > 0 and not path.read_bytes().endswith(b"\n")
     with path.open("a") as out:
+        if torn:  # a line cut by an interruption ends here: the next record starts a line of its own
+            out.write("\n")
         for count, record in enumerate(_results(job, remaining, workers, scheduler), start=1):
             out.write(json.dumps(record, default=str) + "\n")
             out.flush()
