@@ -2,6 +2,8 @@
 
 import math
 import re
+import subprocess
+import sys
 import tomllib
 from pathlib import Path
 
@@ -244,3 +246,21 @@ def test_the_sweep_command_runs_on_a_dask_cluster(tmp_path):
     frame = pd.read_parquet(tmp_path / study.TABLE)
     assert list(frame["options.dt"]) == [1e-3, 2e-3] and set(frame["status"]) == {"ok"}
     assert list(frame["steps"]) == [100, 50]
+
+
+def test_the_example_study_prints_each_slide_beside_its_closed_form(tmp_path):
+    example = Path(__file__).resolve().parents[1] / "examples" / "incline_friction_study.py"
+    result = subprocess.run(
+        [sys.executable, str(example), "--frictions", "0.2,0.7", "--duration", "0.1", "--workers", "1"]
+        + ["--out", str(tmp_path)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert result.returncode == 0, result.stderr
+    lines = result.stdout.splitlines()
+    for line, mu in zip(lines[1:3], (0.2, 0.7)):
+        values = line.split()
+        assert float(values[0]) == mu and values[3] == "ok"
+        assert float(values[1]) == pytest.approx(float(values[2]), rel=SLIDE_RTOL, abs=1e-4)
+    assert (tmp_path / study.TABLE).is_file()
