@@ -83,10 +83,12 @@ def _results(
         from dask.distributed import as_completed as dask_completed
 
         client = Client(scheduler) if isinstance(scheduler, str) else scheduler
+        futures = client.map(job, todo, pure=False)
         try:
-            for future in dask_completed(client.map(job, todo, pure=False)):
+            for future in dask_completed(futures):
                 yield future.result()
-        finally:
+        finally:  # stopped midway (Ctrl-C): the cluster drops the jobs not done
+            client.cancel(futures)
             if isinstance(scheduler, str):
                 client.close()
         return
@@ -95,5 +97,10 @@ def _results(
         yield from map(job, todo)
         return
     with ProcessPoolExecutor(min(workers, len(todo))) as pool:
-        for future in as_completed([pool.submit(job, item) for item in todo]):
-            yield future.result()
+        futures = [pool.submit(job, item) for item in todo]
+        try:
+            for future in as_completed(futures):
+                yield future.result()
+        finally:  # stopped midway (Ctrl-C, a kill of this process): the jobs not started never start
+            for future in futures:
+                future.cancel()
