@@ -97,10 +97,10 @@ def _results(
         yield from map(job, todo)
         return
     with ProcessPoolExecutor(min(workers, len(todo))) as pool:
-        futures = [pool.submit(job, item) for item in todo]
+        submitted = [pool.submit(job, item) for item in todo]
         try:
-            for future in as_completed(futures):
-                yield future.result()
+            for done in as_completed(submitted):
+                yield done.result()
         finally:  # stopped midway (Ctrl-C, a kill of this process): the jobs not started never start
-            for future in futures:
-                future.cancel()
+            for waiting in submitted:
+                waiting.cancel()
