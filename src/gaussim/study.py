@@ -132,6 +132,7 @@ def parse_vary(text: str) -> tuple[str, list[Any]]:
 
     Raises:
         InvalidOptions: no ``=``, no value, a value that is none (the field named ``--vary KEY``).
+        :func:`plan` checks the key and the values against the scene.
     """
     key, equals, values = text.partition("=")
     key = key.strip()
@@ -141,11 +142,7 @@ def parse_vary(text: str) -> tuple[str, list[Any]]:
     tokens = _split(values, where)
     if not tokens:
         raise InvalidOptions(where, "no values given: list them after '=', separated by commas")
-    parsed = [_value(token, where) for token in tokens]
-    for i, value in enumerate(parsed):
-        if any(_same(value, other) for other in parsed[:i]):
-            raise InvalidOptions(where, f"the value {_toml_value(value)} is given twice")
-    return key, parsed
+    return key, [_value(token, where) for token in tokens]
 
 
 def _split(text: str, where: str) -> list[str]:
@@ -201,8 +198,9 @@ def plan(
 
     Raises:
         SceneFileError: the scene file itself is malformed.
-        InvalidOptions: an unknown key, a key the scene has no place for, no values, a value the scene
-            refuses (the field named ``--vary KEY``), seeds < 0, a noise < 0 or without seeds.
+        InvalidOptions: an unknown key, a key the scene has no place for, no values, a value twice, a
+            value the scene refuses (the field named ``--vary KEY``), seeds < 0, a noise < 0 or
+            without seeds.
     """
     scene = Path(scene)
     spec = load_scene(scene)
@@ -221,7 +219,9 @@ def plan(
         places[key] = _place(data, key)
         if not values:
             raise InvalidOptions(f"--vary {key}", "no values given")
-        for value in values:
+        for i, value in enumerate(values):
+            if any(_same(value, other) for other in values[:i]):
+                raise InvalidOptions(f"--vary {key}", f"the value {_toml_value(value)} is given twice")
             try:
                 load_scene_text(_scene_text(data, [(places[key], value)], ""), scene)
             except GaussimError as err:
