@@ -118,7 +118,7 @@ def main(argv: list[str] | None = None) -> int:
         "and summary kept in OUT, the summaries gathered in OUT/results.parquet. Started again, it skips "
         "the runs OUT holds. See docs/sweeps.md.",
     )
-    sweep.add_argument("scene", type=Path)
+    sweep.add_argument("scene", type=Path, help="a scene file (TOML)")
     sweep.add_argument(
         "--vary",
         action="append",
@@ -132,24 +132,29 @@ def main(argv: list[str] | None = None) -> int:
         "--seeds",
         type=int,
         default=0,
+        metavar="N",
         help="run each combination with seeds 0..N-1, its initial state perturbed",
     )
     sweep.add_argument(
         "--position-noise",
         type=float,
+        metavar="SIGMA",
         help="with --seeds: std of each floating base's start position along the ground [m] (default 1e-3)",
     )
     sweep.add_argument(
         "--velocity-noise",
         type=float,
+        metavar="SIGMA",
         help="with --seeds: std added to each initial velocity coordinate [m/s, rad/s] (default 1e-2)",
     )
-    sweep.add_argument("--out", type=Path, help="output folder (default out/<scene>.sweep)")
-    sweep.add_argument("--workers", type=int, help="local processes (default: all cores)")
-    sweep.add_argument("--scheduler", help="run on a Dask cluster: its scheduler address")
+    sweep.add_argument("--out", type=Path, metavar="DIR", help="output folder (default out/<scene>.sweep)")
+    sweep.add_argument("--workers", type=int, metavar="N", help="local processes (default: all cores)")
+    sweep.add_argument("--scheduler", metavar="ADDRESS", help="run on a Dask cluster: its scheduler address")
     sweep.add_argument("--plot", metavar="SUMMARY", help="plot this summary column against --against")
     sweep.add_argument("--against", metavar="KEY", help="with --plot: a varied key (or seed)")
-    sweep.add_argument("--plot-file", type=Path, help="the plot's image (default OUT/SUMMARY-vs-KEY.png)")
+    sweep.add_argument(
+        "--plot-file", type=Path, metavar="IMAGE", help="the plot's image (default OUT/SUMMARY-vs-KEY.png)"
+    )
     sweep.add_argument("--quiet", action="store_true", help="no progress lines")
 
     args = parser.parse_args(argv)
