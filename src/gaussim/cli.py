@@ -262,7 +262,10 @@ def _sweep(args: argparse.Namespace) -> int:
         )
         check_writable(plot[2], "--plot-file")
     done_before = len(runs) - len({r.key for r in runs} - _finished(out))
-    workers = "the Dask cluster" if args.scheduler else f"{args.workers or os.cpu_count() or 1} processes"
+    processes = args.workers or os.cpu_count() or 1
+    workers = (
+        "the Dask cluster" if args.scheduler else f"{processes} processes" if processes > 1 else "1 process"
+    )
     print(
         f"gaussim: {len(runs)} runs, {done_before} already in {out}, "
         f"{len(runs) - done_before} to run on {workers}",
