@@ -122,6 +122,52 @@ def main(argv: list[str] | None = None) -> int:
     stability.add_argument("--long", action="store_true", help="add the long cases (1e6 steps, tiny dt)")
     stability.add_argument("--report", type=Path, default=Path("out/stability.md"), help="markdown table")
 
+    sweep = commands.add_parser(
+        "sweep",
+        help="run a scene over every combination of values of its fields (a parameter study)",
+        description="Run SCENE once per combination of the --vary values (and per seed), each run's log "
+        "and summary kept in OUT, the summaries gathered in OUT/results.parquet. Started again, it skips "
+        "the runs OUT holds. See docs/sweeps.md.",
+    )
+    sweep.add_argument("scene", type=Path, help="a scene file (TOML)")
+    sweep.add_argument(
+        "--vary",
+        action="append",
+        default=[],
+        metavar="KEY=VALUES",
+        help="a scene-file field and its values, TOML separated by commas: ground.friction=0.2,0.5, "
+        "options.dt=1e-3,2e-3, bodies.crate.mass=1,2,4, control.kp=5,10, initial.q[2]=0.5,1, "
+        "bodies.crate.position=[0,0,0.3],[0,0,0.5] (repeat --vary for more keys)",
+    )
+    sweep.add_argument(
+        "--seeds",
+        type=int,
+        default=0,
+        metavar="N",
+        help="run each combination with seeds 0..N-1, its initial state perturbed",
+    )
+    sweep.add_argument(
+        "--position-noise",
+        type=float,
+        metavar="SIGMA",
+        help="with --seeds: std of each floating base's start position along the ground [m] (default 1e-3)",
+    )
+    sweep.add_argument(
+        "--velocity-noise",
+        type=float,
+        metavar="SIGMA",
+        help="with --seeds: std added to each initial velocity coordinate [m/s, rad/s] (default 1e-2)",
+    )
+    sweep.add_argument("--out", type=Path, metavar="DIR", help="output folder (default out/<scene>.sweep)")
+    sweep.add_argument("--workers", type=int, metavar="N", help="local processes (default: all cores)")
+    sweep.add_argument("--scheduler", metavar="ADDRESS", help="run on a Dask cluster: its scheduler address")
+    sweep.add_argument("--plot", metavar="SUMMARY", help="plot this summary column against --against")
+    sweep.add_argument("--against", metavar="KEY", help="with --plot: a varied key (or seed)")
+    sweep.add_argument(
+        "--plot-file", type=Path, metavar="IMAGE", help="the plot's image (default OUT/SUMMARY-vs-KEY.png)"
+    )
+    sweep.add_argument("--quiet", action="store_true", help="no progress lines")
+
     args = parser.parse_args(argv)
     for stop in (signal.SIGTERM, signal.SIGHUP):  # stop as a Ctrl-C does: the viewers' servers stopped
         if signal.getsignal(stop) == signal.SIG_DFL:
@@ -135,6 +181,7 @@ def main(argv: list[str] | None = None) -> int:
             "plot": _plot,
             "bench": _bench,
             "stability": _stability,
+            "sweep": _sweep,
         }
         return commands_[args.command](args)
     except KeyboardInterrupt:
@@ -221,6 +268,114 @@ def _bench_suite(args: argparse.Namespace) -> int:
         write_section(args.report, suite.TITLE, f"{suite.INTRO}\n\n{made}\n\n{text}")
         print(f"table: section '{suite.TITLE}' of {args.report}")
     return 0
+
+
+def _sweep(args: argparse.Namespace) -> int:
+    import os
+
+    from .study import Noise, plan, require_table, study, summary_columns, write_table
+
+    require_table()  # before the runs, not after them
+    if args.workers is not None and args.workers < 1:
+        raise InvalidOptions("--workers", f"must be >= 1, got {args.workers}")
+    vary = _vary(args.vary)
+    noise = None
+    if args.position_noise is not None or args.velocity_noise is not None:
+        default = Noise()
+        noise = Noise(
+            default.position if args.position_noise is None else args.position_noise,
+            default.velocity if args.velocity_noise is None else args.velocity_noise,
+        )
+    out = args.out or Path("out") / f"{args.scene.stem}.sweep"
+    runs = plan(args.scene, vary, out, args.seeds, noise)
+    plot: tuple[str, str, Path] | None = None  # the summary, the key and the image
+    if args.plot is not None or args.against is not None or args.plot_file is not None:
+        from .plots import plot_path
+        from .scenefile import load_scene
+
+        if args.plot is None or args.against is None:
+            raise InvalidOptions("--plot", "give both --plot SUMMARY and --against KEY")
+        columns = summary_columns(load_scene(args.scene))
+        if args.plot not in columns:
+            raise InvalidOptions(
+                "--plot", f"no summary column {args.plot!r}; the scene's: {', '.join(columns)}"
+            )
+        keys = [*vary, *(["seed"] if args.seeds else [])]
+        if args.against not in keys:
+            raise InvalidOptions(
+                "--against", f"{args.against!r} is not varied; the varied: {', '.join(keys) or 'none'}"
+            )
+        plot = (
+            args.plot,
+            args.against,
+            plot_path(args.plot_file or out / f"{args.plot}-vs-{args.against}.png"),
+        )
+        check_writable(plot[2], "--plot-file")
+    done_before = len(runs) - len({r.key for r in runs} - _finished(out))
+    processes = args.workers or os.cpu_count() or 1
+    workers = (
+        "the Dask cluster" if args.scheduler else f"{processes} processes" if processes > 1 else "1 process"
+    )
+    print(
+        f"gaussim: {len(runs)} runs, {done_before} already in {out}, "
+        f"{len(runs) - done_before} to run on {workers}",
+        file=sys.stderr,
+    )
+    labels = {r.key: r.label for r in runs}
+    started = time.perf_counter()
+
+    def progress(done: int, total: int, record: dict) -> None:
+        if args.quiet:
+            return
+        elapsed = time.perf_counter() - started
+        left = elapsed / done * (total - done)
+        _say(
+            f"[{done}/{total}] {labels[record['key']]}: {record['status']}"
+            f"  ({elapsed:.0f} s, ~{left:.0f} s left)",
+            sys.stderr,
+        )
+
+    try:
+        records = study(runs, out, args.workers, args.scheduler, progress)
+    except KeyboardInterrupt:
+        print(
+            f"gaussim: interrupted; {len(_finished(out) & set(labels))} of {len(runs)} runs are kept in "
+            f"{out}: the same command again runs the others",
+            file=sys.stderr,
+        )
+        return EXIT_FAILURE
+    path = write_table(records, out)
+    failed = [r for r in records if r["status"] != "ok"]
+    for r in failed:
+        _say(f"failed: {labels[r['key']]}: {r['status']}", sys.stderr)
+    print(f"{len(records)} runs, {len(failed)} failed; table: {path}; run logs: {out / 'runs'}")
+    if plot is not None:
+        from .plots import save_sweep_plot
+        from .study import rows
+
+        print(f"plot: {save_sweep_plot(rows(records), plot[0], plot[1], [*vary], plot[2])}")
+    return EXIT_FAILURE if failed else EXIT_OK
+
+
+def _vary(texts: list[str]) -> dict[str, list]:
+    """The --vary options as {key: values}; a key given twice is an error."""
+    from .study import parse_vary
+
+    vary: dict[str, list] = {}
+    for text in texts:
+        key, values = parse_vary(text)
+        if key in vary:
+            raise InvalidOptions(f"--vary {key}", "given twice: list all its values in one --vary")
+        vary[key] = values
+    return vary
+
+
+def _finished(out: Path) -> set[str]:
+    """The keys of the runs a sweep's folder holds."""
+    from .pool import load
+    from .study import RESULTS
+
+    return {r["key"] for r in load(out / RESULTS) if "key" in r}
 
 
 def _stability(args: argparse.Namespace) -> int:

@@ -139,7 +139,11 @@ def save_plot(
     if bodies is not None and what != "forces":
         raise InvalidOptions("bodies", "selects the contacts of the forces figure; the energy is the world's")
     path = plot_path(path)
-    figure = force_figure(log, scene, bodies) if what == "forces" else energy_figure(log, scene)
+    return _save(force_figure(log, scene, bodies) if what == "forces" else energy_figure(log, scene), path)
+
+
+def _save(figure: Any, path: Path) -> Path:
+    """Write ``figure`` to ``path`` and close it."""
     try:
         with atomic_path(path) as tmp:  # a failed write leaves any previous image
             figure.savefig(tmp, dpi=110)
@@ -180,3 +184,41 @@ def pareto_figure(records: list[dict], title: str) -> Any:
     axis.grid(True, which="both", alpha=0.3)
     axis.legend(fontsize=7)
     return figure
+
+
+def sweep_figure(rows: Sequence[dict], summary: str, against: str, keys: Sequence[str]) -> Any:
+    """A sweep's ``summary`` column against its varied key ``against``: one curve per combination of
+    the other varied ``keys``' values, through the mean over seeds, each run a point; failed runs are
+    left out (counted in the title). ``against``'s values are the x axis when they are numbers, else
+    equally spaced labels."""
+    plt = _pyplot()
+    figure, axis = plt.subplots(figsize=(7, 4.5), constrained_layout=True)
+    ok = [r for r in rows if r["status"] == "ok" and r.get(summary) is not None]
+    xs = list(dict.fromkeys(str(r[against]) for r in rows))
+    numeric = all(isinstance(r[against], (int, float)) and not isinstance(r[against], bool) for r in rows)
+    others = [k for k in keys if k != against]
+    series: dict[str, list[dict]] = {}
+    for r in ok:
+        series.setdefault(", ".join(f"{k} = {str(r[k])}" for k in others), []).append(r)
+    for i, (name, mine) in enumerate(series.items()):
+        x = [r[against] if numeric else xs.index(str(r[against])) for r in mine]
+        y = [r[summary] for r in mine]
+        means = {xi: float(np.mean([yj for xj, yj in zip(x, y) if xj == xi])) for xi in sorted(set(x))}
+        axis.plot(list(means), list(means.values()), "-", color=f"C{i % 10}", label=name or None)
+        axis.plot(x, y, "o", ms=4, color=f"C{i % 10}", alpha=0.6)
+    if not numeric:
+        axis.set_xticks(range(len(xs)), xs, rotation=20)
+    axis.set(xlabel=against, ylabel=summary)
+    failed = len(rows) - len(ok)
+    axis.set_title(f"{summary} against {against}: {len(ok)} runs" + (f", {failed} failed" if failed else ""))
+    axis.grid(True, alpha=0.3)
+    if any(series):
+        axis.legend(fontsize=7)
+    return figure
+
+
+def save_sweep_plot(
+    rows: Sequence[dict], summary: str, against: str, keys: Sequence[str], path: str | Path
+) -> Path:
+    """Write :func:`sweep_figure` to an image file (.png, .pdf, .svg); the path."""
+    return _save(sweep_figure(rows, summary, against, keys), plot_path(path))

@@ -3,21 +3,20 @@
 A point is one case run with the default options but one knob changed (one knob at a time: the
 effect of each is read against the same default). Points run in a local process pool, or on a Dask
 cluster when given its scheduler address; each finished point is appended to a JSON-lines file at
-once, so an interrupted sweep keeps what it finished and a new one skips it.
+once, so an interrupted sweep keeps what it finished and a new one skips it (:mod:`gaussim.pool`).
 """
 
 from __future__ import annotations
 
-import json
 import math
-import os
 import traceback
-from collections.abc import Callable, Iterable, Iterator
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from collections.abc import Iterable
 from dataclasses import asdict, dataclass
+from operator import attrgetter
 from pathlib import Path
 from typing import Any
 
+from ..pool import Progress, run_all
 from .cases import CASES, options_with
 
 # Each knob and the values swept (the default options' value is the reference row).
@@ -92,70 +91,17 @@ def run_point(point: Point) -> dict:
     return record
 
 
-def load(path: Path) -> list[dict]:
-    """The records of a results file (none when it does not exist); a torn last line is skipped."""
-    if not path.exists():
-        return []
-    records = []
-    for line in path.read_text().splitlines():
-        try:
-            records.append(json.loads(line))
-        except json.JSONDecodeError:
-            continue
-    return records
-
-
 def sweep(
     todo: list[Point],
     path: Path,
     workers: int | None = None,
     scheduler: Any = None,
-    progress: Callable[[int, int, dict], None] | None = None,
+    progress: Progress | None = None,
 ) -> list[dict]:
     """Run the points not already in ``path``, appending each record as it finishes; return all the
-    records of ``todo``.
-
-    Args:
-        workers: local processes (default: the machine's cores).
-        scheduler: a Dask scheduler address ("tcp://host:8786"), or a ``dask.distributed.Client``-like
-            object with ``map``; the points then run on that cluster.
-        progress: called with (done, total, record) after each point.
-    """
-    path.parent.mkdir(parents=True, exist_ok=True)
-    done = {r["key"]: r for r in load(path)}
-    remaining = [p for p in todo if p.key not in done]
-    with path.open("a") as out:
-        for count, record in enumerate(_results(remaining, workers, scheduler), start=1):
-            out.write(json.dumps(record, default=str) + "\n")
-            out.flush()
-            done[record["key"]] = record
-            if progress is not None:
-                progress(count, len(remaining), record)
-    return [done[p.key] for p in todo if p.key in done]
-
-
-def _results(todo: list[Point], workers: int | None, scheduler: Any) -> Iterator[dict]:
-    if not todo:
-        return
-    if scheduler is not None:
-        from dask.distributed import Client
-        from dask.distributed import as_completed as dask_completed
-
-        client = Client(scheduler) if isinstance(scheduler, str) else scheduler
-        try:
-            for future in dask_completed(client.map(run_point, todo, pure=False)):
-                yield future.result()
-        finally:
-            if isinstance(scheduler, str):
-                client.close()
-        return
-    workers = workers or os.cpu_count() or 1
-    if workers == 1:
-        yield from map(run_point, todo)
-        return
-    with ProcessPoolExecutor(workers) as pool:
-        for future in as_completed([pool.submit(run_point, p) for p in todo]):
-            yield future.result()
+    records of ``todo`` (see :func:`gaussim.pool.run_all` for ``workers``, ``scheduler`` and
+    ``progress``)."""
+    return run_all(todo, attrgetter("key"), run_point, path, workers, scheduler, progress)
 
 
 METRICS = (

@@ -1,0 +1,106 @@
+"""Batches of independent jobs: where they run, and the file that keeps what they finished.
+
+A job runs in a local process pool, or on a Dask cluster when given its scheduler address (or a
+client). Each finished job's record, a JSON-able dict with a ``"key"`` that names the job, is appended
+to a JSON-lines file at once: an interrupted batch keeps what it finished, and the same batch started
+again skips every key already in the file. Used by the benchmark's knob sweep
+(:mod:`gaussim.bench.sweep`) and the user's parameter studies (:mod:`gaussim.study`).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from pathlib import Path
+from typing import Any, TypeVar
+
+Job = TypeVar("Job")
+# called with (done, total, record) after each job: done counts this batch's jobs, total those it runs
+Progress = Callable[[int, int, dict], None]
+
+
+def load(path: Path) -> list[dict]:
+    """The records of a results file (none when it does not exist); a torn last line is skipped."""
+    if not path.exists():
+        return []
+    records = []
+    for line in path.read_text().splitlines():
+        try:
+            records.append(json.loads(line))
+        except json.JSONDecodeError:
+            continue
+    return records
+
+
+def run_all(
+    todo: Sequence[Job],
+    key: Callable[[Job], str],
+    job: Callable[[Job], dict],
+    path: Path,
+    workers: int | None = None,
+    scheduler: Any = None,
+    progress: Progress | None = None,
+) -> list[dict]:
+    """Run ``job`` on each item of ``todo`` whose ``key`` is not already in ``path``, appending each
+    record as it finishes; return the records of ``todo`` (those in the file and the new ones), in
+    its order.
+
+    ``job`` must be picklable (a module-level function) and return a JSON-able dict whose ``"key"`` is
+    its item's; it should catch its own errors and record them, since an exception it raises stops the
+    batch (a KeyboardInterrupt stops it too: what finished is kept).
+
+    Args:
+        workers: local processes (default: the machine's cores; 1 runs in this process).
+        scheduler: a Dask scheduler address ("tcp://host:8786"), or a ``dask.distributed.Client``-like
+            object with ``map``; the jobs then run on that cluster.
+        progress: called with (done, total, record) after each job.
+    """
+    path.parent.mkdir(parents=True, exist_ok=True)
+    done = {r["key"]: r for r in load(path) if "key" in r}
+    remaining = [item for item in todo if key(item) not in done]
+    torn = path.exists() and path.stat().st_size > 0 and not path.read_bytes().endswith(b"\n")
+    with path.open("a") as out:
+        if torn:  # a line cut by an interruption ends here: the next record starts a line of its own
+            out.write("\n")
+        for count, record in enumerate(_results(job, remaining, workers, scheduler), start=1):
+            out.write(json.dumps(record, default=str) + "\n")
+            out.flush()
+            done[record["key"]] = record
+            if progress is not None:
+                progress(count, len(remaining), record)
+    return [done[key(item)] for item in todo if key(item) in done]
+
+
+def _results(
+    job: Callable[[Job], dict], todo: list[Job], workers: int | None, scheduler: Any
+) -> Iterator[dict]:
+    if not todo:
+        return
+    if scheduler is not None:
+        from dask.distributed import Client
+        from dask.distributed import as_completed as dask_completed
+
+        client = Client(scheduler) if isinstance(scheduler, str) else scheduler
+        futures = client.map(job, todo, pure=False)
+        try:
+            for future in dask_completed(futures):
+                yield future.result()
+        finally:  # stopped midway (Ctrl-C): the cluster drops the jobs not done
+            client.cancel(futures)
+            if isinstance(scheduler, str):
+                client.close()
+        return
+    workers = workers or os.cpu_count() or 1
+    if workers == 1:
+        yield from map(job, todo)
+        return
+    with ProcessPoolExecutor(min(workers, len(todo))) as pool:
+        submitted = [pool.submit(job, item) for item in todo]
+        try:
+            for done in as_completed(submitted):
+                yield done.result()
+        finally:  # stopped midway (Ctrl-C, a kill of this process): the jobs not started never start
+            for waiting in submitted:
+                waiting.cancel()

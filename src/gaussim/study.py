@@ -1,0 +1,528 @@
+"""Parameter studies of a scene file: every combination of the values given to some of its fields,
+each run kept (its run log and a summary of it), the summaries gathered in one table.
+
+``gaussim sweep SCENE --vary KEY=VALUES ... [--seeds N]`` (see ``docs/sweeps.md``); from Python,
+:func:`plan` then :func:`study` then :func:`table`.
+
+A key names a field of the scene file as the file spells it (:mod:`gaussim.scenefile`):
+``ground.friction``, ``contacts.friction``, ``simulation.duration``, ``options.dt`` (any field of
+:class:`gaussim.Options`), ``control.kp`` and ``initial.q`` (the one-robot form), a ``[[bodies]]`` or
+``[[obstacles]]`` table's field by the table's name or place (``bodies.crate.mass``,
+``bodies.solo.control.kd``, ``obstacles[0].friction``, ``bilaterals[0].position``), and one element of
+a list with ``[k]`` (``initial.q[2]``, ``bodies.crate.position[2]``). A field the file leaves out is
+added. VALUES are TOML values separated by commas: ``1,2,4``, ``1e-3,2e-3``, ``[0, 0, 0.3],[0, 0,
+0.5]``, ``pyramid,exact`` (a bare word is a string).
+
+Seeds: with ``seeds = N`` each combination runs N times, seeds 0 to N-1, its initial state perturbed
+by :func:`perturbed`: each floating base's start position moved parallel to the ground (keeping its
+height above it), then every initial velocity coordinate changed, by normal draws of standard
+deviations ``Noise.position`` [m] and ``Noise.velocity`` [m/s or rad/s] from
+``numpy.random.default_rng(seed)``.
+
+The output folder holds ``runs.jsonl`` (a line per finished run: its values, seed, status and summary;
+a study started again skips the runs it holds, :mod:`gaussim.pool`), ``runs/ID`` (each run's log,
+:class:`gaussim.runlog.RunLog`) and ``results.parquet`` (the table). A run that fails is a row whose
+``status`` gives the error; the others go on.
+"""
+
+from __future__ import annotations
+
+import copy
+import hashlib
+import json
+import math
+import re
+import tomllib
+import traceback
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, fields
+from operator import attrgetter
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .exceptions import GaussimError, InvalidOptions, shown
+from .files import atomic_path
+from .options import Options
+from .pool import Progress, run_all
+from .runlog import ACCEPTED, RunLog
+from .scenefile import SECTIONS, SceneSpec, load_scene, load_scene_text
+from .state import State
+
+# the arrays of tables of a scene file, and the key that names an entry (bilaterals have none)
+ENTRIES = {"bodies": "name", "obstacles": "name", "bilaterals": None}
+# the sections of the one-robot form, which a scene of [[bodies]] gives per body
+ONE_ROBOT = ("robot", "initial", "control")
+RESULTS, RUNS, TABLE = "runs.jsonl", "runs", "results.parquet"
+# the summary of every run (then, per floating body B: B.x, B.y, B.z, B.displacement, B.speed)
+SUMMARY = (
+    "steps",
+    "t_end",
+    "wall_time",
+    "max_penetration",
+    "max_kkt_residual",
+    "unconverged_steps",
+    "max_contact_force",
+    "kinetic_energy",
+)
+BODY_SUMMARY = ("x", "y", "z", "displacement", "speed")
+_PART = re.compile(r"([^.\[\]]+)(?:\[(\d+)\])?$")
+_WORD = re.compile(r"[A-Za-z_][\w.\-]*")
+_BARE_KEY = re.compile(r"[A-Za-z0-9_-]+")
+
+
+@dataclass(frozen=True)
+class Noise:
+    """The perturbation of a seeded run's initial state (see the module docstring).
+
+    Attributes:
+        position: standard deviation of each floating base's start position along each direction
+            parallel to the ground (or the world's x-y plane without one) [m].
+        velocity: standard deviation added to each initial velocity coordinate [m/s or rad/s].
+    """
+
+    position: float = 1e-3
+    velocity: float = 1e-2
+
+
+@dataclass(frozen=True)
+class Run:
+    """One run of a study: its scene (the file with the run's values set), and its seed.
+
+    Attributes:
+        values: each varied key and its value in this run, in the order the keys were given.
+        seed: the perturbation's seed, or None for the scene's own initial state.
+        noise: the perturbation's size (with a seed).
+        text: the scene text the run loads (TOML).
+        scene_path: the scene file (its folder resolves relative robot paths).
+        digest: a digest of the original scene text: a study of an edited scene reruns.
+        out: the study's output folder.
+    """
+
+    values: tuple[tuple[str, Any], ...]
+    seed: int | None
+    noise: Noise
+    text: str
+    scene_path: str
+    digest: str
+    out: str
+
+    @property
+    def key(self) -> str:
+        """What identifies the run in ``runs.jsonl``: the scene, the values and the perturbation."""
+        perturbation = None if self.seed is None else [self.seed, self.noise.position, self.noise.velocity]
+        return json.dumps([self.digest, [list(v) for v in self.values], perturbation], default=str)
+
+    @property
+    def id(self) -> str:
+        """A short name of the run (its log is ``runs/ID``)."""
+        return hashlib.sha1(self.key.encode()).hexdigest()[:12]
+
+    @property
+    def label(self) -> str:
+        """The run's values and seed, as a progress line shows them."""
+        parts = [f"{k}={_toml_value(v)}" for k, v in self.values]
+        return " ".join(parts + ([] if self.seed is None else [f"seed={self.seed}"])) or "the scene as given"
+
+
+def parse_vary(text: str) -> tuple[str, list[Any]]:
+    """``"KEY=VALUES"`` (``--vary``) as the key and its values (TOML values separated by commas, a bare
+    word a string).
+
+    Raises:
+        InvalidOptions: no ``=``, no value, a value that is none (the field named ``--vary KEY``).
+        :func:`plan` checks the key and the values against the scene.
+    """
+    key, equals, values = text.partition("=")
+    key = key.strip()
+    if not equals or not key:
+        raise InvalidOptions("--vary", f"must be KEY=VALUES (e.g. ground.friction=0.2,0.5), got {text!r}")
+    where = f"--vary {key}"
+    tokens = _split(values, where)
+    if not tokens:
+        raise InvalidOptions(where, "no values given: list them after '=', separated by commas")
+    return key, [_value(token, where) for token in tokens]
+
+
+def _split(text: str, where: str) -> list[str]:
+    """``text`` cut at its commas outside brackets, braces and quotes."""
+    tokens, depth, quote, start = [], 0, "", 0
+    for i, char in enumerate(text):
+        if quote:
+            quote = "" if char == quote and text[i - 1] != "\\" else quote
+        elif char in "\"'":
+            quote = char
+        elif char in "[{":
+            depth += 1
+        elif char in "]}":
+            depth -= 1
+        elif char == "," and depth == 0:
+            tokens.append(text[start:i])
+            start = i + 1
+    tokens.append(text[start:])
+    tokens = [t.strip() for t in tokens]
+    if tokens == [""]:
+        return []
+    if "" in tokens:
+        raise InvalidOptions(where, f"an empty value in {text!r} (two commas, or one at an end)")
+    return tokens
+
+
+def _value(token: str, where: str) -> Any:
+    try:
+        return tomllib.loads(f"v = {token}")["v"]
+    except tomllib.TOMLDecodeError:
+        if _WORD.fullmatch(token):
+            return token
+        raise InvalidOptions(
+            where, f'{token!r} is not a value: a number, true or false, a word or "text", a [list]'
+        ) from None
+
+
+def _same(a: Any, b: Any) -> bool:
+    return type(a) is type(b) and a == b
+
+
+def plan(
+    scene: str | Path,
+    vary: Mapping[str, Sequence[Any]],
+    out: str | Path,
+    seeds: int = 0,
+    noise: Noise | None = None,
+) -> list[Run]:
+    """The runs of a study: every combination of ``vary``'s values (the first key's values vary
+    slowest), each with seeds 0 to ``seeds`` - 1 when ``seeds`` > 0.
+
+    Every key and every value is checked before any run: the scene loads with each value set alone.
+
+    Raises:
+        SceneFileError: the scene file itself is malformed.
+        InvalidOptions: an unknown key, a key the scene has no place for, no values, a value twice, a
+            value the scene refuses (the field named ``--vary KEY``), seeds < 0, a noise < 0 or
+            without seeds.
+    """
+    scene = Path(scene)
+    spec = load_scene(scene)
+    data = tomllib.loads(spec.text)
+    if isinstance(seeds, bool) or not isinstance(seeds, int) or seeds < 0:
+        raise InvalidOptions("--seeds", f"must be an integer >= 0, got {shown(seeds)}")
+    if noise is not None:
+        for name in ("position", "velocity"):
+            value = getattr(noise, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise InvalidOptions(f"--{name}-noise", f"must be a finite number >= 0, got {value}")
+        if not seeds:
+            raise InvalidOptions("--position-noise/--velocity-noise", "perturb seeded runs: give --seeds N")
+    places: dict[str, tuple[Any, ...]] = {}
+    for key, values in vary.items():
+        places[key] = _place(data, key)
+        if not values:
+            raise InvalidOptions(f"--vary {key}", "no values given")
+        for i, value in enumerate(values):
+            if any(_same(value, other) for other in values[:i]):
+                raise InvalidOptions(f"--vary {key}", f"the value {_toml_value(value)} is given twice")
+            try:
+                load_scene_text(_scene_text(data, [(places[key], value)], ""), scene)
+            except GaussimError as err:
+                raise InvalidOptions(f"--vary {key}", f"the value {_toml_value(value)}: {err}") from err
+    digest = hashlib.sha1(spec.text.encode()).hexdigest()
+    combinations: list[tuple[tuple[str, Any], ...]] = [()]
+    for key, values in vary.items():
+        combinations = [(*c, (key, v)) for c in combinations for v in values]
+    runs = []
+    for values in combinations:
+        header = (
+            f"# {scene}, with " + ", ".join(f"{k} = {_toml_value(v)}" for k, v in values) + " (a sweep)\n"
+        )
+        text = _scene_text(data, [(places[k], v) for k, v in values], header) if values else spec.text
+        for seed in range(seeds) if seeds else [None]:
+            runs.append(Run(values, seed, noise or Noise(), text, str(scene), digest, str(out)))
+    return runs
+
+
+def _place(data: dict[str, Any], key: str) -> tuple[Any, ...]:
+    """Where ``key`` sits in a scene's data: (section, entry index or None, [subtable,] field, element
+    index or None); raises InvalidOptions naming the key, with the known choices."""
+    where = f"--vary {key}"
+    parts = [_PART.fullmatch(p) for p in key.split(".")]
+    if not all(parts):
+        raise InvalidOptions(where, "must be dotted names, e.g. ground.friction or bodies.crate.mass")
+    names: list[tuple[str, int | None]] = [(m[1], None if m[2] is None else int(m[2])) for m in parts]  # type: ignore[index]
+    section, index = names.pop(0)
+    if section not in SECTIONS:
+        options = {f.name for f in fields(Options)}
+        hint = f"; did you mean options.{section}?" if section in options else ""
+        raise InvalidOptions(
+            where, f"unknown section {section!r}; known: {', '.join(sorted(SECTIONS))}{hint}"
+        )
+    if section in ONE_ROBOT and "bodies" in data:
+        raise InvalidOptions(
+            where,
+            "this scene is of [[bodies]]: give a body's field as bodies.NAME.FIELD (bodies.NAME.control.kp)",
+        )
+    entry: int | None = None
+    if section in ENTRIES:
+        entry = _entry(data, section, index, names, where)
+    elif index is not None:
+        raise InvalidOptions(where, f"[{section}] is a table, not an array of tables")
+    table = section
+    subtable: tuple[str, ...] = ()
+    if section == "bodies" and len(names) == 2 and names[0] == ("control", None):
+        table, subtable = "control", ("control",)
+        names.pop(0)
+    if len(names) != 1:
+        raise InvalidOptions(where, f"give one field of [{section}] after it; known: {_known(table)}")
+    field, element = names[0]
+    if field not in SECTIONS[table]:
+        raise InvalidOptions(where, f"unknown field {field!r} of [{table}]; known: {_known(table)}")
+    if field == "name" and section in ENTRIES:
+        raise InvalidOptions(where, "a table's name says which it is: vary its other fields")
+    if field == "control" and not subtable:
+        raise InvalidOptions(where, f"give a field of the body's control; known: {_known('control')}")
+    place = (section, entry, *subtable, field, element)
+    if element is not None:
+        current = _container(data, place).get(field)
+        if not (isinstance(current, list) and element < len(current)):
+            what = (
+                f"the scene gives no {field}"
+                if current is None
+                else f"the scene's {field} is {shown(current)}"
+            )
+            raise InvalidOptions(where, f"{what}: it has no element [{element}] to vary")
+    return place
+
+
+def _entry(data: dict[str, Any], section: str, index: int | None, names: list, where: str) -> int:
+    """The index of the ``[[section]]`` table a key addresses: its ``[index]``, or its name (the
+    key's next part, popped from ``names``)."""
+    listed = data.get(section, [])
+    named = ENTRIES[section]
+    if index is not None:
+        if index >= len(listed):
+            raise InvalidOptions(where, f"the scene has {len(listed)} [[{section}]] tables (from [0])")
+        return index
+    tables = {t.get(named): i for i, t in enumerate(listed) if named is not None}
+    if named is None or not names:
+        raise InvalidOptions(
+            where, f"say which [[{section}]] table: {section}[i]" + (f" or {section}.NAME" if named else "")
+        )
+    name, element = names.pop(0)
+    if name not in tables or element is not None:
+        raise InvalidOptions(
+            where,
+            f"no [[{section}]] table named {name!r}; the scene's: {', '.join(map(str, tables)) or 'none'}",
+        )
+    return tables[name]
+
+
+def _known(table: str) -> str:
+    return ", ".join(sorted(SECTIONS[table]))
+
+
+def _container(data: dict[str, Any], place: tuple[Any, ...]) -> dict[str, Any]:
+    """The table of ``data`` that holds the field at ``place`` (made when missing)."""
+    section, entry, *subtable, _field, _element = place
+    table = data.setdefault(section, {}) if entry is None else data[section][entry]
+    for name in subtable:
+        table = table.setdefault(name, {})
+    return table
+
+
+def _scene_text(data: dict[str, Any], settings: list[tuple[tuple[Any, ...], Any]], header: str) -> str:
+    """The TOML text of ``data`` with each (place, value) of ``settings`` set."""
+    data = copy.deepcopy(data)
+    for place, value in settings:
+        table, field, element = _container(data, place), place[-2], place[-1]
+        if element is None:
+            table[field] = value
+        else:
+            table[field][element] = value
+    return header + to_toml(data)
+
+
+def to_toml(data: Mapping[str, Any]) -> str:
+    """TOML text of ``data`` (the types ``tomllib`` reads, but dates): ``tomllib.loads`` returns it."""
+    lines: list[str] = []
+    _toml_table(lines, data, ())
+    return "\n".join(lines).lstrip("\n") + "\n"
+
+
+def _toml_table(lines: list[str], table: Mapping[str, Any], prefix: tuple[str, ...]) -> None:
+    nested = {k: v for k, v in table.items() if isinstance(v, dict) or _tables(v)}
+    lines += [f"{_toml_key(k)} = {_toml_value(v)}" for k, v in table.items() if k not in nested]
+    for k, v in nested.items():
+        name = ".".join(map(_toml_key, (*prefix, k)))
+        for entry in [v] if isinstance(v, dict) else v:
+            lines += ["", f"[{name}]" if isinstance(v, dict) else f"[[{name}]]"]
+            _toml_table(lines, entry, (*prefix, k))
+
+
+def _tables(value: Any) -> bool:
+    """True for an array of tables (a TOML [[...]])."""
+    return isinstance(value, list) and bool(value) and all(isinstance(v, dict) for v in value)
+
+
+def _toml_key(key: str) -> str:
+    return key if _BARE_KEY.fullmatch(key) else _toml_string(key)
+
+
+def _toml_string(text: str) -> str:
+    return json.dumps(text, ensure_ascii=False).replace("\x7f", "\\u007f")  # TOML escapes DEL, JSON not
+
+
+def _toml_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, float):
+        return repr(value) if math.isfinite(value) else {math.inf: "inf", -math.inf: "-inf"}.get(value, "nan")
+    if isinstance(value, str):
+        return _toml_string(value)
+    if isinstance(value, list):
+        return "[" + ", ".join(map(_toml_value, value)) + "]"
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{_toml_key(k)} = {_toml_value(v)}" for k, v in value.items()) + "}"
+    raise TypeError(f"no TOML form for {type(value).__name__}")
+
+
+def perturbed(spec: SceneSpec, seed: int, noise: Noise) -> State:
+    """``spec``'s initial state perturbed by ``seed``: each floating base's position moved parallel to
+    the ground (the first [ground]'s plane, else the world's x-y plane: a normal draw in 3D with its
+    component along the plane's normal removed), body by body, then every velocity coordinate changed,
+    drawn from ``numpy.random.default_rng(seed)`` with standard deviations ``noise.position`` [m] (per
+    direction in the plane) and ``noise.velocity`` [m/s or rad/s]. A body moved this way keeps its
+    height above the ground."""
+    from .scene import Ground
+
+    rng = np.random.default_rng(seed)
+    grounds = [o for o in spec.scene.obstacles if isinstance(o, Ground)]
+    n = np.asarray(grounds[0].normal if grounds else (0.0, 0.0, 1.0))  # a unit normal
+    q, v = spec.initial.q.copy(), spec.initial.v.copy()
+    for layout in spec.scene.bodies.values():
+        if layout.floating:
+            shift = rng.normal(0.0, noise.position, 3)
+            q[layout.q.start : layout.q.start + 3] += shift - (shift @ n) * n
+    v += rng.normal(0.0, noise.velocity, v.shape)
+    return State(spec.initial.t, q, v, spec.initial.world)
+
+
+def summarise(log: RunLog, spec: SceneSpec) -> dict[str, float]:
+    """A run's numbers: SUMMARY (steps, simulated end time [s], wall time [s], deepest penetration
+    [m], largest KKT residual, steps whose QP did not converge, largest contact force [N], final
+    kinetic energy [J]), then each floating body B's final base position ``B.x``, ``B.y``, ``B.z`` [m],
+    its distance from its start ``B.displacement`` [m] and its final speed ``B.speed`` [m/s]."""
+    import pinocchio as pin
+
+    c, s = log.contact_arrays(), log.solver_arrays()
+    q, v = log.q[-1], log.v[-1]
+    model = spec.robot.model
+    summary = {
+        "steps": float(log.steps),
+        "t_end": float(log.t[-1]),
+        "wall_time": float(log.wall_time or math.nan),
+        "max_penetration": float(max(0.0, -c["gap"].min())) if len(c["gap"]) else 0.0,
+        "max_kkt_residual": float(s["kkt_residual"].max()) if log.steps else 0.0,
+        "unconverged_steps": float(np.sum(~np.isin(s["status"], ACCEPTED))),
+        "max_contact_force": float(np.linalg.norm(c["force"], axis=1).max()) if len(c["gap"]) else 0.0,
+        "kinetic_energy": float(pin.computeKineticEnergy(model, model.createData(), q, v)),
+    }
+    for name, layout in spec.scene.bodies.items():
+        if layout.floating:
+            start, end = log.q[0][layout.q][:3], q[layout.q][:3]
+            summary.update({f"{name}.{axis}": float(x) for axis, x in zip("xyz", end)})
+            summary[f"{name}.displacement"] = float(np.linalg.norm(end - start))
+            summary[f"{name}.speed"] = float(np.linalg.norm(v[layout.v][:3]))
+    return summary
+
+
+def summary_columns(spec: SceneSpec) -> list[str]:
+    """The summary's columns for a scene (those of :func:`summarise`)."""
+    bodies = [n for n, layout in spec.scene.bodies.items() if layout.floating]
+    return [*SUMMARY, *(f"{n}.{c}" for n in bodies for c in BODY_SUMMARY)]
+
+
+def run_one(run: Run) -> dict:
+    """Simulate one run into its log (``OUT/runs/ID``); its record: its key, id, values, seed,
+    "ok" or the error that stopped it, what weakens its accuracy (:meth:`RunLog.warnings`) and its
+    summary (:func:`summarise`). A KeyboardInterrupt is not caught: the run is not recorded."""
+    from .runner import run as simulate
+
+    log_path = Path(run.out) / RUNS / run.id
+    record: dict[str, Any] = {
+        "key": run.key,
+        "run": run.id,
+        "values": [list(v) for v in run.values],
+        "seed": run.seed,
+        "log": str(Path(RUNS) / run.id),
+    }
+    try:
+        spec = load_scene_text(run.text, run.scene_path)
+        if run.seed is not None:
+            spec.initial = perturbed(spec, run.seed, run.noise)
+        log = simulate(spec, log_path)
+        record.update(status="ok", warnings="; ".join(log.warnings()), summary=summarise(log, spec))
+    except Exception as err:  # a failing run is a result: it is recorded and the study goes on
+        record.update(status=f"{type(err).__name__}: {err}", warnings="", summary={})
+        record["traceback"] = traceback.format_exc(limit=3)
+    return record
+
+
+def study(
+    runs: Sequence[Run],
+    out: str | Path,
+    workers: int | None = None,
+    scheduler: Any = None,
+    progress: Progress | None = None,
+) -> list[dict]:
+    """Run the ``runs`` not already finished in ``out`` (:func:`gaussim.pool.run_all`: a local process
+    pool of ``workers``, or the Dask cluster at ``scheduler``); return the records of ``runs``."""
+    return run_all(runs, attrgetter("key"), run_one, Path(out) / RESULTS, workers, scheduler, progress)
+
+
+def rows(records: Sequence[dict]) -> list[dict[str, Any]]:
+    """One flat dict per record: the varied keys' values, ``seed``, ``status``, the summary,
+    ``warnings``, ``run`` (its id) and ``log`` (its log, relative to the output folder)."""
+    flat = []
+    for r in records:
+        row: dict[str, Any] = dict(r["values"])
+        row.update(seed=r["seed"], status=r["status"], **r["summary"], warnings=r["warnings"])
+        row.update(run=r["run"], log=r["log"])
+        flat.append(row)
+    return flat
+
+
+def require_table() -> None:
+    """Raise GaussimError, with the install command, unless pandas and pyarrow are installed."""
+    import importlib.util
+
+    missing = [m for m in ("pandas", "pyarrow") if importlib.util.find_spec(m) is None]
+    if missing:
+        raise GaussimError(
+            f"a sweep's table needs {' and '.join(missing)}: pip install 'gaussim[analysis]'"
+            " (pandas and pyarrow)"
+        )
+
+
+def table(records: Sequence[dict]):  # type: ignore[no-untyped-def]
+    """The records as a pandas DataFrame, a row per run (columns: :func:`rows`); a column whose values
+    Parquet cannot hold together (numbers and words) is kept as text."""
+    require_table()
+    import pandas as pd
+
+    frame = pd.DataFrame(rows(records))
+    for column in frame.columns:
+        kinds = {type(x) for x in frame[column] if x is not None}
+        if len(kinds - {int, float}) > 1 or (kinds & {int, float} and kinds - {int, float}):
+            frame[column] = frame[column].map(lambda x: None if x is None else _toml_value(x))
+    return frame
+
+
+def write_table(records: Sequence[dict], out: str | Path) -> Path:
+    """Write the records' table to ``OUT/results.parquet`` (atomically); its path."""
+    path = Path(out) / TABLE
+    frame = table(records)
+    with atomic_path(path) as tmp:
+        frame.to_parquet(tmp, index=False)
+    return path

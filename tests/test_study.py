@@ -1,0 +1,267 @@
+"""Parameter studies (gaussim sweep): keys, values, the product, seeds, failures, resume, Dask, table."""
+
+import math
+import re
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from gaussim import study
+from gaussim.cli import main
+from gaussim.exceptions import InvalidOptions
+from gaussim.pool import load
+from gaussim.scenefile import load_scene_text
+
+SCENES = Path(__file__).resolve().parents[1] / "robots" / "scenes"
+INCLINE = SCENES / "box_incline.toml"
+BALL = SCENES / "ball_bounce.toml"
+TWO_BODIES = """
+[[bodies]]
+name = "crate"
+shape = "box"
+size = [0.2, 0.2, 0.2]
+mass = 1.0
+position = [0.0, 0.0, 0.1]
+
+[[bodies]]
+name = "ball"
+shape = "sphere"
+radius = 0.05
+mass = 0.2
+position = [0.5, 0.0, 0.05]
+
+[ground]
+friction = 0.8
+
+[simulation]
+duration = 0.1
+"""
+# the box of box_incline.toml slides down 30 degrees: a = g (sin - mu cos) while mu < tan 30 deg
+G, SLOPE = 9.81, math.radians(30.0)
+# its slide over 0.2 s against the closed form: the first steps settle it on the plane (0.5% seen)
+SLIDE_RTOL = 0.02
+
+
+def _sweep(*args: object) -> int:
+    return main(["sweep", *map(str, args), "--workers", "1"])
+
+
+def test_every_shipped_scene_survives_its_toml_writing():
+    for path in SCENES.glob("*.toml"):
+        data = tomllib.loads(path.read_text())
+        assert tomllib.loads(study.to_toml(data)) == data, path.name
+    odd = {"a": {"b c": 'quote " and \\ \x7f\n', "x": [1.5, -math.inf, True, [1, 2]], "t": {"u": 1}}}
+    assert tomllib.loads(study.to_toml(odd)) == odd
+
+
+def test_values_are_toml_separated_by_commas_outside_brackets():
+    assert study.parse_vary("bodies.crate.position=[0, 0, 0.3],[0,0,0.5]") == (
+        "bodies.crate.position",
+        [[0, 0, 0.3], [0, 0, 0.5]],
+    )
+    assert study.parse_vary('options.friction_mode=pyramid, "exact"') == (
+        "options.friction_mode",
+        ["pyramid", "exact"],
+    )
+    assert study.parse_vary("options.dt=1e-3,2e-3") == ("options.dt", [1e-3, 2e-3])
+    assert study.parse_vary("bodies.ball.mass=1,1.0")[1] == [1, 1.0]  # an integer and a float differ
+
+
+@pytest.mark.parametrize(
+    "vary, message",
+    [
+        ("friction", "must be KEY=VALUES"),
+        ("ground.friction=", "--vary ground.friction: no values given"),
+        ("ground.friction=0.1,,0.2", "--vary ground.friction: an empty value"),
+        ("ground.friction=0.1+", "--vary ground.friction: '0.1+' is not a value"),
+    ],
+)
+def test_malformed_values_are_refused_naming_the_key(vary, message):
+    with pytest.raises(InvalidOptions, match=re.escape(message)):
+        study.parse_vary(vary)
+
+
+def test_keys_address_fields_bodies_by_name_and_list_elements(tmp_path):
+    scene = tmp_path / "two.toml"
+    scene.write_text(TWO_BODIES)
+    vary = {
+        "bodies.crate.mass": [2.0],
+        "bodies[1].position[0]": [0.7],
+        "options.dt": [2e-3],
+        "contacts.friction": [0.3],
+    }
+    (run,) = study.plan(scene, vary, tmp_path / "out")
+    spec = load_scene_text(run.text, scene)
+    assert spec.scene.bodies["crate"].robot.mass == pytest.approx(2.0)
+    assert spec.initial.body("ball").q[0] == 0.7 and spec.initial.body("ball").q[2] == 0.05
+    assert spec.options.dt == 2e-3 and spec.scene.self_contact[0] == 0.3
+    one_robot = study.plan(SCENES / "solo12_standing.toml", {"control.kp": [7.0]}, tmp_path / "out")
+    assert load_scene_text(one_robot[0].text, SCENES / "solo12_standing.toml").controller.kp == 7.0
+
+
+@pytest.mark.parametrize(
+    "key, value, message",
+    [
+        ("dt", 1e-3, "unknown section 'dt'.*did you mean options.dt"),
+        ("ground.frictoin", 0.1, "unknown field 'frictoin' of \\[ground\\]; known: friction"),
+        ("bodies.box.mass", 1.0, "no \\[\\[bodies\\]\\] table named 'box'; the scene's: crate, ball"),
+        ("bodies.crate.size[3]", 1.0, "the scene's size is \\[0.2, 0.2, 0.2\\]: it has no element \\[3\\]"),
+        ("options.dt[0]", 1.0, "the scene gives no dt: it has no element \\[0\\]"),
+        ("control.kp", 1.0, "this scene is of \\[\\[bodies\\]\\]"),
+        ("bodies.crate.mass", -1.0, "the value -1.0: .*bodies\\[0\\].mass"),
+        ("bodies.crate.mass", [2.0, 2.0], "the value 2.0 is given twice"),
+        ("options.scheme", "fast", 'the value "fast": .*options.scheme.*velocity'),
+    ],
+)
+def test_unknown_keys_and_refused_values_name_the_key(tmp_path, key, value, message):
+    scene = tmp_path / "two.toml"
+    scene.write_text(TWO_BODIES)
+    values = value if isinstance(value, list) else [value]
+    with pytest.raises(InvalidOptions, match=f"--vary {re.escape(key)}: {message}"):
+        study.plan(scene, {key: values}, tmp_path / "out")
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--vary", "options.dtt=1e-3"], "--vary options.dtt: unknown field 'dtt' of [options]"),
+        (["--vary", "ground.friction="], "--vary ground.friction: no values given"),
+        (["--vary", "ground.friction=-0.5"], "--vary ground.friction: the value -0.5"),
+        (["--vary", "ground.friction=1", "--vary", "ground.friction=2"], "given twice"),
+        (["--seeds", "2", "--velocity-noise", "-1"], "--velocity-noise: must be a finite number >= 0"),
+        (["--vary", "ground.friction=1", "--plot", "box.speed", "--against", "options.dt"], "not varied"),
+        (["--vary", "ground.friction=1", "--plot", "speed", "--against", "ground.friction"], "box.speed"),
+    ],
+)
+def test_the_command_refuses_bad_input_with_exit_2_and_no_traceback(tmp_path, capsys, args, message):
+    assert _sweep(INCLINE, "--out", tmp_path, *args) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err
+    assert not (tmp_path / study.RESULTS).exists(), "nothing runs before the input is checked"
+
+
+def test_a_friction_sweep_slides_the_box_as_the_closed_form(tmp_path, capsys):
+    """Each value reaches its run: the box's slide over 0.2 s is 1/2 g (sin - mu cos) t^2, or none
+    once mu > tan 30 deg; the seeds move the start along the slope by about 1 mm (the box stays on it)."""
+    frictions = [0.1, 0.3, 0.7]
+    code = _sweep(
+        INCLINE,
+        "--vary",
+        "ground.friction=" + ",".join(map(str, frictions)),
+        "--vary",
+        "simulation.duration=0.2",
+        "--seeds",
+        2,
+        "--velocity-noise",
+        0,
+        "--out",
+        tmp_path,
+        "--plot",
+        "box.displacement",
+        "--against",
+        "ground.friction",
+    )
+    assert code == 0
+    frame = pd.read_parquet(tmp_path / study.TABLE)
+    assert list(frame["ground.friction"]) == [mu for mu in frictions for _ in range(2)]
+    assert list(frame["seed"]) == [0, 1] * 3 and set(frame["status"]) == {"ok"}
+    for mu, slide in zip(frame["ground.friction"], frame["box.displacement"]):
+        expected = 0.5 * G * max(0.0, math.sin(SLOPE) - mu * math.cos(SLOPE)) * 0.2**2
+        assert slide == pytest.approx(expected, rel=SLIDE_RTOL, abs=1e-4), mu
+    starts = frame.groupby("seed")["box.y"].first()
+    assert 1e-5 < abs(starts[0] - starts[1]) < 1e-2, "the seeds perturb the start along the slope"
+    assert (tmp_path / "box.displacement-vs-ground.friction.png").stat().st_size > 0
+    for log in frame["log"]:
+        assert (tmp_path / log / "header.json").is_file()
+    assert "[6/6]" in capsys.readouterr().err
+
+
+def test_the_perturbation_is_the_seeds_and_moves_floating_bases_along_the_ground_and_velocities(tmp_path):
+    spec = load_scene_text(TWO_BODIES, tmp_path / "two.toml")
+    noise = study.Noise(position=1e-3, velocity=1e-2)
+    first, again, other = (study.perturbed(spec, s, noise) for s in (3, 3, 4))
+    np.testing.assert_array_equal(first.q, again.q)
+    assert not np.array_equal(first.q, other.q)
+    moved = first.q - spec.initial.q
+    for name in ("crate", "ball"):
+        q = spec.scene.bodies[name].q
+        assert np.all(moved[q][:2] != 0) and np.all(moved[q][2:] == 0), name  # along the flat ground
+    assert np.all(first.v != 0) and np.abs(first.v).max() < 10 * noise.velocity
+    still = study.perturbed(spec, 3, study.Noise(0.0, 0.0))
+    np.testing.assert_array_equal(still.q, spec.initial.q)
+
+
+def test_a_failing_run_is_a_row_and_the_others_go_on(tmp_path):
+    """A ball started 5 cm deep into the ground is refused when its run starts (not when its scene
+    loads): that run's status says why, the other run is made."""
+    runs = study.plan(BALL, {"initial.q[2]": [0.05, 0.2], "simulation.duration": [0.05]}, tmp_path)
+    records = study.study(runs, tmp_path, workers=1)
+    assert "InvalidState" in records[0]["status"] and "penetrat" in records[0]["status"]
+    assert records[1]["status"] == "ok" and records[1]["summary"]["ball.z"] < 0.2
+    frame = study.table(records)
+    assert frame["status"].iloc[1] == "ok" and math.isnan(frame["ball.z"].iloc[0])
+
+
+def test_an_interrupted_sweep_resumes_without_redoing_its_finished_runs(tmp_path, capsys):
+    args = ["--vary", "simulation.duration=0.05", "--out", tmp_path]
+    assert _sweep(BALL, "--vary", "ground.restitution=0.5", *args) == 0
+    results = tmp_path / study.RESULTS
+    (finished,) = load(results)
+    results.write_text(results.read_text() + '{"key": "a line cut by the interrupt')
+    (tmp_path / study.RUNS / "half-written").mkdir()  # a run killed midway left a partial log
+    capsys.readouterr()
+    assert _sweep(BALL, "--vary", "ground.restitution=0.5,0.9", *args) == 0
+    err = capsys.readouterr().err
+    assert "2 runs, 1 already in" in err and "[1/1] ground.restitution=0.9" in err
+    frame = pd.read_parquet(tmp_path / study.TABLE)
+    assert list(frame["ground.restitution"]) == [0.5, 0.9]
+    assert frame["run"].iloc[0] == finished["run"]
+    assert _sweep(BALL, "--vary", "ground.restitution=0.9", *args) == 0
+    assert "1 runs, 1 already in" in capsys.readouterr().err
+    assert len(pd.read_parquet(tmp_path / study.TABLE)) == 1, "the table holds the runs asked for"
+
+
+def test_the_sweep_command_runs_on_a_dask_cluster(tmp_path):
+    distributed = pytest.importorskip("dask.distributed")
+    with distributed.LocalCluster(n_workers=1, processes=False, threads_per_worker=1) as cluster:
+        code = main(
+            [
+                "sweep",
+                str(INCLINE),
+                "--vary",
+                "options.dt=1e-3,2e-3",
+                "--vary",
+                "simulation.duration=0.1",
+                "--out",
+                str(tmp_path),
+                "--scheduler",
+                cluster.scheduler_address,
+            ]
+        )
+    assert code == 0
+    frame = pd.read_parquet(tmp_path / study.TABLE)
+    assert list(frame["options.dt"]) == [1e-3, 2e-3] and set(frame["status"]) == {"ok"}
+    assert list(frame["steps"]) == [100, 50]
+
+
+def test_the_example_study_prints_each_slide_beside_its_closed_form(tmp_path):
+    example = Path(__file__).resolve().parents[1] / "examples" / "incline_friction_study.py"
+    result = subprocess.run(
+        [sys.executable, str(example), "--frictions", "0.2,0.7", "--duration", "0.1", "--workers", "1"]
+        + ["--out", str(tmp_path)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert result.returncode == 0, result.stderr
+    lines = result.stdout.splitlines()
+    for line, mu in zip(lines[1:3], (0.2, 0.7)):
+        values = line.split()
+        assert float(values[0]) == mu and values[3] == "ok"
+        assert float(values[1]) == pytest.approx(float(values[2]), rel=SLIDE_RTOL, abs=1e-4)
+    assert (tmp_path / study.TABLE).is_file()
