@@ -7,7 +7,6 @@ Exit codes: 0 ok, 2 bad input (the message names the file and key), 1 a simulati
 from __future__ import annotations
 
 import argparse
-import csv
 import functools
 import math
 import re
@@ -443,25 +442,12 @@ def _pairs_by_body(scene: Scene) -> dict[tuple[str, str], list[str]]:
 
 
 def _forces(args: argparse.Namespace) -> int:
-    from .runlog import RunLog
+    from .runlog import RunLog, write_forces
 
-    check_writable(args.csv or args.parquet, "--csv" if args.csv else "--parquet")
-    log = RunLog.load(args.log)
-    if args.csv:
-        columns = log.contact_records()
-        with atomic_path(args.csv) as tmp, tmp.open("w", newline="") as f:
-            writer = csv.writer(f)
-            writer.writerow(columns)
-            writer.writerows(zip(*columns.values()))
-        print(f"{len(columns['t'])} rows written to {args.csv}")
-    else:
-        frame = log.contact_forces()
-        try:
-            with atomic_path(args.parquet) as tmp:
-                frame.to_parquet(tmp)
-        except ImportError as err:
-            raise GaussimError(f"--parquet needs pyarrow: pip install pyarrow ({err})") from err
-        print(f"{len(frame)} rows written to {args.parquet}")
+    path, kind = (args.csv, "csv") if args.csv else (args.parquet, "parquet")
+    check_writable(path, f"--{kind}")
+    rows = write_forces(RunLog.load(args.log), path, kind)
+    print(f"{rows} rows written to {path}")
     return EXIT_OK
 
 

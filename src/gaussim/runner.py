@@ -95,7 +95,7 @@ def _steps(
     sim = Simulator(spec.scene, spec.options)
     state = sim.reset(spec.initial.q, spec.initial.v)
     log = RunLog(spec.robot.name, spec.text, spec.options, str(spec.path))
-    log.start(state)
+    log.start(state, spec.scene.gravity)
     writer = RunLogWriter(out, log) if out is not None else None
     start = last_saved = time.perf_counter()
     with _stop_signals() as stop:
