@@ -184,3 +184,35 @@ def test_the_terminal_bar_shows_the_notice_while_compiling_and_leaves_its_time_o
     assert line.bar.desc == ""
     assert time.perf_counter() - line.start < 0.1, "the compile's 0.3 s is not stepping time"
     line.close()
+
+
+def test_an_impact_reports_its_contact_impulses_by_that_name(ball):
+    """A ball at 1 m/s onto ground with e = 0.8 (acceleration scheme): the impact's contact impulses
+    [N s] are the ball's momentum change m (w - v) (w the velocity after the impact), and the impact
+    report's ContactForce.force holds the same numbers."""
+    from .conftest import G, at_height
+
+    dt = 1e-3
+    scene = gaussim.Scene(ball, ground=gaussim.Ground(friction=0.8, restitution=0.8))
+    sim = gaussim.Simulator(scene, gaussim.Options(scheme="acceleration", dt=dt))
+    state = sim.reset(at_height(ball, 0.1 + 5e-4), np.array([0, 0, -1.0, 0, 0, 0]))
+    for _ in range(5):
+        before = state.v[2]
+        state = sim.step(state)
+        if sim.last_step.impact is not None:
+            break
+    report = sim.last_step
+    assert report.impact is not None and sim.last_step.impulses
+    w = state.v[2] + G * dt  # the velocity the impact left, before the step's gravity
+    total = sum(i.impulse for i in report.impulses)
+    assert total[2] == pytest.approx(ball.mass * (w - before), rel=1e-6)
+    assert all(i.normal_impulse > 0 for i in report.impulses)
+    assert [i.impulse.tolist() for i in report.impulses] == [c.force.tolist() for c in report.impact.contacts]
+
+
+def test_a_step_without_impact_has_no_impulses(ball):
+    from .conftest import at_height
+
+    sim = gaussim.Simulator(gaussim.Scene(ball, ground=gaussim.Ground()))
+    sim.step(sim.reset(at_height(ball, 0.1)))
+    assert sim.last_step.impulses == []

@@ -153,7 +153,7 @@ class RunLog:
 
     # -- recording ---------------------------------------------------------------------------------
 
-    def start(self, state: State, gravity: Sequence[float] | None = None) -> None:
+    def start(self, state: State, gravity: Sequence[float] | np.ndarray | None = None) -> None:
         """Record the initial state (of a Simulator: its world names the bodies and their masses) and
         the scene's ``gravity`` [m/s^2] (``Scene.gravity``; stored in the log's header)."""
         if state.world is not None:
