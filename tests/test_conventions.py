@@ -216,3 +216,10 @@ def test_a_step_without_impact_has_no_impulses(ball):
     sim = gaussim.Simulator(gaussim.Scene(ball, ground=gaussim.Ground()))
     sim.step(sim.reset(at_height(ball, 0.1)))
     assert sim.last_step.impulses == []
+
+
+def test_the_package_imports_its_names_and_submodules_on_first_use():
+    assert gaussim.options.SCHEMES and gaussim.Simulator.__name__ == "Simulator"
+    assert set(gaussim.__all__) <= set(dir(gaussim))
+    with pytest.raises(AttributeError, match="no attribute 'nope'"):
+        gaussim.nope  # noqa: B018

@@ -130,8 +130,13 @@ def __getattr__(name: str) -> Any:
         from importlib.metadata import version
 
         return version("gaussim")
-    if name not in _HOME:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    if name not in _HOME:  # a submodule (gaussim.options): it was an attribute once the names were imported
+        try:
+            return importlib.import_module(f".{name}", __name__)
+        except ModuleNotFoundError as err:
+            if err.name != f"{__name__}.{name}":
+                raise  # the submodule exists and failed to import
+            raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
     value = getattr(importlib.import_module(f".{_HOME[name]}", __name__), name)
     globals()[name] = value  # looked up once
     return value
