@@ -24,7 +24,7 @@ class Recording:
     def __init__(self, sim: gaussim.Simulator, state: gaussim.State) -> None:
         self.sim = sim
         self.log = gaussim.RunLog(sim.scene.robot.name, "", sim.options)
-        self.log.start(state)
+        self.log.start(state, sim.scene.gravity)
 
     def step(self, state: gaussim.State, tau: object = None, damping: object = None) -> gaussim.State:
         """``sim.step(state, tau, damping)``, recorded with the torque the joints felt."""

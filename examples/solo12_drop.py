@@ -1,19 +1,20 @@
 """Solo-12 dropped 1 cm onto the ground stands under a PD posture hold; prints its contact forces.
 
-Run:  python examples/solo12_drop.py [--duration 2.0] [--scheme velocity] [--csv out/solo12_forces.csv]
+Run:  python examples/solo12_drop.py [--duration 2.0] [--scheme velocity] [--csv out/solo12_drop_forces.csv]
+
+The CSV is the run log's force export (``gaussim.runlog.write_forces``, the columns of
+``gaussim forces``), under this example's own name: the main job's out/solo12_forces.csv is left alone.
 """
 
 from __future__ import annotations
 
 import argparse
-import csv
 import sys
 import time
 from pathlib import Path
 
-import numpy as np
-
 import gaussim
+from gaussim.runlog import write_forces
 
 KP, KD = 5.0, 0.2  # posture PD gains [N m / rad], [N m s / rad]
 
@@ -24,7 +25,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--dt", type=float, default=1e-3, help="time step [s]")
     parser.add_argument("--scheme", default="velocity", choices=gaussim.options.SCHEMES)
     parser.add_argument(
-        "--csv", type=Path, default=Path("out/solo12_forces.csv"), help="contact-force time series"
+        "--csv", type=Path, default=Path("out/solo12_drop_forces.csv"), help="contact-force time series"
     )
     args = parser.parse_args(argv)
 
@@ -36,24 +37,22 @@ def main(argv: list[str] | None = None) -> int:
     q0 = q_ref.copy()
     q0[2] += 0.01
     state = sim.reset(q0)
+    log = gaussim.RunLog(robot.name, "", sim.options)
+    log.start(state, scene.gravity)
 
     args.csv.parent.mkdir(parents=True, exist_ok=True)
     steps = int(round(args.duration / args.dt))
     start = time.perf_counter()
-    with args.csv.open("w", newline="") as f:
-        writer = csv.writer(f)
-        writer.writerow(["t", "contact", "px", "py", "pz", "fx", "fy", "fz", "gap"])
-        for k in range(steps):
-            tau = KP * (q_ref[7:] - state.q[7:]) - KD * state.v[6:]
-            state = sim.step(state, tau)
-            for c in sim.last_step.contacts:
-                writer.writerow(
-                    [f"{state.t:.6f}", c.name, *np.round(c.point, 6), *np.round(c.force, 6), f"{c.gap:.3e}"]
-                )
-            if (k + 1) % max(1, steps // 10) == 0:
-                rate = (k + 1) / (time.perf_counter() - start)
-                print(f"\r  t = {state.t:5.2f} s  ({rate:6.0f} steps/s)", end="", file=sys.stderr, flush=True)
+    for k in range(steps):
+        tau = KP * (q_ref[7:] - state.q[7:]) - KD * state.v[6:]
+        state = sim.step(state, tau)
+        log.record(state, sim.full_torque(tau, None, state.v), sim.last_step)
+        if (k + 1) % max(1, steps // 10) == 0:
+            rate = (k + 1) / (time.perf_counter() - start)
+            print(f"\r  t = {state.t:5.2f} s  ({rate:6.0f} steps/s)", end="", file=sys.stderr, flush=True)
     print(file=sys.stderr)
+    log.finish(True)
+    write_forces(log, args.csv)
     report = sim.last_step
     print(f"Solo-12 after {state.t:.2f} s ({args.scheme} scheme, dt = {args.dt:g} s):")
     print(report.table())

@@ -1,7 +1,7 @@
 """Three stacked boxes (mass ratios 1 : 10 : 100) settle on the ground: write the replay page with
 the contact-force arrows and the force plot, or watch it live with --live.
 
-Run:  python examples/watch_box_stack.py [--duration 1] [--out out/box_stack] [--live]
+Run:  python examples/watch_box_stack.py [--duration 1] [--out out/watch_box_stack] [--live]
 """
 
 from __future__ import annotations
@@ -19,7 +19,9 @@ SCENE = Path(__file__).resolve().parents[1] / "robots" / "scenes" / "box_stack.t
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--duration", type=float, default=1.0, help="simulated time [s]")
-    parser.add_argument("--out", type=Path, default=Path("out/box_stack"), help="prefix of the files written")
+    parser.add_argument(
+        "--out", type=Path, default=Path("out/watch_box_stack"), help="prefix of the files written"
+    )
     parser.add_argument("--live", action="store_true", help="also show the run live in the browser")
     args = parser.parse_args()
 

@@ -146,8 +146,9 @@ def test_cli_run_inspect_and_forces(tmp_path):
     assert result.returncode == 0, result.stderr
     rows = list(csv.DictReader(csv_path.open()))
     log = gaussim.RunLog.load(out)
-    assert len(rows) == len(log.contact_records()["t"])
-    assert float(rows[-1]["force_z"]) == pytest.approx(log.contact_records()["force_z"][-1], rel=1e-12)
+    records = log.contact_records()
+    assert len(rows) == len(records["step"]) and list(rows[0]) == list(records)
+    assert float(rows[-1]["force_z_N"]) == pytest.approx(records["force_z_N"][-1], rel=1e-12)
 
 
 def test_parquet_round_trip(tmp_path):

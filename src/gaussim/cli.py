@@ -7,7 +7,7 @@ Exit codes: 0 ok, 2 bad input (the message names the file and key), 1 a simulati
 from __future__ import annotations
 
 import argparse
-import csv
+import functools
 import math
 import re
 import signal
@@ -42,20 +42,30 @@ def _say(text: object, file: TextIO | None = None) -> None:
     print(_printable(text), file=file or sys.stdout)
 
 
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("gaussim")
+    except PackageNotFoundError:  # run from a source tree that was never installed
+        return "(not installed)"
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="gaussim", description="Robot simulation by the Gauss principle.")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     commands = parser.add_subparsers(dest="command", required=True)
 
     run = commands.add_parser("run", help="simulate a scene file, write its log and print a summary")
-    run.add_argument("scene", type=Path)
+    run.add_argument("scene", type=Path, help="scene file (TOML; the shipped ones are in robots/scenes)")
     run.add_argument(
         "--out",
         type=Path,
         help="run log directory (one already there is kept as OUT.prev); default out/<scene>.runlog",
     )
     run.add_argument("--dt", type=float, help="time step [s] (overrides the scene's)")
-    run.add_argument("--scheme", choices=SCHEMES)
-    run.add_argument("--friction-mode", choices=FRICTION_MODES)
+    run.add_argument("--scheme", choices=SCHEMES, help="Gauss problem's level (overrides the scene's)")
+    run.add_argument("--friction-mode", choices=FRICTION_MODES, help="friction model (overrides the scene's)")
     run.add_argument("--duration", type=float, help="simulated time [s]")
     run.add_argument("--quiet", action="store_true", help="no progress line")
     run.add_argument("--view", action="store_true", help="show the run live in the browser (meshcat)")
@@ -70,7 +80,7 @@ def main(argv: list[str] | None = None) -> int:
     _arrow_option(run)
 
     replay = commands.add_parser("replay", help="replay a run log in the browser, live or as an HTML page")
-    replay.add_argument("log", type=Path)
+    replay.add_argument("log", type=Path, help="run log directory (written by gaussim run)")
     replay.add_argument("--html", type=Path, help="write a self-contained page instead of serving it live")
     replay.add_argument("--speed", type=float, default=1.0, help="times real time (default 1)")
     replay.add_argument("--fps", type=float, default=30.0, help="animation frames per second (default 30)")
@@ -79,21 +89,27 @@ def main(argv: list[str] | None = None) -> int:
     plot = commands.add_parser(
         "plot", help="plot a run log: contact forces, friction, gaps, solver; or energy"
     )
-    plot.add_argument("log", type=Path)
+    plot.add_argument("log", type=Path, help="run log directory (written by gaussim run)")
     plot.add_argument("-o", "--output", type=Path, required=True, help="image file (PNG, PDF or SVG)")
-    plot.add_argument("--what", choices=("forces", "energy"), default="forces")
+    plot.add_argument(
+        "--what", choices=("forces", "energy"), default="forces", help="which plot (default forces)"
+    )
     plot.add_argument(
         "--bodies", nargs="+", metavar="NAME", help="forces of these bodies' (or obstacles') contacts only"
     )
 
     inspect = commands.add_parser("inspect", help="describe a scene's robot, constraints and QP size")
-    inspect.add_argument("scene", type=Path)
+    inspect.add_argument("scene", type=Path, help="scene file (TOML)")
 
     forces = commands.add_parser("forces", help="export the per-contact force time series of a run log")
-    forces.add_argument("log", type=Path)
+    forces.add_argument("log", type=Path, help="run log directory (written by gaussim run)")
     target = forces.add_mutually_exclusive_group(required=True)
-    target.add_argument("--csv", type=Path)
-    target.add_argument("--parquet", type=Path, help="needs pandas and pyarrow")
+    target.add_argument(
+        "--csv", type=Path, help="CSV file: one row per contact per step, units in the header"
+    )
+    target.add_argument(
+        "--parquet", type=Path, help="Parquet file, the same columns (needs pandas and pyarrow)"
+    )
 
     bench = commands.add_parser(
         "bench", help="sweep the speed-accuracy knobs over the reference cases, against peers if installed"
@@ -396,14 +412,24 @@ def _stability(args: argparse.Namespace) -> int:
 
 def _run(args: argparse.Namespace) -> int:
     from .runlog import is_run_log
-    from .runner import CHECKPOINT_STEPS, STOP_SIGNALS, Interrupted, LogWriteError, run
+    from .runner import (
+        CHECKPOINT_STEPS,
+        STOP_SIGNALS,
+        Interrupted,
+        LogWriteError,
+        announce,
+        compile_notice,
+        run,
+    )
     from .scenefile import load_scene
 
     if args.plot:
         from .plots import plot_path
 
         plot_path(args.plot)  # before the run, not after it
-    spec = load_scene(args.scene, dt=args.dt, scheme=args.scheme, friction_mode=args.friction_mode)
+    # placing the robot on the ground compiles kernels too
+    with compile_notice(None if args.quiet else functools.partial(announce, sys.stderr)):
+        spec = load_scene(args.scene, dt=args.dt, scheme=args.scheme, friction_mode=args.friction_mode)
     if args.duration is not None:
         if not (math.isfinite(args.duration) and args.duration > 0):
             raise InvalidOptions("--duration", f"must be a finite number > 0, got {args.duration}")
@@ -621,25 +647,12 @@ def _pairs_by_body(scene: Scene) -> dict[tuple[str, str], list[str]]:
 
 
 def _forces(args: argparse.Namespace) -> int:
-    from .runlog import RunLog
+    from .runlog import RunLog, write_forces
 
-    check_writable(args.csv or args.parquet, "--csv" if args.csv else "--parquet")
-    log = RunLog.load(args.log)
-    if args.csv:
-        columns = log.contact_records()
-        with atomic_path(args.csv) as tmp, tmp.open("w", newline="") as f:
-            writer = csv.writer(f)
-            writer.writerow(columns)
-            writer.writerows(zip(*columns.values()))
-        print(f"{len(columns['t'])} rows written to {args.csv}")
-    else:
-        frame = log.contact_forces()
-        try:
-            with atomic_path(args.parquet) as tmp:
-                frame.to_parquet(tmp)
-        except ImportError as err:
-            raise GaussimError(f"--parquet needs pyarrow: pip install pyarrow ({err})") from err
-        print(f"{len(frame)} rows written to {args.parquet}")
+    path, kind = (args.csv, "csv") if args.csv else (args.parquet, "parquet")
+    check_writable(path, f"--{kind}")
+    rows = write_forces(RunLog.load(args.log), path, kind)
+    print(f"{rows} rows written to {path}")
     return EXIT_OK
 
 

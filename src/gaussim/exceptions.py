@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import reprlib
 from collections.abc import Iterable
+from typing import TYPE_CHECKING
 
-import numpy as np
+if TYPE_CHECKING:  # numpy is imported where used: the CLI's --help imports this module and no numpy
+    import numpy as np
 
 _SHOWN = reprlib.Repr()
 _SHOWN.maxlist = _SHOWN.maxtuple = _SHOWN.maxdict = 8
@@ -73,6 +75,8 @@ class InvalidState(GaussimError, ValueError):
     @classmethod
     def non_finite(cls, name: str, values: np.ndarray) -> InvalidState:
         """The error for an array ``name`` with non-finite entries: it lists where they are."""
+        import numpy as np
+
         return cls(f"{name} has non-finite entries at {np.flatnonzero(~np.isfinite(values)).tolist()}")
 
 

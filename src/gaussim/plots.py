@@ -12,7 +12,7 @@ import pinocchio as pin
 
 from .exceptions import InvalidOptions
 from .files import atomic_path
-from .runlog import RunLog
+from .runlog import RunLog, split_forces
 from .scene import Scene
 
 WHATS = ("forces", "energy")
@@ -35,6 +35,7 @@ def _pyplot() -> Any:
 def force_figure(log: RunLog, scene: Scene, bodies: Sequence[str] | None = None) -> Any:
     """Four panels over time: the normal force of each contact, its friction ratio |f_t| / f_n against
     the friction coefficient mu of its pair, its gap, and the solver's KKT residual and iterations.
+    Without contacts (of ``bodies``) the first three say "no contacts in this run".
 
     Args:
         bodies: show only the contacts of these bodies or obstacles (on either side), e.g.
@@ -55,14 +56,18 @@ def force_figure(log: RunLog, scene: Scene, bodies: Sequence[str] | None = None)
         name = log.contact_names[i]
         rows = c["id"] == i
         times = t[c["step"][rows] + 1]
-        force, normal = c["force"][rows], c["normal"][rows]
-        f_n = np.einsum("ij,ij->i", force, normal)
-        f_t = np.linalg.norm(force - f_n[:, None] * normal, axis=1)
+        f_n, f_t = split_forces(c["force"][rows], c["normal"][rows])
         normal_ax.plot(times, f_n, ".", ms=2, label=name)
         loaded = f_n > 1e-9
         ratio_ax.plot(times[loaded], f_t[loaded] / f_n[loaded], ".", ms=2)
         gap_ax.plot(times, 1e3 * c["gap"][rows], ".", ms=2)
         coefficients.add(friction.get(name.rsplit("#", 1)[0], scene.self_contact[0]))
+    of = f" of {', '.join(bodies)}" if bodies else ""
+    if not shown:  # three empty panels would look like a plotting failure
+        for ax in (normal_ax, ratio_ax, gap_ax):
+            ax.text(
+                0.5, 0.5, f"no contacts{of} in this run", ha="center", va="center", transform=ax.transAxes
+            )
     for mu in sorted(coefficients):
         ratio_ax.axhline(mu, color="k", ls="--", lw=1)
         ratio_ax.annotate(f"mu = {mu:g}", (t[0], mu), xytext=(2, 2), textcoords="offset points")
@@ -81,7 +86,6 @@ def force_figure(log: RunLog, scene: Scene, bodies: Sequence[str] | None = None)
     iterations_ax.plot(steps_t, s["iterations"], lw=0.8, color="C3")
     iterations_ax.set_ylabel("ProxQP iterations", color="C3")
     solver_ax.set_xlabel("t [s]")
-    of = f" of {', '.join(bodies)}" if bodies else ""
     figure.suptitle(f"{log.robot}: contact forces{of} and solver")
     return figure
 

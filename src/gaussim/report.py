@@ -39,6 +39,30 @@ def _timed(marks: list[tuple[str, float]], stage: str) -> None:
     marks.append((stage, _clock()))
 
 
+@dataclass(frozen=True)
+class ContactImpulse:
+    """An impact's reaction at one contact point, world frame: an impulse, what ``ContactForce.force``
+    holds in an impact report (:attr:`StepReport.impact`), under its own name.
+
+    Attributes:
+        name, geometry, obstacle, point, normal, gap: as :class:`ContactForce`'s.
+        impulse: the impulse on the robot, shape (3,) [N s].
+    """
+
+    name: str
+    geometry: str
+    obstacle: str
+    point: np.ndarray
+    normal: np.ndarray
+    gap: float
+    impulse: np.ndarray
+
+    @property
+    def normal_impulse(self) -> float:
+        """Component along the normal [N s]."""
+        return float(self.impulse @ self.normal)
+
+
 @dataclass(init=False)
 class StepReport:
     """The reactions and certificates of one step.
@@ -53,7 +77,8 @@ class StepReport:
         bilaterals: bilateral reaction wrenches.
         impact: the reactions of an impact resolved at the start of the step, as impulses
             ([N s], [N m s]) (acceleration scheme only), or None; its own ``impact`` holds the next
-            projection, when that one left a contact approaching.
+            projection, when that one left a contact approaching. Its contacts' ``force`` is an impulse:
+            :attr:`impulses` gives them under that name.
         certificates: one per QP solved this step (fixed-point iterations and impacts add QPs).
         timings: wall time per stage [s]: dynamics, collision, assembly, solve, integrate, when the
             step was timed (``Options.timings``), else empty (from ``marks``: (stage,
@@ -118,6 +143,19 @@ class StepReport:
     @cached_property
     def bilaterals(self) -> list[BilateralReaction]:
         return self.reactions(BilateralModule.name)
+
+    @property
+    def impulses(self) -> list[ContactImpulse]:
+        """The contact impulses [N s] of the impacts resolved at the start of the step (``impact`` and
+        the projections after it, in order), named as impulses; empty without an impact."""
+        found, impact = [], self.impact
+        while impact is not None:
+            found += [
+                ContactImpulse(c.name, c.geometry, c.obstacle, c.point, c.normal, c.gap, c.force)
+                for c in impact.contacts
+            ]
+            impact = impact.impact
+        return found
 
     @property
     def contact_jacobian(self) -> np.ndarray | None:

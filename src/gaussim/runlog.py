@@ -16,12 +16,14 @@ its end is being written).
 
 from __future__ import annotations
 
+import csv
 import json
 import os
 import re
 import shutil
 import tempfile
 import tomllib
+from collections.abc import Sequence
 from dataclasses import asdict, fields
 from pathlib import Path
 from typing import Any
@@ -87,6 +89,8 @@ LAYOUT: dict[str, tuple[str, tuple[str, ...]]] = {
 }
 # the entries of a single-file log that are its header (its scalars and its bodies), not its columns
 NPZ_HEADER = tuple(key for key, (_, shape) in LAYOUT.items() if shape in ((), ("B",)))
+# header entries a log may lack (written before gaussim stored them): gravity (3,), masses (JSON text)
+OPTIONAL_HEADER = ("gravity", "masses")
 # what a log from before BODIES_SINCE lacks
 BODY_ENTRIES = ("bodies", "contact_body", "contact_other")
 # A step's status when its QPs converged but its friction fixed point did not (friction_unsettled).
@@ -105,7 +109,7 @@ class RunLog:
     """A run being recorded, or loaded from a file.
 
     Attributes:
-        t: times [s], shape (N + 1,).
+        t: times [s], shape (N + 1,): the first state's time plus step * dt (no sum of dt's round-off).
         q, v: states, shapes (N + 1, nq), (N + 1, nv).
         tau: torques applied during each step, shape (N, nv).
         complete: False when the run stopped before its duration; ``reason`` says why.
@@ -115,6 +119,9 @@ class RunLog:
             :meth:`contact_arrays`; ``contact_geometry``, ``contact_obstacle``: its two sides;
             ``contact_body``: the body its force acts on (the geometry's), ``contact_other``: the body
             or obstacle pushing it.
+        gravity: the scene's gravity [m/s^2], shape (3,), or None (not given to :meth:`start`, or a
+            log written before gaussim stored it).
+        masses: each body's mass [kg], by name, or None (a log from before gaussim stored them).
     """
 
     def __init__(self, robot: str, scene_text: str, options: Options, scene_path: str = "") -> None:
@@ -122,6 +129,9 @@ class RunLog:
         self.complete, self.reason = False, "not finished"
         self.wall_time: float | None = None
         self._t: list[float] = []
+        self._t0 = 0.0
+        self.gravity: list[float] | None = None
+        self.masses: dict[str, float] | None = None
         self._q: list[np.ndarray] = []
         self._v: list[np.ndarray] = []
         self._tau: list[np.ndarray] = []
@@ -143,16 +153,29 @@ class RunLog:
 
     # -- recording ---------------------------------------------------------------------------------
 
-    def start(self, state: State) -> None:
-        """Record the initial state (of a Simulator: its world names the bodies)."""
+    def start(self, state: State, gravity: Sequence[float] | np.ndarray | None = None) -> None:
+        """Record the initial state (of a Simulator: its world names the bodies and their masses) and
+        the scene's ``gravity`` [m/s^2] (``Scene.gravity``; stored in the log's header)."""
         if state.world is not None:
             self.bodies = list(state.world.bodies)
-        self._append_state(state)
+            self.masses = {name: float(b.robot.mass) for name, b in state.world.bodies.items()}
+        self.gravity = None if gravity is None else [float(g) for g in gravity]
+        self._t0 = state.t
+        self._append_state(state, state.t)
 
     def record(self, state: State, tau: np.ndarray, report: StepReport) -> None:
-        """Add the step that led to ``state`` under torque ``tau`` (nv,) and its report."""
+        """Add one step to the log: call it after each ``Simulator.step``, in order, with the state the
+        step reached, the torque the joints felt during it and the step's report.
+
+        Args:
+            state: the state after the step (its t is stored as the first state's t + step * dt).
+            tau: the generalized torque applied during the step, shape (nv,) [N m or N]; with implicit
+                damping, ``Simulator.full_torque(tau, damping, state.v)``.
+            report: ``Simulator.last_step``: its contacts (force, point, normal, gap and the bodies
+                each is between), limit reactions and solver certificates are stored.
+        """
         step = self.steps
-        self._append_state(state)
+        self._append_state(state, self._t0 + (step + 1) * self.options.dt)
         self._tau.append(np.asarray(tau, dtype=float))
         certificates = report.certificates
         worst = next((c for c in certificates if not c.converged), certificates[0] if certificates else None)
@@ -180,8 +203,8 @@ class RunLog:
                 self.limit_names.append(key)
             self._limits.append((step, self._limit_ids[key], r.torque))
 
-    def _append_state(self, state: State) -> None:
-        self._t.append(state.t)
+    def _append_state(self, state: State, t: float) -> None:
+        self._t.append(t)
         self._q.append(state.q)
         self._v.append(state.v)
 
@@ -284,6 +307,8 @@ class RunLog:
             "complete": self.complete,
             "reason": self.reason,
             "wall_time": self.wall_time,
+            "gravity": self.gravity,
+            "masses": self.masses,
         }
 
     def save(self, path: str | Path) -> Path:
@@ -293,10 +318,16 @@ class RunLog:
         header = self._header()
         arrays: dict[str, Any] = {
             "format_version": np.array(FORMAT_VERSION),
-            **{k: np.array(v) for k, v in header.items() if k not in ("options", "wall_time", "bodies")},
+            **{
+                k: np.array(v)
+                for k, v in header.items()
+                if k not in ("options", "wall_time", "bodies", "gravity", "masses")
+            },
             "bodies": np.array(self.bodies, dtype=str),
             "options": np.array(json.dumps(header["options"])),
             "wall_time": np.array(np.nan if self.wall_time is None else self.wall_time),
+            **({} if self.gravity is None else {"gravity": np.array(self.gravity)}),
+            **({} if self.masses is None else {"masses": np.array(json.dumps(self.masses))}),
             **self._rows(),
         }
         with atomic_path(path) as tmp, tmp.open("wb") as f:
@@ -325,6 +356,8 @@ class RunLog:
             header["wall_time"] = None if np.isnan(data["wall_time"]) else float(data["wall_time"])
             if bodied:
                 header["bodies"] = list(map(str, data["bodies"]))
+            header["gravity"] = data["gravity"].tolist() if "gravity" in data else None
+            header["masses"] = json.loads(str(data["masses"])) if "masses" in data else None
         _check_layout(path, data, _held(tuple(k for k in LAYOUT if k not in NPZ_HEADER), bodied))
         if not bodied:
             header["bodies"] = [str(header["robot"])]
@@ -334,7 +367,8 @@ class RunLog:
         log.scene_path = str(header["scene_path"])
         log.complete, log.reason = bool(header["complete"]), str(header["reason"])
         log.wall_time = header["wall_time"]
-        log._stored = {k: v for k, v in data.items() if k not in NPZ_HEADER}
+        log.gravity, log.masses = header.get("gravity"), header.get("masses")
+        log._stored = {k: v for k, v in data.items() if k not in NPZ_HEADER + OPTIONAL_HEADER}
         log._drained = len(data["tau"])
         log.contact_names = list(map(str, data["contact_names"]))
         log.contact_geometry = list(map(str, data["contact_geometry"]))
@@ -348,23 +382,36 @@ class RunLog:
     # -- analysis --------------------------------------------------------------------------------------
 
     def contact_records(self) -> dict[str, list]:
-        """Per-contact force time series as columns: t, contact, geometry, obstacle, body (the one the
-        force acts on), other (the body or obstacle pushing it), point, normal, force and gap (x, y, z
-        split) — what :meth:`contact_forces` and the CSV export hold."""
+        """The per-contact force time series as columns, one row per contact per step, units in the
+        names (what :meth:`contact_forces`, :func:`write_forces` and ``gaussim forces`` hold):
+
+        ``step`` (the step, from 0; its force acts from t[step] to t[step + 1]), ``t_s`` (t[step + 1],
+        when the step ends [s]), ``contact`` (its name), ``geometry``, ``obstacle`` (its two sides),
+        ``body`` (the body the force acts on), ``other`` (the body or obstacle pushing it),
+        ``point_{x,y,z}_m`` (on the body, world frame [m]), ``normal_{x,y,z}`` (unit, from the other
+        side to the body), ``fn_N`` (the normal component [N]), ``ft_N`` (the tangential one's
+        magnitude [N]), ``force_{x,y,z}_N`` (the force vector [N], world frame) and ``gap_m`` (the
+        signed distance, negative when penetrating [m])."""
         c = self.contact_arrays()
-        t = self.t
+        ids, force = c["id"], c["force"]
+        fn, ft = split_forces(force, c["normal"])
         columns: dict[str, list] = {
-            "t": t[c["step"] + 1].tolist(),
-            "contact": [self.contact_names[i] for i in c["id"]],
-            "geometry": [self.contact_geometry[i] for i in c["id"]],
-            "obstacle": [self.contact_obstacle[i] for i in c["id"]],
-            "body": [self.contact_body[i] for i in c["id"]],
-            "other": [self.contact_other[i] for i in c["id"]],
+            "step": c["step"].tolist(),
+            "t_s": self.t[c["step"] + 1].tolist(),
+            "contact": [self.contact_names[i] for i in ids],
+            "geometry": [self.contact_geometry[i] for i in ids],
+            "obstacle": [self.contact_obstacle[i] for i in ids],
+            "body": [self.contact_body[i] for i in ids],
+            "other": [self.contact_other[i] for i in ids],
         }
-        for name in ("point", "normal", "force"):
+        for name, unit in (("point", "_m"), ("normal", "")):
             for axis, column in zip("xyz", c[name].T):
-                columns[f"{name}_{axis}"] = column.tolist()
-        columns["gap"] = c["gap"].tolist()
+                columns[f"{name}_{axis}{unit}"] = column.tolist()
+        columns["fn_N"] = fn.tolist()
+        columns["ft_N"] = ft.tolist()
+        for axis, column in zip("xyz", force.T):
+            columns[f"force_{axis}_N"] = column.tolist()
+        columns["gap_m"] = c["gap"].tolist()
         return columns
 
     def contact_forces(self):  # type: ignore[no-untyped-def]
@@ -545,6 +592,35 @@ class RunLogWriter:
         write_atomic(self.path / HEADER, json.dumps(header, indent=1).encode())
 
 
+def split_forces(force: np.ndarray, normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The normal components (m,) and the tangential magnitudes (m,) of forces (m, 3) along unit
+    normals (m, 3)."""
+    fn = np.einsum("ij,ij->i", force, normal)
+    return fn, np.linalg.norm(force - fn[:, None] * normal, axis=1)
+
+
+def write_forces(log: RunLog, path: str | Path, kind: str = "csv") -> int:
+    """Write ``log``'s per-contact force time series (:meth:`RunLog.contact_records`: its columns, units
+    in their names) to ``path``, atomically, as ``kind`` "csv" or "parquet" (needs pandas and pyarrow);
+    returns the number of rows. The one export of ``gaussim forces`` and the examples."""
+    columns = log.contact_records()
+    if kind == "csv":
+        with atomic_path(path) as tmp, tmp.open("w", newline="") as f:
+            writer = csv.writer(f)
+            writer.writerow(columns)
+            writer.writerows(zip(*columns.values()))
+    elif kind == "parquet":
+        frame = log.contact_forces()
+        try:
+            with atomic_path(path) as tmp:
+                frame.to_parquet(tmp)
+        except ImportError as err:
+            raise GaussimError(f"{path}: Parquet needs pyarrow: pip install pyarrow ({err})") from err
+    else:
+        raise InvalidOptions("kind", f"must be 'csv' or 'parquet', got {shown(kind)}")
+    return len(columns["step"])
+
+
 def is_run_log(path: Path) -> bool:
     """True for a run log file or directory (checked from its header, not its name)."""
     if path.is_dir():
@@ -720,6 +796,20 @@ def _read_directory(path: Path) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
             )
     if not (header.get("wall_time") is None or isinstance(header["wall_time"], (int, float))):
         raise RunLogError(f"{path / HEADER}: 'wall_time' must be a number or null")
+    gravity, masses = header.get("gravity"), header.get("masses")
+    if not (
+        gravity is None
+        or isinstance(gravity, list)
+        and len(gravity) == 3
+        and all(_number(g) for g in gravity)
+    ):
+        raise RunLogError(
+            f"{path / HEADER}: 'gravity' must be a list of 3 numbers or null, got {shown(gravity)}"
+        )
+    if not (masses is None or isinstance(masses, dict) and all(_number(m) for m in masses.values())):
+        raise RunLogError(
+            f"{path / HEADER}: 'masses' must map body names to numbers or be null, got {shown(masses)}"
+        )
     bodies = header.get("bodies")
     if header["format_version"] >= BODIES_SINCE["directory"] and not (
         isinstance(bodies, list) and bodies and all(isinstance(b, str) for b in bodies)
@@ -734,3 +824,7 @@ def _read_directory(path: Path) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
     if not header["complete"] and contiguous < len(numbers):
         header["reason"] += f" (chunk {contiguous} is missing: the later ones are left out)"
     return header, data
+
+
+def _number(value: object) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)

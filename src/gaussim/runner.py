@@ -11,6 +11,9 @@ from pathlib import Path
 from types import FrameType
 from typing import TextIO
 
+from numba.core import event
+from tqdm import tqdm
+
 from .control import command
 from .exceptions import GaussimError
 from .report import StepReport
@@ -25,6 +28,8 @@ CHECKPOINT_SECONDS = 5.0
 CHECKPOINT_STEPS = 10_000
 # The progress line is redrawn this often [s]: on a terminal, and when written to a file or pipe.
 PROGRESS_SECONDS = {True: 0.2, False: 5.0}
+# What the progress line says while numba compiles a kernel its cache does not hold yet.
+COMPILING = "compiling kernels (first run only)"
 # The signals that stop a run at the end of its step, its log kept: Ctrl-C, kill / timeout, a closed terminal.
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
@@ -71,13 +76,28 @@ def run(
         observer: called with the state and the report after every step (e.g. a live viewer,
             :func:`gaussim.viewer.follow`).
     """
+    steps = max(1, round(spec.duration / spec.options.dt))
+    line = _Progress(progress, steps) if progress is not None else None
+    with compile_notice(line.compiling if line is not None else None):
+        return _steps(spec, out, steps, line, checkpoint_seconds, checkpoint_steps, observer)
+
+
+def _steps(
+    spec: SceneSpec,
+    out: str | Path | None,
+    steps: int,
+    progress: _Progress | None,
+    checkpoint_seconds: float,
+    checkpoint_steps: int,
+    observer: Callable[[State, StepReport], None] | None,
+) -> RunLog:
+    """:func:`run`'s loop, ``progress`` its progress line."""
     sim = Simulator(spec.scene, spec.options)
     state = sim.reset(spec.initial.q, spec.initial.v)
     log = RunLog(spec.robot.name, spec.text, spec.options, str(spec.path))
-    log.start(state)
+    log.start(state, spec.scene.gravity)
     writer = RunLogWriter(out, log) if out is not None else None
-    steps = max(1, round(spec.duration / spec.options.dt))
-    start = last_shown = last_saved = time.perf_counter()
+    start = last_saved = time.perf_counter()
     with _stop_signals() as stop:
         try:
             for step in range(steps):
@@ -93,11 +113,8 @@ def run(
                 if observer is not None:
                     observer(state, report)
                 now = time.perf_counter()
-                if progress is not None and (
-                    now - last_shown > PROGRESS_SECONDS[progress.isatty()] or step == steps - 1
-                ):
-                    last_shown = now
-                    _show(progress, step + 1, steps, state.t, len(report.contacts), now - start)
+                if progress is not None:
+                    progress.update(step + 1, state.t, len(report.contacts))
                 if writer is not None and (
                     log.buffered >= checkpoint_steps or now - last_saved > checkpoint_seconds
                 ):
@@ -111,7 +128,7 @@ def run(
             if interruption is not None:
                 log.finish(False, f"interrupted ({interruption}) at step {log.steps}, t = {state.t:.6g} s")
                 if progress is not None and writer is not None:
-                    print(f"\n{interruption}: stopping, writing the log {writer.path}", end="", file=progress)
+                    progress.say(f"{interruption}: stopping, writing the log {writer.path}")
             else:  # a GaussimError, or a bug: either way the steps made are kept
                 log.finish(False, f"{type(err).__name__} at step {log.steps}, t = {state.t:.6g} s: {err}")
             _close(writer, log, progress)
@@ -192,9 +209,9 @@ def _append(writer: RunLogWriter, step: int) -> None:
         ) from err
 
 
-def _close(writer: RunLogWriter | None, log: RunLog, progress: TextIO | None) -> None:
+def _close(writer: RunLogWriter | None, log: RunLog, progress: _Progress | None) -> None:
     if progress is not None:
-        print(file=progress)
+        progress.close()
     if writer is None:
         return
     try:
@@ -206,13 +223,102 @@ def _close(writer: RunLogWriter | None, log: RunLog, progress: TextIO | None) ->
         ) from err
 
 
-def _show(stream: TextIO, done: int, total: int, t: float, contacts: int, elapsed: float) -> None:
-    width = 30
-    filled = int(width * done / total)
-    bar = "#" * filled + "-" * (width - filled)
-    end = "\r" if stream.isatty() else "\n"
-    rate = done / elapsed
-    stream.write(
-        f"[{bar}] {done}/{total} steps  t = {t:.3f} s  {rate:,.0f} steps/s  contacts: {contacts}{end}"
-    )
-    stream.flush()
+class _Progress:
+    """A run's progress line on ``stream``: steps done, ETA, steps/s, simulated time, active contacts; and
+    while numba compiles, :data:`COMPILING` (the time it takes is left out of the rate and the ETA). On a
+    terminal a tqdm bar redrawn in place; to a file or a pipe one line every ``PROGRESS_SECONDS[False]`` s
+    (a log reads line by line)."""
+
+    def __init__(self, stream: TextIO, total: int) -> None:
+        self.stream, self.total, self.tty = stream, total, stream.isatty()
+        self.bar = tqdm(
+            total=total,
+            unit=" steps",
+            file=stream,
+            mininterval=PROGRESS_SECONDS[True],
+            dynamic_ncols=True,
+            disable=not self.tty,
+        )
+        self.start = self.last_line = time.perf_counter()
+        self.compiled_since: float | None = None  # when the compile going on started
+
+    def update(self, done: int, t: float, contacts: int) -> None:
+        """After a step: ``done`` steps made, at simulated time ``t`` [s], ``contacts`` active."""
+        postfix = f"t = {t:.3f} s, contacts: {contacts}"
+        if self.tty:
+            self.bar.set_postfix_str(postfix, refresh=False)
+            self.bar.update(done - self.bar.n)
+            return
+        now = time.perf_counter()
+        if now - self.last_line > PROGRESS_SECONDS[False] or done == self.total:
+            self.last_line = now
+            meter = tqdm.format_meter(done, self.total, now - self.start, unit=" steps", postfix=postfix)
+            self.stream.write(meter + "\n")
+            self.stream.flush()
+
+    def compiling(self, active: bool) -> None:
+        """numba started (``active``) or ended compiling kernels: say so (a file gets it once)."""
+        now = time.perf_counter()
+        if active and self.compiled_since is None:
+            self.compiled_since = now
+        elif not active and self.compiled_since is not None:
+            self.start += now - self.compiled_since  # the rate is the stepping's
+            self.compiled_since = None
+        if self.tty:
+            self.bar.set_description_str(COMPILING if active else "", refresh=True)
+            if not active:
+                self.bar.unpause()  # the same for tqdm's rate
+        else:
+            announce(self.stream, active)
+
+    def say(self, text: str) -> None:
+        """A line of its own under the bar."""
+        self.bar.write(text, file=self.stream) if self.tty else print(text, file=self.stream)
+
+    def close(self) -> None:
+        self.bar.close()
+
+
+@contextmanager
+def compile_notice(show: Callable[[bool], None] | None) -> Iterator[None]:
+    """While inside, call ``show(True)`` when numba starts compiling a kernel that its on-disk cache does
+    not hold (a first run: a cached kernel is loaded with no compile) and ``show(False)`` when the
+    outermost compile ends; numba's compile events are nested, each start calls again (the line's
+    elapsed time is redrawn). ``show`` None: nothing is watched."""
+    if show is None:
+        yield
+        return
+    listener = _Compiles(show)
+    event.register("numba:compile", listener)
+    try:
+        yield
+    finally:
+        event.unregister("numba:compile", listener)
+
+
+_ANNOUNCED: set[int] = set()  # the streams told of a compile: once is enough
+
+
+def announce(stream: TextIO, active: bool) -> None:
+    """A :func:`compile_notice` callback (with ``functools.partial``) that writes "gaussim: " and
+    :data:`COMPILING` on a line of its own to ``stream`` at the first compile this process makes (where
+    no progress bar is drawn: loading a scene, a run written to a file)."""
+    if active and id(stream) not in _ANNOUNCED:
+        _ANNOUNCED.add(id(stream))
+        print(f"gaussim: {COMPILING}", file=stream, flush=True)
+
+
+class _Compiles(event.Listener):
+    """numba's compile events, told to a ``show(active)`` callback (:func:`compile_notice`)."""
+
+    def __init__(self, show: Callable[[bool], None]) -> None:
+        self.show, self.depth = show, 0
+
+    def on_start(self, event: event.Event) -> None:
+        self.depth += 1
+        self.show(True)
+
+    def on_end(self, event: event.Event) -> None:
+        self.depth -= 1
+        if self.depth == 0:
+            self.show(False)

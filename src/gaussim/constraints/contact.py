@@ -239,6 +239,8 @@ def pyramid_rows(
     most = m * len(cone[0])  # at most m facets rows
     rows, bound = np.empty((most, nv)), np.empty(most)
     packed, starts = np.empty(3 * m * nv + 3 * most + 6 * m), np.empty(m + 1, np.int64)
+    # read-only views whoever made them: one compiled signature (numba types writability)
+    drift, iterate = _read_only(drift), tuple(_read_only(a) for a in iterate)  # type: ignore[assignment]
     total, sliding, force = _pyramids(
         joint_jacobians,
         masks,
@@ -264,6 +266,15 @@ def pyramid_rows(
     if total < most:  # frictionless or sliding contacts: fewer rows
         rows, bound, packed = rows[:total], bound[:total], packed[: 3 * m * nv + 3 * total + 6 * m]
     return rows, bound, packed, starts, sliding, force
+
+
+def _read_only(array: np.ndarray) -> np.ndarray:
+    """``array`` itself when read-only, else a read-only view of it."""
+    if not array.flags.writeable:
+        return array
+    view = array.view()
+    view.flags.writeable = False
+    return view
 
 
 @njit(cache=True)
