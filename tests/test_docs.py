@@ -109,13 +109,8 @@ def _run_bash(block: Block, folder: Path) -> None:
         assert result.returncode == 0, f"{_where(block)} line {number + 1}: {line}\n{result.stderr[-3000:]}"
 
 
-def _run_python(page_blocks: list[Block], folder: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.chdir(folder)
-    monkeypatch.setenv("MPLBACKEND", "Agg")
-    namespace: dict[str, object] = {"__name__": "__docs__"}
-    for block in page_blocks:
-        code = compile(block.text, _where(block), "exec")
-        exec(code, namespace)  # noqa: S102 - the documentation's own code, verbatim
+def _run_python(block: Block, namespace: dict[str, object]) -> None:
+    exec(compile(block.text, _where(block), "exec"), namespace)  # noqa: S102 - the docs' own code, verbatim
 
 
 def _load_toml(block: Block, folder: Path) -> None:
@@ -132,14 +127,14 @@ def test_page_runs(page: Path, folder: Path, monkeypatch: pytest.MonkeyPatch) ->
             f"{_where(block)}: a code block in '{block.language or 'no language'}'; "
             f"label it one of {RUN + NOT_CODE}"
         )
-    python = [b for b in found if b.language == "python" and b.opt_out is None]
-    if python:
-        _run_python(python, folder, monkeypatch)
-    for block in found:
-        if block.opt_out is None and block.language == "bash":
-            _run_bash(block, folder)
-        elif block.opt_out is None and block.language == "toml":
-            _load_toml(block, folder)
+    monkeypatch.chdir(folder)
+    monkeypatch.setenv("MPLBACKEND", "Agg")
+    namespace: dict[str, object] = {"__name__": "__docs__"}  # one per page: its blocks build on each other
+    run = {"python": lambda b: _run_python(b, namespace), "bash": lambda b: _run_bash(b, folder)}
+    run["toml"] = lambda b: _load_toml(b, folder)
+    for block in found:  # in the page's order: a command's output is read by the code after it
+        if block.opt_out is None and block.language in run:
+            run[block.language](block)
 
 
 def test_blocks_are_found(tmp_path: Path) -> None:
