@@ -58,7 +58,7 @@ ON_MASSLESS = ("lump", "error")
 SINGULAR_RTOL, MASSLESS_FRACTION = 1e-12, 1e-3
 # A link's centre of mass farther than this from its collision geometry's bounding box, and than half
 # the geometry's size, gets a warning: the file has it wrong (pybullet's teddy_large: 1 m outside) [m]
-COM_OUTSIDE = 0.05
+COM_OUTSIDE = 0.25
 # coal's hull of a mesh stores at most 255 neighbours per vertex; one with more is rebuilt dropping the
 # points within this distance of the hull (qhull's W option) [m]
 HULL_COARSENING = 1e-3
@@ -598,47 +598,52 @@ def _conventions(robot: Robot) -> None:
             GaussimWarning,
             stacklevel=5,
         )
-    massless = _massless(model)
-    if not massless:
-        return
-    listed = shown([f"{_link(model, j)} (joint {model.names[j]})" for j in massless])
-    if robot.on_massless == "error":
-        raise InvalidRobot(
-            f"{where}: the links {listed} have no mass or no inertia about their joint's motion, so the mass "
-            "matrix is singular: give them an <inertial>, or load with on_massless='lump'"
+    if not all(i.mass >= 0 and np.all(np.isfinite(i.inertia)) for i in model.inertias[1:]):
+        return  # refused by _check, naming the body
+    lumped: list[int] = []
+    for _ in range(model.nv):
+        massless = _massless(model)
+        if not massless:
+            break
+        if robot.on_massless == "error":
+            raise InvalidRobot(
+                f"{where}: the links {shown([_link(model, j) for j in massless])} have no mass or no inertia "
+                "about their joints' motion, so the mass matrix is singular: give them an <inertial>, or "
+                "load with on_massless='lump'"
+            )
+        masses = [i.mass for i in model.inertias[1:] if i.mass > 0]
+        moments = [np.trace(i.inertia) / 3 for i in model.inertias[1:] if np.trace(i.inertia) > 0]
+        mass = MASSLESS_FRACTION * (float(np.mean(masses)) if masses else 1.0)
+        moment = MASSLESS_FRACTION * (float(np.mean(moments)) if moments else 1e-4)
+        for joint_id in massless:
+            inertia = model.inertias[joint_id]
+            added = pin.Inertia(mass if inertia.mass <= 0 else 0.0, inertia.lever, moment * np.eye(3))
+            model.inertias[joint_id] = inertia + added
+        lumped += [j for j in massless if j not in lumped]
+    if lumped:
+        warnings.warn(
+            f"{where}: the links {shown([_link(model, j) for j in lumped])} have no mass or no inertia about "
+            f"their joints' motion: each is given {MASSLESS_FRACTION:g} of the robot's typical link mass "
+            "(where it has none) and inertia (on_massless='error' refuses the robot instead)",
+            GaussimWarning,
+            stacklevel=5,
         )
-    masses = [i.mass for i in model.inertias[1:] if i.mass > 0]
-    moments = [np.trace(i.inertia) / 3 for i in model.inertias[1:] if np.trace(i.inertia) > 0]
-    mass = MASSLESS_FRACTION * (float(np.mean(masses)) if masses else 1.0)
-    moment = MASSLESS_FRACTION * (float(np.mean(moments)) if moments else 1e-4)
-    for joint_id in massless:
-        inertia = model.inertias[joint_id]
-        added = pin.Inertia(mass if inertia.mass <= 0 else 0.0, inertia.lever, moment * np.eye(3))
-        model.inertias[joint_id] = inertia + added
-    warnings.warn(
-        f"{where}: the links {listed} have no mass or no inertia about their joint's motion: each is given "
-        f"{mass:.3g} kg (where it has none) and {moment:.3g} kg m^2 per axis, {MASSLESS_FRACTION:g} of "
-        "the robot's typical link (on_massless='error' refuses the robot instead)",
-        GaussimWarning,
-        stacklevel=5,
-    )
 
 
 def _massless(model: pin.Model) -> list[int]:
-    """The joints whose block of the mass matrix (at the neutral configuration) is singular: their
-    moving links hold no inertia about the joint's motion."""
+    """The joints whose links move, with no kinetic energy, along the mass matrix's null direction (at
+    the neutral configuration; none when the matrix is regular or the direction moves no link: joints
+    that repeat one another's motion)."""
     data = model.createData()
-    mass_matrix = pin.crba(model, data, pin.neutral(model))
+    q = pin.neutral(model)
+    mass_matrix = pin.crba(model, data, q)
     if not np.all(np.isfinite(mass_matrix)):
         return []
-    scale = SINGULAR_RTOL * max(float(np.abs(mass_matrix).max()), 1e-300)
-    found = []
-    for joint_id in range(1, model.njoints):
-        joint = model.joints[joint_id]
-        block = mass_matrix[joint.idx_v : joint.idx_v + joint.nv, joint.idx_v : joint.idx_v + joint.nv]
-        if joint.nv and np.linalg.eigvalsh(block).min() <= scale:
-            found.append(joint_id)
-    return found
+    values, vectors = np.linalg.eigh(mass_matrix)
+    if values[0] > SINGULAR_RTOL * values[-1]:
+        return []
+    pin.forwardKinematics(model, data, q, vectors[:, 0])
+    return [j for j in range(1, model.njoints) if np.linalg.norm(data.v[j].vector) > 0.1]
 
 
 def _joint_part(model: pin.Model, joint_id: int, weights: np.ndarray) -> float:
