@@ -105,13 +105,15 @@ def scene_and_start(robot: gaussim.Robot) -> tuple[gaussim.Scene, np.ndarray]:
     # the start as reset leaves it (clamped into the limits), before it is placed
     probe = gaussim.Simulator(scene, gaussim.Options(start_penetration=1e9))
     q = probe.reset(initial(robot)).q
-    if robot.floating:
-        return scene, place_on_ground(scene, q, CLEARANCE)
+    if robot.floating:  # twice: the first distance, from afar, is coal's estimate for some meshes
+        return scene, place_on_ground(scene, place_on_ground(scene, q, CLEARANCE), CLEARANCE)
     data = robot.model.createData()
     pin.forwardKinematics(robot.model, data, q)
-    lowest = float(ContactDetector(scene, margin=1e3).detect(data).gap.min())
-    lowered = gaussim.Ground(height=lowest - CLEARANCE)
-    return gaussim.Scene(robot, ground=lowered, joint_limits=True), q
+    height = 0.0
+    for _ in range(3):  # a mesh deep in the ground has its depth estimated: again from nearer
+        height += float(ContactDetector(scene, margin=1e3).detect(data).gap.min()) - CLEARANCE
+        scene = gaussim.Scene(robot, ground=gaussim.Ground(height=height), joint_limits=True)
+    return scene, q
 
 
 def simulate(robot: gaussim.Robot, run: str, duration: float, row: Row) -> None:
