@@ -154,16 +154,16 @@ def simulate(robot: gaussim.Robot, run: str, duration: float, row: Row) -> None:
 
 
 def one(name: str, corpus_name: str, source: str, duration: float) -> list[Row]:
-    """Both passes of one robot (in a worker process)."""
+    """Both passes of one robot (in a worker process), with the GaussimWarnings they gave."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", GaussimWarning)
+        rows = _passes(name, corpus_name, source, duration)
+    said = [str(w.message) for w in caught if issubclass(w.category, GaussimWarning)]
+    return _noted(rows, said)
+
+
+def _passes(name: str, corpus_name: str, source: str, duration: float) -> list[Row]:
     rows = [Row(name, corpus_name, run) for run in PASSES]
-    caught: list[str] = []
-
-    def noted(message, category, *args, **kwargs):  # type: ignore[no-untyped-def]
-        if issubclass(category, GaussimWarning):
-            caught.append(str(message))
-
-    warnings.showwarning = noted
-    warnings.simplefilter("always", GaussimWarning)
     try:
         if corpus_name == "example-robot-data":
             robot = gaussim.load_robot(source)
@@ -172,11 +172,11 @@ def one(name: str, corpus_name: str, source: str, duration: float) -> list[Row]:
     except GaussimError as err:
         for row in rows:
             row.outcome, row.message = "refused", f"{type(err).__name__}: {err}"
-        return _noted(rows, caught)
+        return rows
     except Exception as err:  # a bug: recorded as a crash with its place
         for row in rows:
             row.outcome, row.message = "crash", _crash(err)
-        return _noted(rows, caught)
+        return rows
     for row in rows:
         row.nq, row.nv, row.geometries = robot.model.nq, robot.model.nv, robot.collision_model.ngeoms
         try:
@@ -186,7 +186,7 @@ def one(name: str, corpus_name: str, source: str, duration: float) -> list[Row]:
             row.message = f"{type(err).__name__} at step {row.steps}: {err}"
         except Exception as err:
             row.outcome, row.message = "crash", f"at step {row.steps}: {_crash(err)}"
-    return _noted(rows, caught)
+    return rows
 
 
 def _noted(rows: list[Row], caught: list[str]) -> list[Row]:
