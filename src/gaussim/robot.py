@@ -600,6 +600,7 @@ def _conventions(robot: Robot) -> None:
         )
     if not all(i.mass >= 0 and np.all(np.isfinite(i.inertia)) for i in model.inertias[1:]):
         return  # refused by _check, naming the body
+    _check_inertias(model, where)  # an unphysical inertia is refused, not lumped
     lumped: list[int] = []
     for _ in range(model.nv):
         massless = _massless(model)
