@@ -460,3 +460,102 @@ def test_as_robot_bad_inputs():
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # the checks raise; they do not warn
         as_robot(model)
+
+
+# -- the corpora's faults (issue 22), each in a small hand-written URDF of tests/data/corpus ----------
+CORPUS = DATA / "corpus"
+
+
+def test_a_transmission_names_no_joint():
+    robot = gaussim.load_robot(CORPUS / "transmission.urdf")
+    assert [robot.model.names[j] for j in range(1, robot.model.njoints)] == ["shoulder"]
+
+
+def test_a_tilted_continuous_joint_is_a_unit_pair():
+    robot = gaussim.load_robot(CORPUS / "tilted_continuous.urdf")
+    assert robot.model.joints[1].shortname() == "JointModelRevoluteUnboundedUnaligned"
+    sim = gaussim.Simulator(gaussim.Scene(robot))
+    sim.reset(robot.neutral())  # (cos, sin) = (1, 0): a unit pair
+    with pytest.raises(gaussim.InvalidState, match=r"q\[0:2\] of joint 'wheel' must be a unit \(cos, sin\)"):
+        sim.reset(np.array([1.0, 1.0]))
+
+
+def test_bullets_lower_above_upper_is_no_limit():
+    with pytest.warns(gaussim.GaussimWarning, match=r"'slider' \(1 > -1\).*Bullet's convention for no limit"):
+        robot = gaussim.load_robot(CORPUS / "bullet_no_limit.urdf")
+    scene = gaussim.Scene(robot, joint_limits=True, gravity=(1.0, 0.0, 0.0))  # pushes the slider along x
+    sim = gaussim.Simulator(scene)
+    state = sim.reset()
+    for _ in range(200):
+        state = sim.step(state)
+    assert state.q[0] == pytest.approx(0.5 * 1.0 * 0.2**2, rel=0.02)  # free: x = g t^2 / 2 past any bound
+
+
+def test_massless_links_are_lumped_or_refused_by_name():
+    with pytest.warns(gaussim.GaussimWarning, match=r"links \['finger'\] have no mass or no inertia"):
+        robot = gaussim.load_robot(CORPUS / "massless_finger.urdf")
+    assert np.linalg.eigvalsh(pin.crba(robot.model, robot.model.createData(), robot.neutral())).min() > 0
+    with pytest.raises(
+        gaussim.InvalidRobot, match=r"massless_finger.urdf: the links \['finger'\].*on_massless='lump'"
+    ):
+        gaussim.load_robot(CORPUS / "massless_finger.urdf", on_massless="error")
+    with pytest.raises(gaussim.InvalidOptions, match="on_massless.*lump, error"):
+        gaussim.load_robot(CORPUS / "massless_finger.urdf", on_massless="drop")
+
+
+def test_a_centre_of_mass_far_outside_its_geometry_is_warned():
+    with pytest.warns(gaussim.GaussimWarning, match=r"centre of mass of the links 'box' \(1.95 m\)"):
+        gaussim.load_robot(CORPUS / "com_outside.urdf", floating_base=True)
+
+
+def test_a_start_outside_the_limits_is_clamped_with_a_warning():
+    robot = gaussim.load_robot(CORPUS / "limited_start.urdf")
+    sim = gaussim.Simulator(gaussim.Scene(robot, joint_limits=True))
+    with pytest.warns(gaussim.GaussimWarning, match=r"'elbow' at 0 \(limits 0.5, 1\)"):
+        state = sim.reset()
+    assert state.q[0] == 0.5
+    sim = gaussim.Simulator(gaussim.Scene(robot))  # no limits declared: nothing to clamp into
+    assert sim.reset().q[0] == 0.0
+
+
+def test_the_parsers_reason_is_in_the_error():
+    with pytest.raises(
+        gaussim.InvalidRobot,
+        match=r"missing_child.urdf: .*child link \[forearm\] of joint \[elbow\] not found",
+    ):
+        gaussim.load_robot(CORPUS / "missing_child.urdf")
+    with pytest.raises(
+        gaussim.InvalidRobot, match=r"deformable.urdf: no <link> element.*found: <deformable>"
+    ):
+        gaussim.load_robot(CORPUS / "deformable.urdf")
+
+
+def test_a_hull_with_a_crowded_vertex_is_built_coarser(tmp_path):
+    # a cone of 400 rim points: qhull's hull gives its apex 400 neighbours, coal's hull stores 255
+    angles = np.linspace(0, 2 * np.pi, 400, endpoint=False)
+    rim = np.column_stack([0.1 * np.cos(angles), 0.1 * np.sin(angles), np.zeros_like(angles)])
+    points = np.vstack([rim, [0.0, 0.0, 0.2], [0.0, 0.0, 0.0]])
+    faces = [(k, (k + 1) % 400, 400) for k in range(400)] + [((k + 1) % 400, k, 401) for k in range(400)]
+    mesh = tmp_path / "cone.obj"
+    mesh.write_text(
+        "".join(f"v {x} {y} {z}\n" for x, y, z in points)
+        + "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in faces)
+    )
+    urdf = tmp_path / "cone.urdf"
+    urdf.write_text(
+        '<robot name="cone"><link name="cone"><inertial><mass value="1"/><inertia ixx="0.01" ixy="0" ixz="0" '
+        'iyy="0.01" iyz="0" izz="0.01"/></inertial><collision><geometry><mesh filename="cone.obj"/>'
+        "</geometry></collision></link></robot>"
+    )
+    with pytest.warns(gaussim.GaussimWarning, match="collision geometry 'cone_0'.*more neighbours than coal"):
+        robot = gaussim.load_robot(urdf, floating_base=True)
+    hull = robot.collision_model.geometryObjects[0].geometry.convex
+    assert hull.num_points < 402
+    # the coarser hull still holds the cone to its tolerance: its apex and rim are within 1 mm
+    assert np.asarray(hull.points()).max(axis=0)[2] == pytest.approx(0.2, abs=gaussim.robot.HULL_COARSENING)
+
+
+def test_cassies_sdf_is_read_by_gaussim():
+    # example-robot-data builds it with Pinocchio's SDF parser, which pin's wheels leave out (ImportError)
+    with pytest.raises(gaussim.InvalidRobot, match=r"cassie.sdf: joint '.*a closed kinematic loop"):
+        gaussim.load_robot("cassie")

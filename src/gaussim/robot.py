@@ -5,12 +5,16 @@ inertias, limits, a positive definite mass matrix, and geometry attached to its 
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import importlib.resources
 import os
 import re
+import sys
+import tempfile
 import warnings
 import xml.etree.ElementTree as ET
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -19,7 +23,15 @@ import numpy as np
 import pinocchio as pin
 
 from . import mjcf, sdf
-from .exceptions import FrameNotFound, GaussimWarning, GeometryNotFound, InvalidRobot, RobotNotFound, shown
+from .exceptions import (
+    FrameNotFound,
+    GaussimWarning,
+    GeometryNotFound,
+    InvalidOptions,
+    InvalidRobot,
+    RobotNotFound,
+    shown,
+)
 from .urdfcheck import check_urdf, mesh_fault, mimic_joints
 
 
@@ -40,6 +52,16 @@ FORMATS = {"robot": "URDF", "mujoco": "MJCF", "sdf": "SDF"}
 SUFFIXES = (".urdf", ".xml", ".mjcf", ".sdf")
 # shapes no body has: a ground is a Scene's gaussim.Ground
 UNBOUNDED = (coal.Halfspace, coal.Plane)
+ON_MASSLESS = ("lump", "error")
+# A joint's block of the mass matrix is singular when its smallest eigenvalue is below this fraction of
+# the matrix's largest; "lump" gives its link this fraction of the typical link's mass and inertia.
+SINGULAR_RTOL, MASSLESS_FRACTION = 1e-12, 1e-3
+# A link's centre of mass farther than this from its collision geometry's bounding box, and than half
+# the geometry's size, gets a warning: the file has it wrong (pybullet's teddy_large: 1 m outside) [m]
+COM_OUTSIDE = 0.25
+# coal's hull of a mesh stores at most 255 neighbours per vertex; one with more is rebuilt dropping the
+# points within this distance of the hull (qhull's W option) [m]
+HULL_COARSENING = 1e-3
 ACCEPTED = (
     "a gaussim.Robot, a pinocchio.RobotWrapper (example_robot_data.load(...) returns one), a "
     "pinocchio.Model, a tuple (model, collision_model) or (model, collision_model, visual_model), a URDF, "
@@ -60,6 +82,10 @@ class Robot:
         urdf: the file it was read from (a URDF, MJCF or SDF file); "" for a model made in memory.
         package_dirs: directories where ``package://`` meshes are resolved.
         reference_configurations: named configurations (e.g. ``standing``), shape (nq,) each.
+        on_massless: what to do with a joint whose moving links have no mass or no inertia about its
+            motion (the mass matrix is then singular): ``"lump"`` (default, PyBullet accepts such
+            files) gives the joint's link MASSLESS_FRACTION of the robot's typical link mass and
+            inertia, with a warning naming each; ``"error"`` refuses the robot naming them.
     """
 
     name: str
@@ -69,14 +95,17 @@ class Robot:
     urdf: str
     package_dirs: tuple[str, ...] = ()
     reference_configurations: dict[str, np.ndarray] = field(default_factory=dict)
+    on_massless: str = "lump"
 
     def __post_init__(self) -> None:
+        _conventions(self)
         _check(self)
+        _warn_oddities(self)
         for geometry in self.collision_model.geometryObjects:
             if isinstance(geometry.geometry, coal.BVHModelBase) and geometry.geometry.convex is None:
                 # Contacts are detected on the convex hull of a mesh (coal's GJK/EPA needs convex shapes
                 # to give signed distances and contact patches); built once here.
-                geometry.geometry.buildConvexHull(True, "Qt")
+                _convex_hull(self, geometry)
 
     @property
     def source(self) -> str:
@@ -133,6 +162,7 @@ def load_robot(
     *,
     package_dirs: list[str] | tuple[str, ...] = (),
     floating_base: bool | None = None,
+    on_massless: str = "lump",
 ) -> Robot:
     """Load a robot.
 
@@ -147,6 +177,7 @@ def load_robot(
             can: an MJCF whose first body has a ``<freejoint>`` floats, an SDF model floats unless a
             joint attaches it to the world; a URDF is fixed-base; example-robot-data decides for its
             robots (mobile robots float). A file that says the opposite of the value given is refused.
+        on_massless: ``"lump"`` or ``"error"``: see :class:`Robot`.
 
     Raises:
         RobotNotFound: the name is none of the above (the message lists the known names).
@@ -157,7 +188,7 @@ def load_robot(
     if path.suffix in SUFFIXES or path.exists():
         if not path.is_file():
             raise RobotNotFound(str(name), _known_names())
-        return _from_file(path, tuple(package_dirs), floating_base)
+        return _from_file(path, tuple(package_dirs), floating_base, on_massless)
     if local.is_file():
         if str(name) in example_robot_names():  # the shipped robot comes first: say so
             warnings.warn(
@@ -166,13 +197,26 @@ def load_robot(
                 GaussimWarning,
                 stacklevel=2,
             )
-        return _from_urdf(local, (str(ROBOTS_DIR), *package_dirs), bool(floating_base))
+        return _from_urdf(local, (str(ROBOTS_DIR), *package_dirs), bool(floating_base), on_massless)
     known = example_robot_names()
     if str(name) not in known:
         raise RobotNotFound(str(name), _known_names())
     from example_robot_data.robots_loader import ROBOTS
+    from example_robot_data.utils import getModelPath
 
-    loader = ROBOTS[str(name)]()
+    kind = ROBOTS[str(name)]
+    if kind.sdf_filename and not kind.urdf_filename:  # its loader needs Pinocchio's SDF parser: gaussim's
+        relative = os.path.join(kind.path, kind.sdf_subpath, kind.sdf_filename)
+        model_path = Path(getModelPath(relative))
+        robot = _from_sdf(model_path / relative, (str(model_path.parent.parent),), floating_base, on_massless)
+        return dataclasses.replace(robot, name=str(name))
+    try:
+        with _stderr_kept() as stderr:
+            loader = kind()
+    except (RuntimeError, ValueError, OSError) as err:
+        raise InvalidRobot(
+            f"example-robot-data's '{name}' cannot be built: {_cause(err)}{_said(stderr)}"
+        ) from err
     if floating_base is not None and floating_base != loader.free_flyer:
         base = "floating" if loader.free_flyer else "fixed"
         raise InvalidRobot(
@@ -189,6 +233,7 @@ def load_robot(
         str(loader.df_path),
         (str(loader.model_path),),
         _configurations(model),
+        on_massless,
     )
 
 
@@ -209,7 +254,7 @@ def _own_geometry(name: str, model: pin.Model, geometry: pin.GeometryModel) -> p
     return geometry
 
 
-def as_robot(obj: object, name: str | None = None) -> Robot:
+def as_robot(obj: object, name: str | None = None, *, on_massless: str = "lump") -> Robot:
     """A :class:`Robot` of what a user holds, passed as it is.
 
     Args:
@@ -220,6 +265,7 @@ def as_robot(obj: object, name: str | None = None) -> Robot:
             path or robot name (see :func:`load_robot`). Pinocchio objects are copied: changing them
             later does not change the robot.
         name: the robot's name; default the model's name (``model.name``), or "robot".
+        on_massless: ``"lump"`` or ``"error"``: see :class:`Robot` (for a model it makes).
 
     Raises:
         InvalidRobot: ``obj`` is none of these, or its model is unusable, or a geometry is attached to
@@ -229,7 +275,7 @@ def as_robot(obj: object, name: str | None = None) -> Robot:
     if isinstance(obj, Robot):
         return obj if name is None else dataclasses.replace(obj, name=name)
     if isinstance(obj, str | os.PathLike):
-        robot = load_robot(obj)
+        robot = load_robot(obj, on_massless=on_massless)
         return robot if name is None else dataclasses.replace(robot, name=name)
     if isinstance(obj, pin.RobotWrapper):
         parts: tuple[object, ...] = (obj.model, obj.collision_model, obj.visual_model)
@@ -252,7 +298,8 @@ def as_robot(obj: object, name: str | None = None) -> Robot:
     collision = collision if collision is not None else pin.GeometryModel()
     visual = visual if visual is not None else collision.clone()
     model = pin.Model(model)
-    return Robot(name or model.name or "robot", model, collision, visual, "", (), _configurations(model))
+    configurations = _configurations(model)
+    return Robot(name or model.name or "robot", model, collision, visual, "", (), configurations, on_massless)
 
 
 def _described(obj: object) -> str:
@@ -268,38 +315,41 @@ def _known_names() -> list[str]:
     return local + example_robot_names()
 
 
-def _from_file(path: Path, package_dirs: tuple[str, ...], floating: bool | None) -> Robot:
+def _from_file(path: Path, package_dirs: tuple[str, ...], floating: bool | None, on_massless: str) -> Robot:
     """A robot of a URDF, MJCF or SDF file, told apart by its root element."""
     try:
         tag = ET.parse(path).getroot().tag.rpartition("}")[2]  # without an XML namespace
     except ET.ParseError as err:
         raise InvalidRobot(f"{path}: not well-formed XML ({err})") from err
     if tag == "mujoco":
-        return _from_mjcf(path, floating)
+        return _from_mjcf(path, floating, on_massless)
     if tag == "sdf":
-        return _from_sdf(path, package_dirs, floating)
+        return _from_sdf(path, package_dirs, floating, on_massless)
     if tag == "robot":
-        return _from_urdf(path, package_dirs, bool(floating))
+        return _from_urdf(path, package_dirs, bool(floating), on_massless)
     known = ", ".join(f"<{t}> ({f})" for t, f in FORMATS.items())
     raise InvalidRobot(f"{path}: the root element <{tag}> is no robot format gaussim reads; known: {known}")
 
 
-def _from_urdf(path: Path, package_dirs: tuple[str, ...] | list[str], floating: bool) -> Robot:
+def _from_urdf(
+    path: Path, package_dirs: tuple[str, ...] | list[str], floating: bool, on_massless: str = "lump"
+) -> Robot:
     dirs = [str(d) for d in (*package_dirs, path.parent)]
     check_urdf(path)
     try:
-        if floating:
-            model, collision, visual = pin.buildModelsFromUrdf(str(path), dirs, pin.JointModelFreeFlyer())
-        else:
-            model, collision, visual = pin.buildModelsFromUrdf(str(path), dirs)
+        with _stderr_kept() as stderr:
+            if floating:
+                model, collision, visual = pin.buildModelsFromUrdf(str(path), dirs, pin.JointModelFreeFlyer())
+            else:
+                model, collision, visual = pin.buildModelsFromUrdf(str(path), dirs)
     except (RuntimeError, ValueError, OSError) as err:
-        cause = mesh_fault(path, dirs, str(err)) or str(err)
+        cause = mesh_fault(path, dirs, str(err)) or _cause(err) + _said(stderr)
         raise InvalidRobot(f"{path}: cannot build a model from this URDF: {cause}") from err
     _warn_mimics(path, model)
-    return Robot(path.stem, model, collision, visual, str(path), tuple(dirs), {})
+    return Robot(path.stem, model, collision, visual, str(path), tuple(dirs), {}, on_massless)
 
 
-def _from_mjcf(path: Path, floating: bool | None) -> Robot:
+def _from_mjcf(path: Path, floating: bool | None, on_massless: str) -> Robot:
     root = mjcf.read(path)
     mjcf.check_file(path, root)
     try:
@@ -335,10 +385,11 @@ def _from_mjcf(path: Path, floating: bool | None) -> Robot:
         )
     for note in notes:
         warnings.warn(f"{path}: {note}", GaussimWarning, stacklevel=4)
-    return Robot(path.stem, model, collision, visual, str(path), (str(path.parent),), _configurations(model))
+    dirs = (str(path.parent),)
+    return Robot(path.stem, model, collision, visual, str(path), dirs, _configurations(model), on_massless)
 
 
-def _from_sdf(path: Path, package_dirs: tuple[str, ...], floating: bool | None) -> Robot:
+def _from_sdf(path: Path, package_dirs: tuple[str, ...], floating: bool | None, on_massless: str) -> Robot:
     converted = sdf.to_urdf(path, package_dirs)
     floats = converted.world_joint is None if floating is None else floating
     if floats and converted.world_joint is not None:
@@ -357,7 +408,34 @@ def _from_sdf(path: Path, package_dirs: tuple[str, ...], floating: bool | None) 
         raise InvalidRobot(f"{path}: cannot build a model from this SDF: {_cause(err)}") from err
     for note in converted.notes:
         warnings.warn(f"{path}: {note}", GaussimWarning, stacklevel=4)
-    return Robot(path.stem, model, collision, visual, str(path), (*package_dirs, str(path.parent)), {})
+    dirs = (*package_dirs, str(path.parent))
+    return Robot(path.stem, model, collision, visual, str(path), dirs, {}, on_massless)
+
+
+@contextlib.contextmanager
+def _stderr_kept() -> Iterator[list[str]]:
+    """Capture what C++ code (urdfdom, which tells why a URDF is refused only there) writes to the
+    process's stderr, file descriptor 2, into the list yielded; written on to stderr afterwards."""
+    said: list[str] = []
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as capture:
+        os.dup2(capture.fileno(), 2)
+        try:
+            yield said
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            capture.seek(0)
+            text = capture.read().decode(errors="replace")
+            said.append(text)
+            sys.stderr.write(text)
+
+
+def _said(stderr: list[str]) -> str:
+    """What the parser said on stderr, for a message: its non-empty lines joined, or nothing."""
+    lines = [line.strip() for text in stderr for line in text.splitlines() if line.strip()]
+    return f" (the parser said: {'; '.join(lines)})" if lines else ""
 
 
 def _cause(err: Exception) -> str:
@@ -405,7 +483,7 @@ def _check(robot: Robot) -> None:
         joint = model.joints[joint_id]
         lower = model.lowerPositionLimit[joint.idx_q : joint.idx_q + joint.nq]
         upper = model.upperPositionLimit[joint.idx_q : joint.idx_q + joint.nq]
-        if np.any(lower > upper):
+        if np.any(lower > upper):  # a one-coordinate joint's are Bullet's "no limit" (_conventions)
             raise InvalidRobot(
                 f"{where}: joint '{model.names[joint_id]}' has its lower limit {lower.tolist()} "
                 f"above its upper limit {upper.tolist()}"
@@ -417,10 +495,16 @@ def _check(robot: Robot) -> None:
             )
     data = model.createData()
     mass_matrix = pin.crba(model, data, pin.neutral(model))
-    if not np.all(np.isfinite(mass_matrix)) or np.linalg.eigvalsh(mass_matrix).min() <= 0:
+    if not np.all(np.isfinite(mass_matrix)):
+        raise InvalidRobot(f"{where}: the mass matrix at the neutral configuration is not finite")
+    values, vectors = np.linalg.eigh(mass_matrix)
+    if values[0] <= SINGULAR_RTOL * values[-1]:
+        weights = np.abs(vectors[:, 0])
+        moving = [model.names[j] for j in range(1, model.njoints) if _joint_part(model, j, weights) > 0.1]
         raise InvalidRobot(
-            f"{where}: the mass matrix is not positive definite at the neutral "
-            "configuration (a moving body without mass or inertia?)"
+            f"{where}: the mass matrix is singular at the neutral configuration: a motion of the joints "
+            f"{shown(moving)} together moves no mass (joints that repeat one another's motion, e.g. "
+            "prismatic joints under a floating base, or links without inertia)"
         )
     _check_geometry(model, robot.collision_model, where, "collision")
     _check_geometry(model, robot.visual_model, where, "visual")
@@ -479,4 +563,149 @@ def _check_inertias(model: pin.Model, where: str) -> None:
             f"{where}: link '{body}' (the body of joint '{model.names[joint_id]}') has principal moments of "
             f"inertia {', '.join(f'{m:.6g}' for m in moments)} [kg m^2]: {fault}, which no body has "
             "(check the <inertia> of it and of the links fixed to it)"
+        )
+
+
+def _link(model: pin.Model, joint_id: int) -> str:
+    """The name of the link a joint moves (its first body frame), else the joint's name."""
+    return next(
+        (f.name for f in model.frames if f.type == pin.FrameType.BODY and f.parentJoint == joint_id),
+        model.names[joint_id],
+    )
+
+
+def _conventions(robot: Robot) -> None:
+    """Read the files' well-known conventions, with a warning naming what is read so: a joint's lower
+    limit above its upper one is Bullet's "no limit" (unlimited here); joints whose moving links have no
+    inertia about their motion are lumped or refused as ``robot.on_massless`` says."""
+    model, where = robot.model, robot.source
+    if robot.on_massless not in ON_MASSLESS:
+        raise InvalidOptions(
+            "on_massless", f"must be one of {', '.join(ON_MASSLESS)}, got {shown(robot.on_massless)}"
+        )
+    swapped = []
+    for joint_id in range(1, model.njoints):
+        joint = model.joints[joint_id]
+        iq = joint.idx_q
+        if joint.nq == 1 and model.lowerPositionLimit[iq] > model.upperPositionLimit[iq]:
+            lower, upper = model.lowerPositionLimit[iq], model.upperPositionLimit[iq]
+            swapped.append(f"'{model.names[joint_id]}' ({lower:g} > {upper:g})")
+            model.lowerPositionLimit[iq], model.upperPositionLimit[iq] = -np.inf, np.inf
+    if swapped:
+        warnings.warn(
+            f"{where}: the joints {', '.join(swapped)} have their lower limit above their upper one, "
+            "Bullet's convention for no limit: gaussim leaves them unlimited",
+            GaussimWarning,
+            stacklevel=5,
+        )
+    if not all(i.mass >= 0 and np.all(np.isfinite(i.inertia)) for i in model.inertias[1:]):
+        return  # refused by _check, naming the body
+    _check_inertias(model, where)  # an unphysical inertia is refused, not lumped
+    lumped: list[int] = []
+    for _ in range(model.nv):
+        massless = _massless(model)
+        if not massless:
+            break
+        if robot.on_massless == "error":
+            raise InvalidRobot(
+                f"{where}: the links {shown([_link(model, j) for j in massless])} have no mass or no inertia "
+                "about their joints' motion, so the mass matrix is singular: give them an <inertial>, or "
+                "load with on_massless='lump'"
+            )
+        masses = [i.mass for i in model.inertias[1:] if i.mass > 0]
+        moments = [np.trace(i.inertia) / 3 for i in model.inertias[1:] if np.trace(i.inertia) > 0]
+        mass = MASSLESS_FRACTION * (float(np.mean(masses)) if masses else 1.0)
+        moment = MASSLESS_FRACTION * (float(np.mean(moments)) if moments else 1e-4)
+        for joint_id in massless:
+            inertia = model.inertias[joint_id]
+            added = pin.Inertia(mass if inertia.mass <= 0 else 0.0, inertia.lever, moment * np.eye(3))
+            model.inertias[joint_id] = inertia + added
+        lumped += [j for j in massless if j not in lumped]
+    if lumped:
+        warnings.warn(
+            f"{where}: the links {shown([_link(model, j) for j in lumped])} have no mass or no inertia about "
+            f"their joints' motion: each is given {MASSLESS_FRACTION:g} of the robot's typical link mass "
+            "(where it has none) and inertia (on_massless='error' refuses the robot instead)",
+            GaussimWarning,
+            stacklevel=5,
+        )
+
+
+def _massless(model: pin.Model) -> list[int]:
+    """The joints whose links move, with no kinetic energy, along the mass matrix's null direction (at
+    the neutral configuration; none when the matrix is regular or the direction moves no link: joints
+    that repeat one another's motion)."""
+    data = model.createData()
+    q = pin.neutral(model)
+    mass_matrix = pin.crba(model, data, q)
+    if not np.all(np.isfinite(mass_matrix)):
+        return []
+    values, vectors = np.linalg.eigh(mass_matrix)
+    if values[0] > SINGULAR_RTOL * values[-1]:
+        return []
+    pin.forwardKinematics(model, data, q, vectors[:, 0])
+    return [j for j in range(1, model.njoints) if np.linalg.norm(data.v[j].vector) > 0.1]
+
+
+def _joint_part(model: pin.Model, joint_id: int, weights: np.ndarray) -> float:
+    """The largest of a joint's entries in a vector of the velocity space, shape (nv,)."""
+    joint = model.joints[joint_id]
+    return float(weights[joint.idx_v : joint.idx_v + joint.nv].max(initial=0.0))
+
+
+def _warn_oddities(robot: Robot) -> None:
+    """Warn about what a file likely has wrong: a robot read from a file without collision geometry (it
+    touches nothing), a link whose centre of mass lies far outside its collision geometry."""
+    model, collision = robot.model, robot.collision_model
+    if robot.urdf and not collision.ngeoms:
+        warnings.warn(
+            f"{robot.source}: no collision geometry: the robot touches nothing (a ground or obstacle is "
+            "refused in its scene); give its links <collision> elements",
+            GaussimWarning,
+            stacklevel=5,
+        )
+    far = []
+    for joint_id in range(1, model.njoints):
+        com = model.inertias[joint_id].lever
+        distances, sizes = [], []
+        for g in collision.geometryObjects:
+            if g.parentJoint == joint_id and not isinstance(g.geometry, UNBOUNDED):
+                g.geometry.computeLocalAABB()
+                box, point = g.geometry.aabb_local, g.placement.actInv(com)
+                distances.append(
+                    float(np.linalg.norm(np.maximum(np.maximum(box.min_ - point, point - box.max_), 0)))
+                )
+                sizes.append(g.geometry.aabb_radius)
+        if (
+            distances
+            and model.inertias[joint_id].mass > 0
+            and min(distances) > max(COM_OUTSIDE, max(sizes) / 2)
+        ):
+            far.append(f"'{_link(model, joint_id)}' ({min(distances):.3g} m)")
+    if far:
+        warnings.warn(
+            f"{robot.source}: the centre of mass of the links {', '.join(far)} lies that far outside their "
+            "collision geometry: check their <inertial> origin (the robot will tip or sink about it)",
+            GaussimWarning,
+            stacklevel=5,
+        )
+
+
+def _convex_hull(robot: Robot, geometry: pin.GeometryObject) -> None:
+    """The convex hull of a mesh; where qhull's hull has a vertex with more neighbours than coal's hull
+    can store, the hull without the points within HULL_COARSENING of it, with a warning."""
+    try:
+        geometry.geometry.buildConvexHull(True, "Qt")
+    except RuntimeError as err:
+        if "Too many neighbors" not in str(err):
+            raise InvalidRobot(
+                f"{robot.source}: collision geometry '{geometry.name}': {_cause(err)}"
+            ) from err
+        geometry.geometry.buildConvexHull(True, f"Qt W{HULL_COARSENING:g}")
+        warnings.warn(
+            f"{robot.source}: collision geometry '{geometry.name}': its mesh's convex hull has a vertex with "
+            "more neighbours than coal stores (255): the hull leaves out the points within "
+            f"{1e3 * HULL_COARSENING:g} mm of it",
+            GaussimWarning,
+            stacklevel=5,
         )

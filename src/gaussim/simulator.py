@@ -15,6 +15,7 @@ floating bases (dynamics.FloatingBases, integrator): the base's linear velocity 
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Mapping, Sequence
 
 import numpy as np
@@ -25,7 +26,7 @@ from .collision import NO_CONTACTS, ContactDetector, Contacts
 from .constraints import BilateralModule, ContactModule, LimitModule, checked_modules
 from .constraints.base import ConstraintModule
 from .dynamics import DynamicsStage
-from .exceptions import InvalidState, SolverError
+from .exceptions import GaussimWarning, InvalidRobot, InvalidState, SolverError
 from .gauss import GaussStage
 from .integrator import integrate
 from .options import Options
@@ -108,6 +109,7 @@ class Simulator:
             v = self._per_body(v, "v", np.zeros(self.model.nv))
         state = State(t, q, v, self.world)  # type: ignore[arg-type]
         self._check_state(state)
+        state = self._within_limits(state)
         self._check_overlap(state)
         self.last_step = None
         return state
@@ -129,6 +131,30 @@ class Simulator:
                 raise InvalidState(f"{name}['{body}'] must have shape ({size},), got {arr.shape}")
             full[where] = arr
         return full
+
+    def _within_limits(self, state: State) -> State:
+        """With joint limits on, a start outside them clamped into them, with a warning naming each
+        joint (the limit rows would snap it back in one step, at any speed)."""
+        if not self.scene.joint_limits:
+            return state
+        model = self.model
+        one = [model.joints[j].idx_q for j in range(1, model.njoints) if model.joints[j].nq == 1]
+        q, lower, upper = state.q[one], model.lowerPositionLimit[one], model.upperPositionLimit[one]
+        outside = [k for k in range(len(one)) if not lower[k] <= q[k] <= upper[k]]
+        if not outside:
+            return state
+        names = [model.names[j] for j in range(1, model.njoints) if model.joints[j].nq == 1]
+        listed = ", ".join(
+            f"'{names[k]}' at {q[k]:.4g} (limits {lower[k]:.4g}, {upper[k]:.4g})" for k in outside
+        )
+        warnings.warn(
+            f"the initial configuration has joints outside their limits, clamped into them: {listed}",
+            GaussimWarning,
+            stacklevel=3,
+        )
+        clamped = state.q.copy()
+        clamped[one] = np.clip(q, lower, upper)
+        return State(state.t, clamped, state.v, self.world)
 
     def _check_overlap(self, state: State) -> None:
         """Refuse a start whose pairs overlap deeper than ``Options.start_penetration``."""
@@ -231,15 +257,39 @@ class Simulator:
         return self._last_state
 
 
+# Where each joint type's configuration holds a unit vector: (offset in its q, size); a joint type
+# whose nq exceeds its nv and is not listed here is refused (its q cannot be checked).
+UNIT_PARTS = {
+    "JointModelFreeFlyer": (3, 4),
+    "JointModelSpherical": (0, 4),
+    "JointModelPlanar": (2, 2),
+    "JointModelRevoluteUnboundedUnaligned": (0, 2),
+    **{f"JointModelRUB{axis}": (0, 2) for axis in "XYZ"},
+}
+
+
 def _unit_parts(model: pin.Model) -> list[tuple[slice, str]]:
-    """(slice, what) of each joint whose configuration ends with a unit quaternion or (cos, sin)."""
+    """(slice, what) of each joint whose configuration holds a unit quaternion or (cos, sin), told by
+    the joint's type (a composite joint's parts each by theirs)."""
     parts = []
     for j in range(1, model.njoints):
         joint = model.joints[j]
-        if joint.nq > joint.nv:
-            planar = any(k in joint.shortname() for k in ("RUB", "Planar"))
-            what, size = ("(cos, sin) pair", 2) if planar else ("quaternion (x, y, z, w)", 4)
-            part = slice(joint.idx_q + joint.nq - size, joint.idx_q + joint.nq)
-            message = f"q[{part.start}:{part.stop}] of joint '{model.names[j]}' must be a unit {what}"
-            parts.append((part, message))
+        kinds = [joint]
+        if joint.shortname() == "JointModelComposite":
+            kinds = list(joint.extract().joints)
+        start = joint.idx_q
+        for kind in kinds:
+            name = kind.shortname()
+            if name in UNIT_PARTS:
+                offset, size = UNIT_PARTS[name]
+                what = "(cos, sin) pair" if size == 2 else "quaternion (x, y, z, w)"
+                part = slice(start + offset, start + offset + size)
+                message = f"q[{part.start}:{part.stop}] of joint '{model.names[j]}' must be a unit {what}"
+                parts.append((part, message))
+            elif kind.nq > kind.nv:
+                raise InvalidRobot(
+                    f"joint '{model.names[j]}' is a {name} (nq {kind.nq} > nv {kind.nv}), a type gaussim "
+                    f"cannot check the configuration of; known: {', '.join(sorted(UNIT_PARTS))}"
+                )
+            start += kind.nq
     return parts

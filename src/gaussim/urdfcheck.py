@@ -30,7 +30,12 @@ NUMBERS = {
 
 def check_urdf(path: Path) -> None:
     """Raise :class:`InvalidRobot` naming the file and the element when the URDF at ``path`` is not
-    well-formed XML, holds a number that is not finite, a negative mass, or a joint of unknown type."""
+    well-formed XML, has no link, holds a number that is not finite, a negative mass, or a joint of
+    unknown type."""
+    root = _root(path)
+    if root.find("link") is None:
+        found = ", ".join(sorted({f"<{e.tag}>" for e in root})) or "nothing"
+        raise InvalidRobot(f"{path}: no <link> element, of which a URDF robot is made (found: {found})")
     for where, element in _elements(path):
         if element.tag == "joint" and element.get("type") not in JOINT_TYPES:
             raise InvalidRobot(
@@ -90,8 +95,12 @@ def _root(path: Path) -> ET.Element:
 
 
 def _elements(path: Path) -> Iterator[tuple[str, ET.Element]]:
-    """(the link or joint it belongs to, element) for every element of the URDF."""
+    """(the link or joint it belongs to, element) for every element of the URDF's links and joints
+    (a <transmission> or <gazebo> element, which the model ignores, names joints in elements of its own:
+    ``<transmission><joint name="...">`` is no joint)."""
     for owner in _root(path):
+        if owner.tag not in ("link", "joint"):
+            continue
         where = f"{owner.tag} '{owner.get('name')}'"
         for element in owner.iter():
             yield where, element

@@ -78,9 +78,11 @@ CONVERGED = (
     Status.MULTIPLIERS_CERTIFIED,
     Status.FREE_MOTION_CERTIFIED,
 )
-# The statuses that say the problem has no solution: no restart can help.
+# The statuses that say the problem has no solution: no restart can help. Not DUAL_INFEASIBLE: the Gauss
+# problem's H = M is positive definite, so it is never unbounded, and ProxQP's detection of it is false
+# (allegro_left_hand collapsing: DUAL_INFEASIBLE at residuals of 5e-10); such an answer is recovered.
 PRIMAL_INFEASIBLE = (Status.PRIMAL_INFEASIBLE, Status.SOLVED_CLOSEST_PRIMAL_FEASIBLE)
-INFEASIBLE = (*PRIMAL_INFEASIBLE, Status.DUAL_INFEASIBLE)
+INFEASIBLE = PRIMAL_INFEASIBLE
 
 
 @dataclass

@@ -1,0 +1,337 @@
+"""Every robot people already have: the example-robot-data and pybullet_data corpora, each robot
+loaded and dropped onto the ground, or refused with a reason.
+
+Each robot runs in its own process (forked from this one, which has imported gaussim and compiled its
+kernels) with a time limit, twice: a PD hold of its initial pose (``hold``; zero torque for an object
+without joints) and zero torque (``zero``: a robot collapses onto the ground). Settings: dt = 1e-3,
+every collision geometry against the ground, joint limits on; a floating robot starts 1 cm above the
+ground, a fixed-base one has the ground 1 cm below its lowest geometry. The table (robot, nq/nv,
+geometries, outcome, message, steps, median and p90 step, max penetration, max KKT residual, final
+base height) goes to a Markdown file and a CSV; the counts per outcome are printed.
+
+Outcomes: ``ok`` (ran to the end), ``refused`` (gaussim refused the robot at load, naming the cause),
+``failed`` (a gaussim error while simulating), ``exploded`` (a non-finite state, |v| > 1e3 or the base
+farther than 100 m), ``crash`` (an exception that is not gaussim's: a bug), ``timeout``.
+
+    python benchmarks/corpus.py                       # both corpora, 1 s each pass; docs/corpus.md + .csv
+    python benchmarks/corpus.py --quick               # 0.1 s each pass, a few random_urdfs
+    python benchmarks/corpus.py --only solo12 a1.urdf # some robots (example-robot-data names, file names)
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+import multiprocessing as mp
+import os
+import sys
+import time
+import traceback
+import warnings
+from collections import Counter
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+import gaussim
+from gaussim.collision import ContactDetector
+from gaussim.exceptions import GaussimError, GaussimWarning
+from gaussim.robot import example_robot_names
+from gaussim.scenefile import place_on_ground
+
+PASSES = ("hold", "zero")
+OUTCOMES = ("ok", "refused", "failed", "exploded", "crash", "timeout")
+DT = 1e-3
+CLEARANCE = 0.01  # [m]
+# A state this far gone is an explosion: no robot of the corpora moves at 1 km/s or leaves 100 m.
+MAX_SPEED, MAX_DISTANCE = 1e3, 100.0
+# PD hold gains per kilogram of robot [N m / rad / kg], [N m s / rad / kg]
+KP_PER_KG, KD_PER_KG = 20.0, 0.5
+
+
+@dataclass
+class Row:
+    """One robot's run of one pass."""
+
+    robot: str
+    corpus: str
+    run: str
+    nq: int = 0
+    nv: int = 0
+    geometries: int = 0
+    outcome: str = ""
+    message: str = ""
+    steps: int = 0
+    median_ms: float = math.nan
+    p90_ms: float = math.nan
+    max_penetration_mm: float = math.nan
+    max_kkt: float = math.nan
+    base_height: float = math.nan
+    warnings: str = ""
+
+
+def corpus(random_urdfs: int) -> list[tuple[str, str, str]]:
+    """(name, corpus, what load_robot takes) of every robot: example-robot-data's names, pybullet_data's
+    URDFs (floating, as pybullet loads them by default) and every ``random_urdfs``-th random object
+    (0: none)."""
+    import pybullet_data
+
+    root = Path(pybullet_data.getDataPath())
+    entries = [(name, "example-robot-data", name) for name in example_robot_names()]
+    files = sorted(p for p in root.rglob("*.urdf") if "random_urdfs" not in p.parts)
+    entries += [(str(p.relative_to(root)), "pybullet_data", str(p)) for p in files]
+    if random_urdfs:
+        objects = sorted((root / "random_urdfs").rglob("*.urdf"))
+        entries += [(str(p.relative_to(root)), "random_urdfs", str(p)) for p in objects[::random_urdfs]]
+    return entries
+
+
+def initial(robot: gaussim.Robot) -> np.ndarray:
+    """The robot's ``standing`` (or other first named) configuration, else its neutral one."""
+    named = robot.reference_configurations
+    for key in ("standing", "half_sitting", *named):
+        if key in named:
+            return robot.configuration(key)
+    return robot.neutral()
+
+
+def scene_and_start(robot: gaussim.Robot) -> tuple[gaussim.Scene, np.ndarray]:
+    """The robot above a ground (every geometry against it, limits on) and its start."""
+    ground = gaussim.Ground()
+    scene = gaussim.Scene(robot, ground=ground, joint_limits=True)
+    # the start as reset leaves it (clamped into the limits), before it is placed
+    probe = gaussim.Simulator(scene, gaussim.Options(start_penetration=1e9))
+    q = probe.reset(initial(robot)).q
+    if robot.floating:  # twice: the first distance, from afar, is coal's estimate for some meshes
+        return scene, place_on_ground(scene, place_on_ground(scene, q, CLEARANCE), CLEARANCE)
+    data = robot.model.createData()
+    pin.forwardKinematics(robot.model, data, q)
+    height = 0.0
+    for _ in range(3):  # a mesh deep in the ground has its depth estimated: again from nearer
+        height += float(ContactDetector(scene, margin=1e3).detect(data).gap.min()) - CLEARANCE
+        scene = gaussim.Scene(robot, ground=gaussim.Ground(height=height), joint_limits=True)
+    return scene, q
+
+
+def simulate(robot: gaussim.Robot, run: str, duration: float, row: Row) -> None:
+    """Run one pass, filling ``row`` with its outcome and measures."""
+    scene, q0 = scene_and_start(robot)
+    sim = gaussim.Simulator(scene, gaussim.Options(dt=DT))
+    state = sim.reset(q0)
+    model = sim.model
+    actuated = slice(6, model.nv) if robot.floating else slice(0, model.nv)
+    hold = run == "hold" and model.nv > (6 if robot.floating else 0)
+    gain = max(robot.mass, 1.0)
+    pd = gaussim.control.PDHold(model, q0, KP_PER_KG * gain, KD_PER_KG * gain, actuated, DT)
+    times, penetration, kkt = [], 0.0, 0.0
+    for _ in range(round(duration / DT)):
+        command = pd(state) if hold else gaussim.control.Command(None)
+        start = time.perf_counter()
+        state = sim.step(state, command.tau, command.damping)
+        times.append(time.perf_counter() - start)
+        report = sim.last_step
+        kkt = max([kkt, *(c.relative_kkt_residual for c in report.certificates)])
+        if report.blocks:
+            penetration = max([penetration, *(-c.gap for c in report.contacts)])
+        row.steps += 1
+        if (
+            not np.all(np.isfinite(state.v))
+            or np.abs(state.v).max() > MAX_SPEED
+            or (robot.floating and np.abs(state.q[:3]).max() > MAX_DISTANCE)
+        ):
+            row.outcome = "exploded"
+            row.message = f"|v| = {np.abs(state.v).max():.3g}, base at {np.round(state.q[:3], 2).tolist()}"
+            break
+    else:
+        row.outcome = "ok"
+    ms = 1e3 * np.asarray(times)
+    row.median_ms, row.p90_ms = float(np.median(ms)), float(np.percentile(ms, 90))
+    row.max_penetration_mm, row.max_kkt = 1e3 * max(penetration, 0.0), kkt
+    row.base_height = float(state.q[2]) if robot.floating else math.nan
+
+
+def one(name: str, corpus_name: str, source: str, duration: float) -> list[Row]:
+    """Both passes of one robot (in a worker process), with the GaussimWarnings they gave."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", GaussimWarning)
+        rows = _passes(name, corpus_name, source, duration)
+    said = [str(w.message) for w in caught if issubclass(w.category, GaussimWarning)]
+    return _noted(rows, said)
+
+
+def _passes(name: str, corpus_name: str, source: str, duration: float) -> list[Row]:
+    rows = [Row(name, corpus_name, run) for run in PASSES]
+    try:
+        if corpus_name == "example-robot-data":
+            robot = gaussim.load_robot(source)
+        else:
+            robot = gaussim.load_robot(source, floating_base=True)
+    except GaussimError as err:
+        for row in rows:
+            row.outcome, row.message = "refused", f"{type(err).__name__}: {err}"
+        return rows
+    except Exception as err:  # a bug: recorded as a crash with its place
+        for row in rows:
+            row.outcome, row.message = "crash", _crash(err)
+        return rows
+    for row in rows:
+        row.nq, row.nv, row.geometries = robot.model.nq, robot.model.nv, robot.collision_model.ngeoms
+        try:
+            simulate(robot, row.run, duration, row)
+        except GaussimError as err:
+            row.outcome = "failed" if row.steps or not isinstance(err, gaussim.InvalidOptions) else "refused"
+            row.message = f"{type(err).__name__} at step {row.steps}: {err}"
+        except Exception as err:
+            row.outcome, row.message = "crash", f"at step {row.steps}: {_crash(err)}"
+    return rows
+
+
+def _noted(rows: list[Row], caught: list[str]) -> list[Row]:
+    text = _short(" | ".join(dict.fromkeys(caught)))
+    for row in rows:
+        row.message = _short(row.message)
+        row.warnings = text
+    return rows
+
+
+def _short(text: str) -> str:
+    """A message with the corpora's install folders left out."""
+    import example_robot_data
+    import pybullet_data
+
+    folders = {
+        pybullet_data.getDataPath() + "/": "pybullet_data/",
+        str(Path(example_robot_data.getModelPath("")).resolve()) + "/": "example-robot-data/",
+        example_robot_data.getModelPath("") + "/": "example-robot-data/",
+    }
+    for folder, short in folders.items():
+        text = text.replace(folder, short)
+    return " ".join(text.split())
+
+
+def _crash(err: Exception) -> str:
+    where = traceback.extract_tb(err.__traceback__)[-1]
+    return f"{type(err).__name__}: {err} ({Path(where.filename).name}:{where.lineno})"
+
+
+def _worker(conn, name: str, corpus_name: str, source: str, duration: float) -> None:  # type: ignore[no-untyped-def]
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    conn.send([asdict(r) for r in one(name, corpus_name, source, duration)])
+    conn.close()
+
+
+def run_all(entries: list[tuple[str, str, str]], duration: float, workers: int, limit: float) -> list[Row]:
+    """Every entry in its own forked process, ``workers`` at a time, each killed after ``limit`` s."""
+    context = mp.get_context("fork")
+    pending, running, rows = list(entries), [], []
+    done = 0
+    while pending or running:
+        while pending and len(running) < workers:
+            entry = pending.pop(0)
+            receive, send = context.Pipe(duplex=False)
+            process = context.Process(target=_worker, args=(send, *entry, duration), daemon=True)
+            process.start()
+            send.close()
+            running.append((entry, process, receive, time.monotonic()))
+        time.sleep(0.05)
+        for item in list(running):
+            entry, process, receive, started = item
+            result = None
+            if receive.poll():
+                try:
+                    result = [Row(**r) for r in receive.recv()]
+                except EOFError:
+                    result = _lost(entry, f"the process died (exit code {process.exitcode})")
+            elif not process.is_alive():
+                result = _lost(entry, f"the process died (exit code {process.exitcode})")
+            elif time.monotonic() - started > limit:
+                process.kill()
+                result = _lost(entry, f"no answer within {limit:g} s", "timeout")
+            if result is None:
+                continue
+            process.join()
+            running.remove(item)
+            rows += result
+            done += 1
+            outcomes = "/".join(r.outcome for r in result)
+            took = time.monotonic() - started
+            print(f"[{done}/{len(entries)}] {entry[0]}: {outcomes} ({took:.1f} s)", flush=True)
+    order = {name: i for i, (name, _, _) in enumerate(entries)}
+    return sorted(rows, key=lambda r: (order[r.robot], PASSES.index(r.run)))
+
+
+def _lost(entry: tuple[str, str, str], why: str, outcome: str = "crash") -> list[Row]:
+    return [Row(entry[0], entry[1], run, outcome=outcome, message=why) for run in PASSES]
+
+
+def write(rows: list[Row], markdown: Path, command: str, duration: float) -> None:
+    """The table as Markdown (with the counts) and as a CSV beside it."""
+    markdown.parent.mkdir(parents=True, exist_ok=True)
+    with open(markdown.with_suffix(".csv"), "w", newline="") as f:
+        writer = csv.DictWriter(f, [f.name for f in fields(Row)])
+        writer.writeheader()
+        writer.writerows(asdict(r) for r in rows)
+    robots = {r.robot for r in rows}
+    both = {r.robot for r in rows if r.outcome == "ok"} - {r.robot for r in rows if r.outcome != "ok"}
+    refused = {r.robot for r in rows if r.outcome == "refused"}
+    lines = [
+        "# The robot corpora",
+        "",
+        f"Written by `{command}` ({duration:g} s each pass, dt = {DT:g} s; see benchmarks/corpus.py for the "
+        "settings and the outcomes). The CSV beside this file holds the same rows with the warnings.",
+        "",
+        f"{len(robots)} robots: {len(both)} simulate both passes, {len(refused)} are refused with a reason, "
+        f"{len(robots - both - refused)} neither.",
+        "",
+        "| outcome | " + " | ".join(PASSES) + " |",
+        "|---|" + "---:|" * len(PASSES),
+    ]
+    for outcome in OUTCOMES:
+        counts = [sum(r.outcome == outcome and r.run == run for r in rows) for run in PASSES]
+        lines.append(f"| {outcome} | " + " | ".join(map(str, counts)) + " |")
+    lines += [
+        "",
+        "| robot | corpus | pass | nq/nv | geoms | outcome | steps | median [ms] | p90 [ms] | "
+        "max pen. [mm] | max KKT | base z [m] | message |",
+        "|---|---|---|---|---:|---|---:|---:|---:|---:|---:|---:|---|",
+    ]
+    for r in rows:
+        message = r.message.replace("|", "/").replace("\n", " ")
+        lines.append(
+            f"| {r.robot} | {r.corpus} | {r.run} | {r.nq}/{r.nv} | {r.geometries} | {r.outcome} | "
+            f"{r.steps} | "
+            f"{r.median_ms:.3g} | {r.p90_ms:.3g} | {r.max_penetration_mm:.3g} | {r.max_kkt:.2g} | "
+            f"{r.base_height:.3g} | {message[:300]} |"
+        )
+    markdown.write_text("\n".join(lines) + "\n")
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--duration", type=float, default=1.0, help="simulated time of each pass [s]")
+    parser.add_argument("--quick", action="store_true", help="0.1 s each pass, every 200th random_urdf")
+    parser.add_argument("--random", type=int, default=10, help="every N-th random_urdfs object (0: none)")
+    parser.add_argument("--workers", type=int, default=max(1, (os.cpu_count() or 2)))
+    parser.add_argument("--limit", type=float, default=600.0, help="time limit per robot [s]")
+    parser.add_argument("--only", nargs="*", help="robot names, pybullet_data file names or corpus names")
+    parser.add_argument("--out", type=Path, default=Path("docs/corpus.md"))
+    args = parser.parse_args(argv)
+    duration = 0.1 if args.quick else args.duration
+    entries = corpus(200 if args.quick else args.random)
+    if args.only:
+        entries = [e for e in entries if {e[0], e[1], Path(e[0]).name} & set(args.only)]
+    warm = [e for e in corpus(0) if e[0] == "solo12"]  # compiles the kernels before the fork
+    one(*warm[0], DT)
+    rows = run_all(entries, duration, args.workers, args.limit)
+    write(rows, args.out, "python benchmarks/corpus.py " + " ".join(argv or sys.argv[1:]), duration)
+    counts = Counter((r.run, r.outcome) for r in rows)
+    for run in PASSES:
+        print(run + ": " + ", ".join(f"{o} {counts[run, o]}" for o in OUTCOMES if counts[run, o]))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
