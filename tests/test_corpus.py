@@ -28,6 +28,7 @@ SAMPLE = {
     "talos_legs": ("ok", "geometries of joints its model does not have"),
     "bravo7_gripper": ("ok", "['bravo_finger1_link', 'bravo_finger2_link'] have no mass"),
     "allegro_left_hand": ("ok", ""),
+    "allegro_right_hand": ("ok", ""),  # a false PROXQP_DUAL_INFEASIBLE at step 23
     "centauro": ("ok", "more neighbours than coal stores"),
     "cassie": ("refused", "a closed kinematic loop"),  # read by gaussim's SDF reader, not an ImportError
     "a1/a1.urdf": ("ok", ""),  # <transmission> joints

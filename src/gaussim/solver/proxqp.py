@@ -232,6 +232,9 @@ class GaussSolver:
         settings.eps_duality_gap_abs = self.options.eps_abs
         settings.eps_duality_gap_rel = 0.0
         settings.primal_infeasibility_solving = False
+        # H = M is positive definite, so a Gauss problem is never unbounded: ProxQP's dual-infeasibility
+        # test, which stopped allegro_right_hand's fall with a false PROXQP_DUAL_INFEASIBLE, stays off
+        settings.eps_dual_inf = 1e-14
         settings.max_iter_in = INNER_ITERATIONS
         return qp
 
