@@ -29,6 +29,7 @@ given a ``meshcat.Visualizer`` draws into it and leaves it open.
 from __future__ import annotations
 
 import atexit
+import colorsys
 import contextlib
 import io
 import json
@@ -73,6 +74,9 @@ MIN_ARROW = 1e-4
 BODIES, WORLD, CONTACTS = "bodies", "world", "contacts"
 # A geometry with its own colour is drawn this far from it towards its body's colour.
 TINT = 0.5
+# The k-th tree of a body past its first (a robot file of several free links) turns its hue by k times
+# this (of a full turn), so that each is told apart.
+TREE_HUE = 0.15
 # meshcat's camera: vertical field of view [deg]; the framed bodies' bounding sphere fills this share
 # of it; the smallest framed radius [m]; the direction from the bodies to the camera (world frame).
 CAMERA_FOV, FRAME_FILL, MIN_FRAMED_RADIUS = 75.0, 0.7, 0.1
@@ -411,7 +415,7 @@ class Viewer:
                 skipped.append(obj.name)
                 continue
             node = f"{BODIES}/{body.name}/{obj.name.removeprefix(body.prefix)}"
-            rgba = _color(body, obj)
+            rgba = _color(body, obj, _tree(self.model, body, obj.parentJoint))
             self.meshcat[node].set_object(shape, _material(_hex(rgba), float(rgba[3]), phong=True))
             nodes.append((g, node))
         if skipped:
@@ -586,10 +590,21 @@ def _hex(rgba: Sequence[float] | np.ndarray) -> int:
     return red << 16 | green << 8 | blue
 
 
-def _color(body: BodyLayout, obj: pin.GeometryObject) -> np.ndarray:
-    """A geometry's RGBA (4,): its body's colour, or its own (given by its robot file) tinted by TINT
-    towards it."""
-    color = np.asarray(body.color, dtype=float)
+def _tree(model: pin.Model, body: BodyLayout, joint: int) -> int:
+    """Which of the body's kinematic trees (0, 1, ...: one per joint on the world, as the three free
+    boxes of one robot file) holds this joint (0 for the world itself)."""
+    roots = [j for j in body.joints if model.parents[j] == 0]
+    while joint and model.parents[joint] != 0:
+        joint = model.parents[joint]
+    return roots.index(joint) if joint in roots else 0
+
+
+def _color(body: BodyLayout, obj: pin.GeometryObject, tree: int = 0) -> np.ndarray:
+    """A geometry's RGBA (4,): its body's colour, its hue turned by TREE_HUE per tree of the body past
+    the first, or its own colour (given by its robot file) tinted by TINT towards that."""
+    red, green, blue, alpha = body.color
+    hue, saturation, value = colorsys.rgb_to_hsv(red, green, blue)
+    color = np.array([*colorsys.hsv_to_rgb((hue + tree * TREE_HUE) % 1.0, saturation, value), alpha])
     if body.free or not obj.overrideMaterial:
         return color
     own = np.asarray(obj.meshColor, dtype=float)

@@ -14,6 +14,8 @@ import sys
 from pathlib import Path
 
 import tornado.web
+import umsgpack
+from meshcat.servers.tree import find_node, walk
 from meshcat.servers.zmqserver import VIEWER_HTML, VIEWER_ROOT, ZMQWebSocketBridge
 from tornado.ioloop import PeriodicCallback
 
@@ -46,6 +48,28 @@ class LocalBridge(ZMQWebSocketBridge):
         app.wildcard_router.rules.insert(0, app.wildcard_router.rules.pop())
         app.listen = functools.partial(app.listen, address=HOST)
         return app
+
+    def handle_zmq(self, frames):  # type: ignore[no-untyped-def]
+        """meshcat's, but a property set again replaces the node's old value (meshcat keeps them all,
+        and sends them all to each page: a live run's clock, every frame)."""
+        if len(frames) == 3 and frames[0] == b"set_property":
+            node = find_node(self.tree, [p for p in frames[1].decode().split("/") if p])
+            name = umsgpack.unpackb(frames[2])["property"]
+            node.properties[:] = [p for p in node.properties if umsgpack.unpackb(p)["property"] != name]
+        super().handle_zmq(frames)
+
+    def send_scene(self, websocket):  # type: ignore[no-untyped-def]
+        """The scene to a page that connects: its objects, properties and transforms, then its
+        animation (meshcat sends the animation, held by the root, first: a page given it before the
+        objects it moves froze)."""
+        nodes = list(walk(self.tree))
+        for node in nodes:
+            for command in (node.object, *node.properties, node.transform):
+                if command is not None:
+                    websocket.write_message(command, binary=True)
+        for node in nodes:
+            if node.animation is not None:
+                websocket.write_message(node.animation, binary=True)
 
 
 def main() -> None:
