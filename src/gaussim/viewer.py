@@ -79,7 +79,7 @@ TINT = 0.5
 TREE_HUE = 0.15
 # meshcat's camera: vertical field of view [deg]; the framed bodies' bounding sphere fills this share
 # of it; the smallest framed radius [m]; the direction from the bodies to the camera (world frame).
-CAMERA_FOV, FRAME_FILL, MIN_FRAMED_RADIUS = 75.0, 0.7, 0.1
+CAMERA_FOV, FRAME_FILL, MIN_FRAMED_RADIUS = 75.0, 0.85, 0.1
 CAMERA_DIRECTION = np.array([0.75, -0.5, 0.45]) / np.linalg.norm([0.75, -0.5, 0.45])
 # A replay is framed over at most this many of its states.
 FRAMED_STATES = 50
@@ -602,9 +602,10 @@ def _tree(model: pin.Model, body: BodyLayout, joint: int) -> int:
 def _color(body: BodyLayout, obj: pin.GeometryObject, tree: int = 0) -> np.ndarray:
     """A geometry's RGBA (4,): its body's colour, its hue turned by TREE_HUE per tree of the body past
     the first, or its own colour (given by its robot file) tinted by TINT towards that."""
-    red, green, blue, alpha = body.color
-    hue, saturation, value = colorsys.rgb_to_hsv(red, green, blue)
-    color = np.array([*colorsys.hsv_to_rgb((hue + tree * TREE_HUE) % 1.0, saturation, value), alpha])
+    color = np.asarray(body.color, dtype=float)
+    if tree > 0:
+        hue, saturation, value = colorsys.rgb_to_hsv(*color[:3])
+        color[:3] = colorsys.hsv_to_rgb((hue + tree * TREE_HUE) % 1.0, saturation, value)
     if body.free or not obj.overrideMaterial:
         return color
     own = np.asarray(obj.meshColor, dtype=float)
@@ -695,16 +696,22 @@ def screenshot(
         f"--screenshot={png}",
         f"--window-size={size[0]},{size[1]}",
         f"--timeout={wait_ms}",
-        fragment="" if at is None else f"#t={at:.6g}",
+        fragment=_at(at),
     )
     if not png.is_file():
         raise GaussimError(f"chromium wrote no screenshot of {html}")
     return png
 
 
-def page_dom(html: str | Path, wait_ms: int = 4000) -> str:
-    """The DOM of a page after it ran for ``wait_ms`` (headless Chromium), as HTML text."""
-    return _chromium(html, f"--timeout={wait_ms}", "--dump-dom")
+def page_dom(html: str | Path, wait_ms: int = 4000, at: float | None = None) -> str:
+    """The DOM of a page after it ran for ``wait_ms`` (headless Chromium), a replay stopped at the
+    simulated time ``at`` [s] when given, as HTML text."""
+    return _chromium(html, f"--timeout={wait_ms}", "--dump-dom", fragment=_at(at))
+
+
+def _at(at: float | None) -> str:
+    """The page's URL fragment that stops a replay at the simulated time ``at`` [s]."""
+    return "" if at is None else f"#t={at:.6g}"
 
 
 def _chromium(html: str | Path, *options: str, timeout: float = 120.0, fragment: str = "") -> str:
