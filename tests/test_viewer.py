@@ -164,7 +164,9 @@ def test_replay_page_draws_each_body_in_its_colour(two_bodies, tmp_path):
     for wait_ms in (4000, 12000, 30000):  # software WebGL on a loaded 2-core machine can take longer
         # below the legend, which shows each body's colour too, and above the time bar
         shown = imread(screenshot(both, tmp_path / "both.png", wait_ms=wait_ms))[LEGEND_HEIGHT:-BAR_HEIGHT]
-        hidden = imread(screenshot(no_crate, tmp_path / "no_crate.png", wait_ms=wait_ms))[LEGEND_HEIGHT:-BAR_HEIGHT]
+        hidden = imread(screenshot(no_crate, tmp_path / "no_crate.png", wait_ms=wait_ms))[
+            LEGEND_HEIGHT:-BAR_HEIGHT
+        ]
         if min(_share(shown, GREEN), _share(shown, MAGENTA), _share(hidden, MAGENTA)) > MIN_BODY_FRACTION:
             break
     assert _share(shown, GREEN) > MIN_BODY_FRACTION, "the crate was not drawn in its colour"
@@ -307,7 +309,9 @@ def _assert_inside(mask, what):
     assert rows.size, f"{what}: no body drawn"
     h, w = mask.shape
     assert rows.min() >= FRAME_MARGIN and cols.min() >= FRAME_MARGIN, f"{what}: cut off at the top/left"
-    assert rows.max() < h - BAR_HEIGHT and cols.max() < w - FRAME_MARGIN, f"{what}: cut off at the bottom/right"
+    assert rows.max() < h - BAR_HEIGHT and cols.max() < w - FRAME_MARGIN, (
+        f"{what}: cut off at the bottom/right"
+    )
 
 
 def test_replay_of_a_bouncing_ball_changes_with_time_and_keeps_it_in_frame(tmp_path):
@@ -400,8 +404,22 @@ def test_run_view_serves_then_exits_without_a_terminal(tmp_path):
 
     for flags in ((), ("--no-wait",)):
         done = subprocess.run(
-            [sys.executable, "-m", "gaussim", "run", str(SCENES / "ball_bounce.toml"), "--view", "--quiet",
-             "--duration", "0.1", "--speed", "10", "--out", str(tmp_path / "r"), *flags],  # fmt: skip
+            [
+                sys.executable,
+                "-m",
+                "gaussim",
+                "run",
+                str(SCENES / "ball_bounce.toml"),
+                "--view",
+                "--quiet",
+                "--duration",
+                "0.1",
+                "--speed",
+                "10",
+                "--out",
+                str(tmp_path / "r"),
+                *flags,
+            ],  # fmt: skip
             stdin=subprocess.DEVNULL,
             capture_output=True,
             text=True,

@@ -41,8 +41,8 @@ import tempfile
 import time
 import warnings
 from collections.abc import Callable, Sequence
-from pathlib import Path
 from html import escape
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -699,7 +699,7 @@ def screenshot(
         fragment=_at(at),
     )
     if not png.is_file():
-        raise GaussimError(f"chromium wrote no screenshot of {html}")
+        raise GaussimError(f"chromium wrote no screenshot of {page}")
     return png
 
 
