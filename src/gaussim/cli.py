@@ -270,7 +270,7 @@ def _run(args: argparse.Namespace) -> int:
         print(f"force plot: {save_plot(log, spec.scene, args.plot)}")
     if viewer is not None:
         with viewer:
-            viewer.replay(log, speed=args.speed)
+            viewer.replay(log)  # at real time: the live page's clock shows animation time as simulated time
             if args.no_wait or not sys.stdin.isatty():
                 why = "--no-wait" if args.no_wait else "standard input is not a terminal"
                 print(f"gaussim: viewer closed ({why})", file=sys.stderr)
