@@ -8,6 +8,7 @@ import html.parser
 import re
 import urllib.request
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -27,8 +28,13 @@ FEET = ("FL", "FR", "HL", "HR")
 GREEN, MAGENTA = (0.2, 0.8, 0.2, 1.0), (0.8, 0.2, 0.8, 1.0)
 # A pixel shows a colour when its chromaticity rgb / (r + g + b) (kept by diffuse shading) is this close.
 CHROMA_TOLERANCE = 0.05
-# A body covers at least this fraction of a screenshot; a hidden one, less than NO_BODY_FRACTION.
-MIN_BODY_FRACTION, NO_BODY_FRACTION = 0.01, 1e-4
+# A body shows its colour in at least this fraction of a screenshot (a shaded sphere framed with a box:
+# 0.01); a hidden one, in less than NO_BODY_FRACTION.
+MIN_BODY_FRACTION, NO_BODY_FRACTION = 0.005, 1e-4
+SCENES = Path(__file__).parent.parent / "robots" / "scenes"
+# A replay's scene pixels leave this margin to the screenshot's edges [px], and lie above the overlay's
+# time bar (the bottom BAR_HEIGHT px); its legend of the bodies' colours is the top LEGEND_HEIGHT px.
+FRAME_MARGIN, BAR_HEIGHT, LEGEND_HEIGHT = 2, 50, 60
 
 
 @pytest.fixture(scope="module")
@@ -156,8 +162,11 @@ def test_replay_page_draws_each_body_in_its_colour(two_bodies, tmp_path):
     removes the green and keeps the magenta."""
     _, both, no_crate, _ = two_bodies
     for wait_ms in (4000, 12000, 30000):  # software WebGL on a loaded 2-core machine can take longer
-        shown = imread(screenshot(both, tmp_path / "both.png", wait_ms=wait_ms))
-        hidden = imread(screenshot(no_crate, tmp_path / "no_crate.png", wait_ms=wait_ms))
+        # below the legend, which shows each body's colour too, and above the time bar
+        shown = imread(screenshot(both, tmp_path / "both.png", wait_ms=wait_ms))[LEGEND_HEIGHT:-BAR_HEIGHT]
+        hidden = imread(screenshot(no_crate, tmp_path / "no_crate.png", wait_ms=wait_ms))[
+            LEGEND_HEIGHT:-BAR_HEIGHT
+        ]
         if min(_share(shown, GREEN), _share(shown, MAGENTA), _share(hidden, MAGENTA)) > MIN_BODY_FRACTION:
             break
     assert _share(shown, GREEN) > MIN_BODY_FRACTION, "the crate was not drawn in its colour"
@@ -262,3 +271,170 @@ def _tetrahedron_stl(side: float) -> str:
         for face in faces
     )
     return f"solid tetra\n{facets}endsolid tetra\n"
+
+
+# Two times of the bouncing ball [s]: at rest at 1.1 m, and falling through 0.66 m (no contact yet).
+BALL_TIMES = (0.0, 0.3)
+# The ball moves on screen at least this far between them [px].
+MIN_BALL_SHIFT = 20
+
+
+def _replay_pages(spec, duration, folder):
+    """A run's replay page, and the same page with its bodies and contacts hidden (the background)."""
+    spec.duration = duration
+    log = gaussim.run(spec)
+    viewer = Viewer(spec.scene, live=False)
+    viewer.replay(log)
+    replay = viewer.save_html(folder / "replay.html")
+    viewer.meshcat["bodies"].set_property("visible", False)
+    viewer.meshcat["contacts"].set_property("visible", False)
+    return replay, viewer.save_html(folder / "background.html")
+
+
+def _bodies_at(pages, at, tmp_path):
+    """The screenshot (H, W, 3) of the replay stopped at ``at`` [s] and the mask (H, W) of the pixels
+    that its bodies change (against the background page stopped at the same time)."""
+    replay, background = pages
+    for wait_ms in (4000, 12000, 30000):  # software WebGL on a loaded 2-core machine can take longer
+        drawn = imread(screenshot(replay, tmp_path / f"replay_{at}.png", wait_ms=wait_ms, at=at))[..., :3]
+        empty = imread(screenshot(background, tmp_path / f"empty_{at}.png", wait_ms=wait_ms, at=at))[..., :3]
+        mask = np.abs(drawn - empty).max(axis=-1) > PIXEL_TOLERANCE
+        if mask.mean() > NO_BODY_FRACTION:
+            break
+    return drawn, mask
+
+
+def _assert_inside(mask, what):
+    rows, cols = np.nonzero(mask)
+    assert rows.size, f"{what}: no body drawn"
+    h, w = mask.shape
+    assert rows.min() >= FRAME_MARGIN and cols.min() >= FRAME_MARGIN, f"{what}: cut off at the top/left"
+    assert rows.max() < h - BAR_HEIGHT and cols.max() < w - FRAME_MARGIN, (
+        f"{what}: cut off at the bottom/right"
+    )
+
+
+def test_replay_of_a_bouncing_ball_changes_with_time_and_keeps_it_in_frame(tmp_path):
+    """Screenshots of the replay stopped at two times by its own time control (page#t=T): the ball is
+    inside the frame at both, and lower on screen at the later one."""
+    spec = gaussim.load_scene(SCENES / "ball_bounce.toml")
+    pages = _replay_pages(spec, 0.8, tmp_path)
+    (first, early), (second, late) = (_bodies_at(pages, at, tmp_path) for at in BALL_TIMES)
+    _assert_inside(early, "the ball at rest at the start")
+    _assert_inside(late, "the falling ball")
+    scene = (slice(0, first.shape[0] - BAR_HEIGHT), slice(None))
+    assert (np.abs(first[scene] - second[scene]).max(axis=-1) > PIXEL_TOLERANCE).mean() > NO_BODY_FRACTION
+    shift = np.nonzero(late)[0].mean() - np.nonzero(early)[0].mean()
+    assert shift > MIN_BALL_SHIFT, f"the ball moved {shift:.0f} px down the screen, not its fall"
+
+
+def test_replay_of_the_box_stack_frames_the_top_box(tmp_path):
+    """At the start, the stack's three boxes (the top one 0.6 m up) lie inside the frame, each in its
+    own colour."""
+    spec = gaussim.load_scene(SCENES / "box_stack.toml")
+    drawn, mask = _bodies_at(_replay_pages(spec, 0.05, tmp_path), 0.0, tmp_path)
+    _assert_inside(mask, "the box stack")
+    objects = _page_objects(tmp_path / "replay.html")
+    colours = {c for path, (_, c) in objects.items() if path.startswith("/meshcat/bodies/box_stack/")}
+    assert len(colours) == 3, "the three boxes of the stack share a colour"
+
+
+def test_replay_page_shows_time_and_controls_without_a_menu(two_bodies):
+    """The overlay's time, play/pause and slider are on the page as it opens (meshcat's own controls
+    stay closed), the slider spans the run, and the page opened at #t=0.05 shows that time."""
+    dom = _page_dom_at(two_bodies[0], 0.05)
+    assert 'id="gaussim-play"' in dom and 'id="gaussim-scrub"' in dom
+    assert "t = 0.050 s" in dom, "the replay did not stop at the time asked"
+    scrub = re.search(r'<input id="gaussim-scrub"[^>]*>', dom)[0]
+    assert "disabled" not in scrub and re.search(r'max="0\.(09|1)\d*"', scrub), scrub  # 0.1 s at 30 fps
+    assert "force arrows: 1 m = " in dom and "crate" in dom and "ball" in dom
+
+
+def test_arrows_have_heads_and_the_length_of_their_force(two_bodies):
+    """Each arrow's shaft and cone end where force_scale * |f| says; the page holds a cone per arrow."""
+    from gaussim.viewer import HEAD_LENGTH, _arrow
+
+    for length in (1.0, 0.01):  # a long arrow has a full head, a short one a head of half its length
+        vector = np.array([3.0, 0.0, 4.0])
+        parts, shown = _arrow(np.zeros(3), vector, length / 5.0)
+        assert shown
+        (shaft_at, shaft_scale), (head_at, head_scale) = parts["shaft"], parts["head"]
+        head = head_scale[0] * HEAD_LENGTH
+        assert shaft_at[1, 3] + shaft_scale[1] / 2 == pytest.approx(length - head)
+        assert head_at[1, 3] + head / 2 == pytest.approx(length)
+        assert head == pytest.approx(min(HEAD_LENGTH, length / 2))
+        assert np.allclose(parts[""][0][:3, 1], vector / 5.0)  # the arrow's y axis along the force
+    objects = _page_objects(two_bodies[0])
+    heads = [path for path in objects if path.endswith("/head")]
+    shafts = [path for path in objects if path.endswith("/shaft")]
+    assert heads and len(heads) == len(shafts)
+
+
+def test_viewer_draws_into_an_open_visualizer_and_leaves_it_open(tmp_path):
+    import meshcat
+
+    from gaussim.viewer import _PageWindow
+
+    scene = gaussim.Scene(bodies={"ball": Body(FreeBody.sphere("ball", 0.1, mass=1.0))})
+    mine = meshcat.Visualizer(window=_PageWindow())["my_scene"]
+    mine["/other"].set_object(meshcat.geometry.Box([0.1, 0.1, 0.1]))
+    with Viewer(scene, meshcat=mine) as viewer:
+        assert viewer.meshcat is mine
+    mine["/later"].set_object(meshcat.geometry.Box([0.1, 0.1, 0.1]))  # still open after close()
+    page = tmp_path / "page.html"
+    page.write_text(mine.static_html())
+    objects = set(_page_objects(page))
+    assert {"/other", "/later"} <= objects
+    assert any(path.startswith("/meshcat/my_scene/bodies/ball/") for path in objects), objects
+    with pytest.raises(gaussim.GaussimError, match="meshcat.Visualizer"):
+        Viewer(scene, meshcat="http://127.0.0.1:7000")
+
+
+def test_every_body_of_a_large_world_has_its_own_colour():
+    bodies = {f"b{k}": Body(FreeBody.sphere(f"b{k}", 0.05, mass=1.0)) for k in range(20)}
+    colours = [b.color for b in gaussim.Scene(bodies=bodies).world.bodies.values()]
+    assert len(set(colours)) == 20
+
+
+def test_run_view_serves_then_exits_without_a_terminal(tmp_path):
+    """``run --view`` with no terminal on standard input (a script, CI) prints the URL, runs, and exits
+    rather than serving forever; with --no-wait too."""
+    import subprocess
+    import sys
+
+    for flags in ((), ("--no-wait",)):
+        done = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "gaussim",
+                "run",
+                str(SCENES / "ball_bounce.toml"),
+                "--view",
+                "--quiet",
+                "--duration",
+                "0.1",
+                "--speed",
+                "10",
+                "--out",
+                str(tmp_path / "r"),
+                *flags,
+            ],  # fmt: skip
+            stdin=subprocess.DEVNULL,
+            capture_output=True,
+            text=True,
+            timeout=300,
+        )
+        assert done.returncode == 0, done.stderr
+        assert "watch the run at http://127.0.0.1:" in done.stderr
+        assert "viewer closed" in done.stderr, done.stderr
+
+
+def _page_dom_at(page, at) -> str:
+    """The page's DOM once its overlay has stopped the replay at ``at`` [s]: Chromium's --dump-dom
+    sometimes dumps before the page's scripts ran, whatever its --timeout (Chromium 150)."""
+    for wait_ms in (4000, 8000, 12000, 20000, 30000):
+        dom = page_dom(page, wait_ms=wait_ms, at=at)
+        if f"t = {at:.3f} s" in dom:
+            break
+    return dom

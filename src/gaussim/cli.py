@@ -70,6 +70,12 @@ def main(argv: list[str] | None = None) -> int:
     run.add_argument("--quiet", action="store_true", help="no progress line")
     run.add_argument("--view", action="store_true", help="show the run live in the browser (meshcat)")
     run.add_argument("--speed", type=float, default=1.0, help="with --view: times real time (default 1)")
+    run.add_argument(
+        "--no-wait",
+        action="store_true",
+        help="with --view: exit when the run ends (by default the replay is served until Ctrl-C, "
+        "or not at all when standard input is not a terminal)",
+    )
     run.add_argument("--html", type=Path, help="also write the replay page (self-contained HTML)")
     run.add_argument("--plot", type=Path, help="also write the contact-force plot (PNG, PDF or SVG)")
     run.add_argument(
@@ -450,7 +456,9 @@ def _run(args: argparse.Namespace) -> int:
 
         _positive("--speed", args.speed)
         viewer = Viewer(spec.scene, force_scale=args.force_scale)
-        print(f"gaussim: watch the run at {viewer.url}", file=sys.stderr)
+        viewer.show(spec.initial.q, t=0.0)  # the page shows the scene while the kernels compile
+        print(f"gaussim: watch the run at {viewer.url}", file=sys.stderr, flush=True)
+    done = False
     try:
         log = run(
             spec,
@@ -459,6 +467,7 @@ def _run(args: argparse.Namespace) -> int:
             checkpoint_steps=checkpoint_steps,
             observer=follow(viewer, args.speed) if viewer else None,
         )
+        done = True
     except Interrupted as stop:
         for repeated in STOP_SIGNALS:  # more Ctrl-Cs while we report change nothing: the log is written
             signal.signal(repeated, signal.SIG_IGN)
@@ -480,7 +489,7 @@ def _run(args: argparse.Namespace) -> int:
         )
         return EXIT_FAILURE
     finally:
-        if viewer is not None:
+        if viewer is not None and not done:
             viewer.close()
     _say(log.summary())
     print(f"\nrun log: {out}")
@@ -490,6 +499,14 @@ def _run(args: argparse.Namespace) -> int:
         from .plots import save_plot
 
         print(f"force plot: {save_plot(log, spec.scene, args.plot)}")
+    if viewer is not None:
+        with viewer:
+            viewer.replay(log)  # at real time: the live page's clock shows animation time as simulated time
+            if args.no_wait or not sys.stdin.isatty():
+                why = "--no-wait" if args.no_wait else "standard input is not a terminal"
+                print(f"gaussim: viewer closed ({why})", file=sys.stderr)
+            else:
+                _serve(f"the run's replay is at {viewer.url}")
     return EXIT_OK
 
 
@@ -529,8 +546,6 @@ def _write_replay(
 
 
 def _replay(args: argparse.Namespace) -> int:
-    import time
-
     from .viewer import Viewer
 
     _positive("--fps", args.fps)
@@ -543,13 +558,18 @@ def _replay(args: argparse.Namespace) -> int:
         return EXIT_OK
     with Viewer(scene, force_scale=args.force_scale) as viewer:
         viewer.replay(log, fps=args.fps, speed=args.speed)
-        print(f"replaying {args.log} at {viewer.url} (Ctrl-C to stop)", flush=True)
-        try:
-            while True:
-                time.sleep(1.0)
-        except KeyboardInterrupt:
-            print("gaussim: viewer stopped", file=sys.stderr)
+        _serve(f"replaying {args.log} at {viewer.url}")
     return EXIT_OK
+
+
+def _serve(message: str) -> None:
+    """Say ``message`` and wait for Ctrl-C (or SIGTERM, SIGHUP) while a live viewer serves its page."""
+    print(f"{message} (Ctrl-C to stop)", flush=True)
+    try:
+        while True:
+            time.sleep(1.0)
+    except KeyboardInterrupt:
+        print("gaussim: viewer stopped", file=sys.stderr)
 
 
 def _plot(args: argparse.Namespace) -> int:

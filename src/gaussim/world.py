@@ -9,6 +9,7 @@ notion of bodies, and the bodies that do not touch one another evolve as they wo
 
 from __future__ import annotations
 
+import colorsys
 import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -32,6 +33,18 @@ PALETTE = (
     (0.30, 0.75, 0.75, 1.0),
     (0.55, 0.55, 0.55, 1.0),
 )
+# Beyond the palette, body k's hue turns by this much from body k - 1's (the golden angle: no two alike).
+GOLDEN_HUE = 0.381966
+
+
+def body_color(k: int) -> tuple[float, float, float, float]:
+    """The k-th body's default RGBA: PALETTE's, then hues a golden angle apart (all distinct)."""
+    if k < len(PALETTE):
+        return PALETTE[k]
+    red, green, blue = colorsys.hsv_to_rgb((k * GOLDEN_HUE) % 1.0, 0.6, 0.85)
+    return (red, green, blue, 1.0)
+
+
 SHAPES = ("box", "sphere", "cylinder", "capsule", "mesh")
 # The largest Coulomb coefficient a scene may declare: real materials stay below 2; a block sliding on
 # mu = 1000 is tested to stop without sinking, and Solo-12 standing on mu = 1e6 sinks 3.6 mm
@@ -314,7 +327,7 @@ class Body:
         material: contact properties of its geometries, or None (the other side's).
         contype, conaffinity: collision bit masks (MuJoCo's): two bodies may touch when
             ``a.contype & b.conaffinity or b.contype & a.conaffinity``.
-        color: RGBA (4,) in the viewer, or None (a colour of PALETTE).
+        color: RGBA (4,) in the viewer, or None (body_color of its index: each body its own).
     """
 
     source: object
@@ -398,7 +411,7 @@ class World:
                 tuple(g for g, obj in enumerate(collision.geometryObjects) if obj.name.startswith(prefix)),
                 robots[name].floating,
                 isinstance(spec.source, FreeBody),
-                spec.color or PALETTE[k % len(PALETTE)],
+                spec.color or body_color(k),
                 prefix,
                 spec,
             )
