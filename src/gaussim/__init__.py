@@ -18,6 +18,8 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
+from . import portable as _portable  # noqa: F401  # proxsuite's build is chosen at its first import
+
 if TYPE_CHECKING:
     from .constraints import BilateralReaction, ContactForce, LimitReaction
     from .exceptions import (

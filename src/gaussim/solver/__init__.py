@@ -7,8 +7,8 @@ Modules: :mod:`.certificate` (the status of a solve and gaussim's own KKT check 
 :mod:`.proxqp` (the dense ProxQP wrapper that tries that first, then ProxQP, then recovers),
 :mod:`.islands` (the problem split into the independent problems of the bodies that touch, each
 solved by its own ProxQP wrapper),
-:mod:`.diagnosis` (the errors of a failed solve: the rows behind an infeasibility), :mod:`.portable`
-(proxsuite loaded with its portable build, so that runs repeat bit for bit).
+:mod:`.diagnosis` (the errors of a failed solve: the rows behind an infeasibility); proxsuite is
+loaded with its portable build by :mod:`gaussim.portable`, so that runs repeat bit for bit.
 """
 
 from .certificate import CONVERGED, KKT_RTOL, Certificate, Solution, Status, kkt_residual

@@ -16,10 +16,13 @@ from numba import njit
 from ..assembly import GaussProblem
 from ..exceptions import GaussimWarning
 from ..options import Options
+from ..portable import portable_proxsuite
 from .active_set import ACTIVE_SET_FLOOR, active_set_candidate
 from .certificate import INFEASIBLE, KKT_RTOL, PRIMAL_INFEASIBLE, Certificate, Solution, Status, kkt_residuals
 from .diagnosis import failure, infeasibility
-from .portable import proxqp
+
+proxqp = portable_proxsuite().proxqp
+
 
 _STATUS = {output: Status(name) for name, output in proxqp.QPSolverOutput.__members__.items()}
 _SOLVED = proxqp.QPSolverOutput.PROXQP_SOLVED  # compared by identity: hashing the enum costs more
