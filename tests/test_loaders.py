@@ -559,3 +559,10 @@ def test_cassies_sdf_is_read_by_gaussim():
     # example-robot-data builds it with Pinocchio's SDF parser, which pin's wheels leave out (ImportError)
     with pytest.raises(gaussim.InvalidRobot, match=r"cassie.sdf: joint '.*a closed kinematic loop"):
         gaussim.load_robot("cassie")
+
+
+def test_a_single_free_body_without_a_floating_base_is_refused_with_the_fix():
+    """A one-link URDF loaded without floating_base has no degree of freedom: the error says how to
+    give it one."""
+    with pytest.raises(gaussim.InvalidRobot, match=r"ball\.urdf: .*floating_base=True"):
+        gaussim.load_robot("ball")

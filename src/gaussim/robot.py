@@ -473,7 +473,11 @@ def _check(robot: Robot) -> None:
                 f"{where}: the {role} must be a pinocchio.GeometryModel, got {type(geometry).__name__}"
             )
     if model.nv == 0:
-        raise InvalidRobot(f"{where}: the model has no degree of freedom")
+        raise InvalidRobot(
+            f"{where}: the model has no degree of freedom (a single free body needs a floating base: "
+            "load_robot(..., floating_base=True); in a scene file, floating_base = true in [robot] or "
+            "floating = true in [[bodies]])"
+        )
     for joint_id in range(1, model.njoints):
         inertia = model.inertias[joint_id]
         if not np.isfinite(inertia.mass) or inertia.mass < 0:
