@@ -6,13 +6,10 @@ import pinocchio as pin
 import pytest
 
 import gaussim
-from gaussim import FreeBody
+from gaussim.bench.scenes import example
 
-INSIDE, HEIGHT, WALL = 0.28, 0.2, 0.02  # the bin's inner side, wall height and thickness [m]
-# The bin is tilted, as a hopper is, so that the balls come to rest in its low corner: on a level
-# floor a rigid ball rolls without end
-SLOPE = np.radians(8.0)
-FRICTION, DENSITY = 0.6, 500.0  # [-], [kg/m^3] (wood)
+PILE = example("bin_pile")  # the example's bin and objects: the test checks the scene it ships
+INSIDE, HEIGHT, FRICTION = PILE.INSIDE, PILE.HEIGHT, PILE.FRICTION
 G = 9.81
 # The bodies are at rest below these speeds [m/s], [rad/s].
 AT_REST = (1e-3, 1e-2)
@@ -23,43 +20,16 @@ ENERGY_ROUND_OFF = 1e-12
 
 
 def _pile(seed: int = 0) -> tuple[gaussim.Scene, pin.SE3, dict[str, pin.SE3]]:
-    """The scene, the bin's frame (its floor's top centre) and each body's start: four layers of five
-    (the bin's corners and centre), each clear of the one below by 5 mm, at random orientations."""
-    frame = pin.SE3(pin.AngleAxis(SLOPE, np.array([-1.0, 1.0, 0.0]) / np.sqrt(2)).matrix(), np.zeros(3))
-    half, side = INSIDE / 2, INSIDE + 2 * WALL
-    parts = {
-        "floor": ((0, 0, -WALL / 2), (side, side, WALL)),
-        "wall_x+": ((half + WALL / 2, 0, HEIGHT / 2), (WALL, side, HEIGHT)),
-        "wall_x-": ((-half - WALL / 2, 0, HEIGHT / 2), (WALL, side, HEIGHT)),
-        "wall_y+": ((0, half + WALL / 2, HEIGHT / 2), (INSIDE, WALL, HEIGHT)),
-        "wall_y-": ((0, -half - WALL / 2, HEIGHT / 2), (INSIDE, WALL, HEIGHT)),
-    }
-    walls = [
-        gaussim.Box(n, s, position=frame.act(np.array(c, float)), rotation=frame.rotation, friction=FRICTION)
-        for n, (c, s) in parts.items()
-    ]
-    shapes = [  # (a body of that shape, its bounding radius [m])
-        (lambda name: FreeBody.box(name, (0.08, 0.06, 0.04), density=DENSITY), 0.054),
-        (lambda name: FreeBody.sphere(name, 0.03, density=DENSITY), 0.03),
-        (lambda name: FreeBody.capsule(name, 0.02, 0.06, density=DENSITY), 0.05),
-    ]
-    bodies, radii = {}, {}
-    for k in range(20):
-        make, radii[f"b{k}"] = shapes[k % 3]
-        bodies[f"b{k}"] = make(f"b{k}")
-    scene = gaussim.Scene(bodies=bodies, obstacles=walls, self_contact=(FRICTION, 0.0))
-    rng, corner, z, starts = np.random.default_rng(seed), half - 0.055, 0.0, {}
-    slots = [(-corner, -corner), (corner, -corner), (corner, corner), (-corner, corner), (0.0, 0.0)]
-    for layer in range(4):
-        names = list(bodies)[5 * layer : 5 * layer + 5]
-        radius = max(radii[name] for name in names)
-        z += radius + 0.005
-        for name, (x, y) in zip(names, slots):
-            starts[name] = frame * pin.SE3(
-                pin.rpy.rpyToMatrix(*rng.uniform(-0.5, 0.5, 3)), np.array([x, y, z])
-            )
-        z += radius
-    return scene, frame, starts
+    """The example's scene, the bin's frame (its floor's top centre) and each body's start: four
+    layers of five, each clear of the one below, at random orientations."""
+    frame, walls = PILE.bin_walls()
+    bodies = PILE.objects()
+    scene = gaussim.Scene(
+        bodies={name: body for name, (body, _) in bodies.items()},
+        obstacles=walls,
+        self_contact=(FRICTION, 0.0),
+    )
+    return scene, frame, PILE.drop_poses(frame, bodies, seed)
 
 
 def _energy(model: pin.Model, data: pin.Data, state: gaussim.State) -> float:
