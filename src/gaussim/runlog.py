@@ -349,15 +349,12 @@ class RunLog:
             bodied = int(data["format_version"]) >= BODIES_SINCE["file"]
             _check_layout(path, data, _held(NPZ_HEADER, bodied))
             header = {k: data[k].item() for k in ("robot", "scene_text", "scene_path", "complete", "reason")}
-            try:
-                header["options"] = json.loads(str(data["options"]))
-            except json.JSONDecodeError as err:
-                raise RunLogError(f"{path}: options: not JSON ({err})") from err
+            header["options"] = _json(path, data, "options")
             header["wall_time"] = None if np.isnan(data["wall_time"]) else float(data["wall_time"])
             if bodied:
                 header["bodies"] = list(map(str, data["bodies"]))
             header["gravity"] = data["gravity"].tolist() if "gravity" in data else None
-            header["masses"] = json.loads(str(data["masses"])) if "masses" in data else None
+            header["masses"] = _json(path, data, "masses") if "masses" in data else None
         _check_layout(path, data, _held(tuple(k for k in LAYOUT if k not in NPZ_HEADER), bodied))
         if not bodied:
             header["bodies"] = [str(header["robot"])]
@@ -654,6 +651,14 @@ def _set_aside(path: Path) -> Path | None:
         previous.unlink()
     os.replace(path, previous)
     return previous
+
+
+def _json(path: Path, data: dict, field: str) -> object:
+    """The JSON a log's header ``field`` holds; a :class:`RunLogError` naming the file and field."""
+    try:
+        return json.loads(str(data[field]))
+    except json.JSONDecodeError as err:
+        raise RunLogError(f"{path}: {field}: not JSON ({err})") from err
 
 
 def _read_npz(path: Path) -> dict[str, np.ndarray]:
