@@ -324,3 +324,36 @@ def test_the_reach_of_the_free_motion_bounds_the_travel(solo12):
                 travel if same else pytest.approx(dt * coarse.longest * reach)
             )
             assert clearance - coarse.clearance >= travel > 0
+
+
+def test_the_travel_bound_holds_for_every_pair_of_a_world(solo12):
+    """A world of a robot and three free boxes, each pair of them declared: the travel the margin
+    schedule takes off the clearance (its levers kept per pair on that pair's coordinates only) is the
+    dense bound max_k dt sum_i levers[k, i] |v_i| over all coordinates, and no pair's bounding spheres
+    close by more than it in a step of random motion."""
+    from gaussim.collision.margin import _pair_levers
+    from gaussim.collision.narrow import BoundingSpheres
+
+    boxes = {f"box{k}": gaussim.FreeBody.box(f"box{k}", (0.1, 0.2, 0.3), mass=1.0) for k in range(3)}
+    scene = gaussim.Scene(bodies={"solo": solo12, **boxes}, ground=gaussim.Ground())
+    sim = gaussim.Simulator(scene)
+    detector = ContactDetector(scene, sim.options.contact_margin)
+    spheres = BoundingSpheres(detector.pairs)
+    dense = np.array([_pair_levers(sim.model, pair) for pair in detector.pairs])
+    rng, dt = np.random.default_rng(7), 1e-3
+    starts = {name: gaussim.pose(0.5 * k + 1.0, 0.0, 0.5) for k, name in enumerate(boxes)}
+    q = sim.reset({"solo": solo12.configuration("standing"), **starts}).q
+    data = sim.model.createData()
+    for _ in range(20):
+        v = rng.normal(size=sim.model.nv)
+        schedule = detector.schedule
+        schedule.clearance = 1.0
+        schedule.cover(v, v, dt, 0.0)
+        travel = 1.0 - schedule.clearance
+        assert travel == pytest.approx(dt * (dense @ np.abs(v)).max(), rel=1e-12)
+        pin.forwardKinematics(sim.model, data, q)
+        before = spheres.gaps(data)
+        pin.forwardKinematics(sim.model, data, pin.integrate(sim.model, q, dt * v))
+        closed = before - spheres.gaps(data)
+        finite = np.isfinite(closed)
+        assert finite.sum() > 10 and closed[finite].max() <= travel

@@ -25,7 +25,9 @@ class MarginSchedule:
     Attributes:
         base_margin, margin: the base margin and the margin the next detection uses [m].
         levers: per pair and velocity coordinate, how fast (at most) the pair's two geometries
-            approach per unit of |v_k|, shape (pairs, nv) [m/s per unit].
+            approach per unit of |v_k| [m/s per unit], as a CSR matrix (pairs, nv): (row starts,
+            coordinates, levers); a pair moves with the coordinates of its two joints' chains only, so
+            a pile's pairs cost in proportion to their number, not to it times nv.
         longest: the longest lever (see :meth:`cover`'s reach).
         clearance: the least gap of the last detection less what the pairs may have closed since
             [m] (-inf: unknown, so the next detection runs).
@@ -33,8 +35,13 @@ class MarginSchedule:
 
     def __init__(self, model: pin.Model, pairs: list[Pair], margin: float) -> None:
         self.base_margin = self.margin = margin
-        self.levers = np.array([_pair_levers(model, p) for p in pairs])
-        self.longest = float(self.levers.max(initial=0.0))
+        dense = [_pair_levers(model, p) for p in pairs]
+        nonzero = [np.flatnonzero(row) for row in dense]
+        starts = np.cumsum([0] + [len(k) for k in nonzero])
+        coordinates = np.concatenate([np.zeros(0, np.int64), *nonzero]).astype(np.int64)
+        values = np.concatenate([np.zeros(0), *(row[k] for row, k in zip(dense, nonzero))])
+        self.levers = (starts, coordinates, values)
+        self.longest = float(values.max(initial=0.0))
         self.clearance = -np.inf
 
     def forget(self) -> None:
@@ -62,7 +69,7 @@ class MarginSchedule:
             if self.clearance - 2 * coarse > self.base_margin:
                 self.clearance -= coarse
                 return False
-        travel = _travel(self.levers, v, x, dt, x_scale)
+        travel = _travel(*self.levers, v, x, dt, x_scale)
         self.clearance -= travel
         needed = self.base_margin + travel
         if needed > self.margin or (self.margin > self.base_margin and 3 * needed < self.margin):
@@ -106,12 +113,14 @@ def _speed_levers(model: pin.Model, joint: int, center: np.ndarray, radius: floa
 
 
 @njit(cache=True)
-def _travel(levers, v, x, dt, x_scale):  # type: ignore[no-untyped-def]
-    """The farthest a pair can close in a step: max_k dt sum_i levers[k, i] (|v_i| + x_scale |x_i|)."""
+def _travel(starts, coordinates, levers, v, x, dt, x_scale):  # type: ignore[no-untyped-def]
+    """The farthest a pair can close in a step: max_k dt sum_i levers[k, i] (|v_i| + x_scale |x_i|),
+    the levers in CSR form (see MarginSchedule.levers)."""
     farthest = 0.0
-    for k in range(levers.shape[0]):
+    for k in range(len(starts) - 1):
         total = 0.0
-        for i in range(levers.shape[1]):
-            total += levers[k, i] * (abs(v[i]) + x_scale * abs(x[i]))
+        for j in range(starts[k], starts[k + 1]):
+            i = coordinates[j]
+            total += levers[j] * (abs(v[i]) + x_scale * abs(x[i]))
         farthest = max(farthest, total)
     return dt * farthest
