@@ -10,7 +10,7 @@ import pinocchio as pin
 from numba import njit
 
 from .exceptions import InvalidState, SolverError
-from .linalg import dot, finite, matvec
+from .linalg import cross, dot, finite, solve3
 
 LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 _WORLD = pin.Convention.WORLD
@@ -251,43 +251,71 @@ def floating_terms(v, x, dt, acceleration, bases, inertias, rigid):  # type: ign
     h = 1.0 if acceleration else dt
     for k in range(len(bases)):
         i = bases[k]
-        vl, w = v[i : i + 3], v[i + 3 : i + 6]
-        x[i] += h * (w[1] * vl[2] - w[2] * vl[1])  # + w x v_l: the frame's turn leaves the acceleration
-        x[i + 1] += h * (w[2] * vl[0] - w[0] * vl[2])
-        x[i + 2] += h * (w[0] * vl[1] - w[1] * vl[0])
+        w0, w1, w2 = v[i + 3], v[i + 4], v[i + 5]
+        x[i] += h * (w1 * v[i + 2] - w2 * v[i + 1])  # + w x v_l: the frame's turn leaves the acceleration
+        x[i + 1] += h * (w2 * v[i] - w0 * v[i + 2])
+        x[i + 2] += h * (w0 * v[i + 1] - w1 * v[i])
         if rigid[k]:
-            turn = x[i + 3 : i + 6]
-            u = _midpoint_turn(inertias[k], w, dt * turn if acceleration else turn - w, dt)
-            turn[:] = u / dt if acceleration else w + u
+            t0, t1, t2 = x[i + 3], x[i + 4], x[i + 5]
+            if acceleration:
+                u0, u1, u2 = _midpoint_turn(inertias[k], w0, w1, w2, dt * t0, dt * t1, dt * t2, dt)
+                x[i + 3], x[i + 4], x[i + 5] = u0 / dt, u1 / dt, u2 / dt
+            else:
+                u0, u1, u2 = _midpoint_turn(inertias[k], w0, w1, w2, t0 - w0, t1 - w1, t2 - w2, dt)
+                x[i + 3], x[i + 4], x[i + 5] = w0 + u0, w1 + u1, w2 + u2
 
 
 @njit(cache=True)
-def _midpoint_turn(I, w, u, dt):  # type: ignore[no-untyped-def]
+def _midpoint_turn(I, w0, w1, w2, u0, u1, u2, dt):  # type: ignore[no-untyped-def]
     """The change u of a rigid body's angular velocity w [rad/s] in a step dt [s] with the gyroscopic
     term at the midpoint, I u = dt tau - dt w_m x I w_m, w_m = w + u / 2, from the explicit change u
-    (whose torque is dt tau = I u + dt w x I w); Newton's method on the 3 x 3 system."""
-    rhs = I @ u + dt * np.cross(w, I @ w)
+    (whose torque is dt tau = I u + dt w x I w); Newton's method on the 3 x 3 system. In scalars, as
+    tuples."""
+    a0, a1, a2 = _times(I, u0, u1, u2)
+    b0, b1, b2 = _times(I, w0, w1, w2)
+    c0, c1, c2 = cross(w0, w1, w2, b0, b1, b2)
+    rhs0, rhs1, rhs2 = a0 + dt * c0, a1 + dt * c1, a2 + dt * c2
+    K = np.empty((3, 3))
     for _ in range(20):
-        wm = w + 0.5 * u
-        Iwm = I @ wm
-        r = I @ u + dt * np.cross(wm, Iwm) - rhs
-        # d r / d u = I + dt / 2 ([w_m]x I - [I w_m]x)
-        K = I.copy()
+        m0, m1, m2 = w0 + 0.5 * u0, w1 + 0.5 * u1, w2 + 0.5 * u2
+        n0, n1, n2 = _times(I, m0, m1, m2)
+        a0, a1, a2 = _times(I, u0, u1, u2)
+        c0, c1, c2 = cross(m0, m1, m2, n0, n1, n2)
+        r0, r1, r2 = a0 + dt * c0 - rhs0, a1 + dt * c1 - rhs1, a2 + dt * c2 - rhs2
+        # d r / d u = I + dt / 2 ([w_m]x I - [I w_m]x), column by column
         for c in range(3):
-            e = np.zeros(3)
-            e[c] = 1.0
-            K[:, c] += 0.5 * dt * (np.cross(e, Iwm) + np.cross(wm, I[:, c]))
-        step = np.linalg.solve(K, r)
-        u = u - step
-        if np.sqrt(step @ step) <= _MIDPOINT_TOLERANCE * (np.sqrt(u @ u) + np.sqrt(w @ w)):
+            e0, e1, e2 = cross(
+                1.0 if c == 0 else 0.0, 1.0 if c == 1 else 0.0, 1.0 if c == 2 else 0.0, n0, n1, n2
+            )
+            f0, f1, f2 = cross(m0, m1, m2, I[0, c], I[1, c], I[2, c])
+            K[0, c] = I[0, c] + 0.5 * dt * (e0 + f0)
+            K[1, c] = I[1, c] + 0.5 * dt * (e1 + f1)
+            K[2, c] = I[2, c] + 0.5 * dt * (e2 + f2)
+        s0, s1, s2 = solve3(K, r0, r1, r2)
+        u0, u1, u2 = u0 - s0, u1 - s1, u2 - s2
+        size = np.sqrt(u0 * u0 + u1 * u1 + u2 * u2) + np.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+        if np.sqrt(s0 * s0 + s1 * s1 + s2 * s2) <= _MIDPOINT_TOLERANCE * size:
             break
-    return u
+    return u0, u1, u2
+
+
+@njit(cache=True, inline="always")
+def _times(I, x0, x1, x2):  # type: ignore[no-untyped-def]
+    """I x for I (3, 3) and x = (x0, x1, x2), as a tuple."""
+    return (
+        I[0, 0] * x0 + I[0, 1] * x1 + I[0, 2] * x2,
+        I[1, 0] * x0 + I[1, 1] * x1 + I[1, 2] * x2,
+        I[2, 0] * x0 + I[2, 1] * x1 + I[2, 2] * x2,
+    )
 
 
 @njit(cache=True)
 def _negated_product(M, x):  # type: ignore[no-untyped-def]
     """-M x."""
-    return -matvec(M, x)
+    result = np.empty(M.shape[0])
+    for i in range(M.shape[0]):
+        result[i] = -dot(M[i], x)
+    return result
 
 
 def point_placements(
@@ -319,7 +347,10 @@ def point_jacobians(
     the point moves at v_O + w x p over the columns of the joint's ancestors, and the ancestors the
     two bodies share cancel.
     """
-    return point_jacobians_from(joint_jacobians(data), masks, joints, other_joints, points)
+    J = joint_jacobians(data)
+    result = np.empty((len(joints), 3, J.shape[1]))
+    point_jacobians_into(result, J, masks, joints, other_joints, points)
+    return result
 
 
 def joint_jacobians(data: pin.Data) -> np.ndarray:
@@ -329,19 +360,19 @@ def joint_jacobians(data: pin.Data) -> np.ndarray:
 
 
 @njit(cache=True)
-def point_jacobians_from(J, masks, joints, other_joints, points):  # type: ignore[no-untyped-def]
-    """:func:`point_jacobians` from the joint Jacobians J (6, nv) (compiled, for other kernels)."""
-    m, nv = len(joints), J.shape[1]
-    result = np.zeros((m, 3, nv))
-    for i in range(m):
+def point_jacobians_into(out, J, masks, joints, other_joints, points):  # type: ignore[no-untyped-def]
+    """:func:`point_jacobians` from the joint Jacobians J (6, nv), written into ``out`` (m, 3, nv)
+    (compiled, for other kernels)."""
+    for i in range(len(joints)):
         px, py, pz = points[i, 0], points[i, 1], points[i, 2]
-        for k in range(nv):
+        for k in range(J.shape[1]):
             moving = masks[joints[i], k] - masks[other_joints[i], k]
             if moving != 0.0:  # v_O + w x p, with v_O at the world origin
-                result[i, 0, k] = moving * (J[0, k] + J[4, k] * pz - J[5, k] * py)
-                result[i, 1, k] = moving * (J[1, k] + J[5, k] * px - J[3, k] * pz)
-                result[i, 2, k] = moving * (J[2, k] + J[3, k] * py - J[4, k] * px)
-    return result
+                out[i, 0, k] = moving * (J[0, k] + J[4, k] * pz - J[5, k] * py)
+                out[i, 1, k] = moving * (J[1, k] + J[5, k] * px - J[3, k] * pz)
+                out[i, 2, k] = moving * (J[2, k] + J[3, k] * py - J[4, k] * px)
+            else:
+                out[i, 0, k] = out[i, 1, k] = out[i, 2, k] = 0.0
 
 
 def point_drifts(

@@ -66,10 +66,15 @@ def _midpoint_turns(v, v_next, dt, velocity, free, out):  # type: ignore[no-unty
     for k in range(len(velocity)):
         if free[k]:
             i = velocity[k] + 3
-            wm = 0.5 * (v[i : i + 3] + v_next[i : i + 3])
-            speed = np.sqrt(wm @ wm)
+            m0, m1, m2 = (
+                0.5 * (v[i] + v_next[i]),
+                0.5 * (v[i + 1] + v_next[i + 1]),
+                0.5 * (v[i + 2] + v_next[i + 2]),
+            )
+            speed = np.sqrt(m0 * m0 + m1 * m1 + m2 * m2)
             if speed > 0.0:
-                out[i : i + 3] = (2.0 * np.arctan(0.5 * dt * speed) / speed) * wm
+                scale = 2.0 * np.arctan(0.5 * dt * speed) / speed
+                out[i], out[i + 1], out[i + 2] = scale * m0, scale * m1, scale * m2
 
 
 @njit(cache=True)

@@ -190,7 +190,7 @@ def _ground_hulls(
         turned = (c[0] - narrow_at[k, 0]) ** 2 + (c[1] - narrow_at[k, 1]) ** 2 + (c[2] - narrow_at[k, 2]) ** 2
         narrow = turned <= turn2[k]  # False where no verdict was kept (NaN)
         if not narrow:
-            low, high = np.full(3, np.inf), np.full(3, -np.inf)
+            low, high = _unbounded()
             for v in range(size):
                 if (
                     c[0] * X[0, v] + c[1] * X[1, v] + c[2] * X[2, v] + c[3]
@@ -198,7 +198,7 @@ def _ground_hulls(
                 ):
                     for j in range(3):
                         low[j], high[j] = min(low[j], X[j, v]), max(high[j], X[j, v])
-            narrow = (high - low).max() <= PATCH_MIN_EXTENT
+            narrow = _extent(low, high) <= PATCH_MIN_EXTENT
             for j in range(3):
                 narrow_at[k, j] = c[j] if narrow else np.nan
         if narrow:
@@ -227,7 +227,7 @@ def _outline(c, R, p, X, rounding, directions, margin, gap, heights, world, chos
     PATCH_MIN_EXTENT, with their gaps in ``heights`` and world points in ``world``."""
     size = X.shape[1]
     bound = max(0.0, min(margin, gap + PATCH_TOLERANCE))
-    low, high = np.full(3, np.inf), np.full(3, -np.inf)
+    low, high = _unbounded()
     deepest, lowest = -1, np.inf
     for v in range(size):
         heights[v] = c[0] * X[0, v] + c[1] * X[1, v] + c[2] * X[2, v] + c[3] - rounding
@@ -238,7 +238,7 @@ def _outline(c, R, p, X, rounding, directions, margin, gap, heights, world, chos
                 low[j], high[j] = min(low[j], world[v, j]), max(high[j], world[v, j])
             if heights[v] < lowest:
                 deepest, lowest = v, heights[v]
-    if (high - low).max() <= PATCH_MIN_EXTENT:
+    if _extent(low, high) <= PATCH_MIN_EXTENT:
         chosen[deepest] = True
         return
     for d in range(directions.shape[0]):
@@ -253,6 +253,21 @@ def _outline(c, R, p, X, rounding, directions, margin, gap, heights, world, chos
                 if along > reach:
                     best, reach = v, along
         chosen[best] = True
+
+
+@njit(cache=True, inline="always")
+def _unbounded():  # type: ignore[no-untyped-def]
+    """An empty bounding box: (low, high) = (+inf, -inf) in each of 3 coordinates."""
+    low, high = np.empty(3), np.empty(3)
+    for j in range(3):
+        low[j], high[j] = np.inf, -np.inf
+    return low, high
+
+
+@njit(cache=True, inline="always")
+def _extent(low, high):  # type: ignore[no-untyped-def]
+    """The largest side of the bounding box (low, high), each (3,)."""
+    return max(high[0] - low[0], high[1] - low[1], high[2] - low[2])
 
 
 def _hulls(pairs: list[Pair]) -> Hulls:

@@ -51,11 +51,11 @@ from ..dynamics import (
     joint_jacobians,
     point_drifts,
     point_jacobians,
-    point_jacobians_from,
+    point_jacobians_into,
     point_placements,
     support_masks,
 )
-from ..linalg import dot
+from ..linalg import cross, dot
 from .base import LEVELS, ConstraintModule, Context, Rows, bound_of, is_active
 
 # Below this tangential speed a contact sticks: no sliding force at the acceleration level, no De
@@ -327,37 +327,43 @@ def _pyramids(  # type: ignore[no-untyped-def]
     dt, stabilisation, threshold = bounds
     m, nv, facets = len(joints), len(v), len(cos)
     acceleration = level == 2
-    J3 = point_jacobians_from(joint_jacobians, masks, joints, other_joints, points)
-    starts[0], sliding = 0, np.zeros(m, np.bool_)
-    contact_bound, slip_used, u = np.empty(m), slips.copy(), np.empty((m, 3))
+    J = packed[: 3 * m * nv].reshape((m, 3, nv))  # the buffer's first part, whatever R is
+    point_jacobians_into(J, joint_jacobians, masks, joints, other_joints, points)
+    starts[0], sliding, any_sliding = 0, np.zeros(m, np.bool_), False
+    contact_bound, slip_used, u, free = np.empty(m), np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 3))
     for i in range(m):
-        n = normal[i]
-        u0, u1, u2 = dot(J3[i, 0], v), dot(J3[i, 1], v), dot(J3[i, 2], v)
-        u[i] = (u0, u1, u2)
-        u_n = u0 * n[0] + u1 * n[1] + u2 * n[2]
+        n0, n1, n2 = normal[i, 0], normal[i, 1], normal[i, 2]
+        u0, u1, u2 = dot(J[i, 0], v), dot(J[i, 1], v), dot(J[i, 2], v)
+        u[i, 0], u[i, 1], u[i, 2] = u0, u1, u2
+        free[i, 0], free[i, 1], free[i, 2] = dot(J[i, 0], x_free), dot(J[i, 1], x_free), dot(J[i, 2], x_free)
+        u_n = u0 * n0 + u1 * n1 + u2 * n2
         if acceleration or np.isnan(slips[i, 0]):  # the current slip
-            slip_used[i] = (u0 - u_n * n[0], u1 - u_n * n[1], u2 - u_n * n[2])
+            slip_used[i, 0], slip_used[i, 1], slip_used[i, 2] = u0 - u_n * n0, u1 - u_n * n1, u2 - u_n * n2
+        else:
+            slip_used[i, 0], slip_used[i, 1], slip_used[i, 2] = slips[i, 0], slips[i, 1], slips[i, 2]
         speed = np.sqrt(slip_used[i, 0] ** 2 + slip_used[i, 1] ** 2 + slip_used[i, 2] ** 2)
         sliding[i] = acceleration and mu[i] > 0 and speed > SLIP_SPEED and not stops[i]
+        any_sliding |= sliding[i]
         starts[i + 1] = starts[i] + (1 if mu[i] == 0 or sliding[i] else facets)
         contact_bound[i] = bound_of(level, dt, stabilisation, gap[i], 0.0, 0.0, True)
         if not acceleration:
             # restitution: an approaching contact that closes within the step leaves at -e u_n at least
             # (velocity level: under the free motion, as the margin finds contacts earlier; impulse level:
             # every contact here, is_active's closing test chose them); De Saxce shift mu |slip|
-            closes = level == 1 or gap[i] + dt * dot(n, J3[i] @ x_free) <= 0.0
+            closes = level == 1 or gap[i] + dt * (n0 * free[i, 0] + n1 * free[i, 1] + n2 * free[i, 2]) <= 0.0
             if e[i] > 0 and -u_n > threshold and closes:
                 contact_bound[i] = max(contact_bound[i], -e[i] * u_n)
             if not pyramid and speed > SLIP_SPEED:  # slower, it sticks: no shift to make
                 contact_bound[i] -= mu[i] * speed
     total = starts[m]
     J, generators, slip, friction = _unpacked(packed[: 3 * m * nv + 3 * total + 6 * m], m, nv)
-    J[:] = J3
-    slip[:] = slip_used
-    friction[:] = 0.0
+    for i in range(m):
+        for j in range(3):
+            slip[i, j], friction[i, j] = slip_used[i, j], 0.0
     force = np.zeros(nv)
     for i in range(m):
-        n, r, count = normal[i], starts[i], starts[i + 1] - starts[i]
+        n0, n1, n2 = normal[i, 0], normal[i, 1], normal[i, 2]
+        r, count = starts[i], starts[i + 1] - starts[i]
         if sliding[i]:  # explicit Coulomb force opposite the slip, lambda_n iterated (module docstring)
             speed = np.sqrt(slip[i, 0] ** 2 + slip[i, 1] ** 2 + slip[i, 2] ** 2)
             for j in range(3):
@@ -365,37 +371,43 @@ def _pyramids(  # type: ignore[no-untyped-def]
                 for k in range(nv):
                     force[k] += friction[i, j] * J[i, j, k]
         if count == 1:  # the normal row alone
-            generators[r] = n
+            generators[r, 0], generators[r, 1], generators[r, 2] = n0, n1, n2
         else:  # friction opposes the tangential velocity the contact would have without it
             # (acceleration level: the acceleration that keeps it, plus the one that stops it in the step)
-            tendency = np.array([dot(J[i, j], x_free) + drift[i, j] for j in range(3)])
+            d0, d1, d2 = free[i, 0] + drift[i, 0], free[i, 1] + drift[i, 1], free[i, 2] + drift[i, 2]
             if acceleration:
-                tendency += u[i] / dt
-            t = -tendency + (tendency[0] * n[0] + tendency[1] * n[1] + tendency[2] * n[2]) * n
-            norm = np.sqrt(t[0] ** 2 + t[1] ** 2 + t[2] ** 2)
+                d0, d1, d2 = d0 + u[i, 0] / dt, d1 + u[i, 1] / dt, d2 + u[i, 2] / dt
+            along = d0 * n0 + d1 * n1 + d2 * n2
+            t0, t1, t2 = -d0 + along * n0, -d1 + along * n1, -d2 + along * n2
+            norm = np.sqrt(t0**2 + t1**2 + t2**2)
             if pyramid or norm <= 1e-12:  # a fixed basis: n x (the axis of n's smallest component)
-                axis = np.zeros(3)
-                axis[np.argmin(np.abs(n))] = 1.0
-                t = np.cross(n, axis)
-                norm = np.sqrt(t[0] ** 2 + t[1] ** 2 + t[2] ** 2)
-            t1 = t / norm
-            t2 = np.cross(n, t1)
+                a0, a1, a2 = abs(n0), abs(n1), abs(n2)
+                if a0 <= a1 and a0 <= a2:
+                    t0, t1, t2 = cross(n0, n1, n2, 1.0, 0.0, 0.0)
+                elif a1 <= a2:
+                    t0, t1, t2 = cross(n0, n1, n2, 0.0, 1.0, 0.0)
+                else:
+                    t0, t1, t2 = cross(n0, n1, n2, 0.0, 0.0, 1.0)
+                norm = np.sqrt(t0**2 + t1**2 + t2**2)
+            t0, t1, t2 = t0 / norm, t1 / norm, t2 / norm
+            s0, s1, s2 = cross(n0, n1, n2, t0, t1, t2)
             for k in range(count):
-                for j in range(3):
-                    generators[r + k, j] = n[j] + mu[i] * (cos[k] * t1[j] + sin[k] * t2[j])
+                generators[r + k, 0] = n0 + mu[i] * (cos[k] * t0 + sin[k] * s0)
+                generators[r + k, 1] = n1 + mu[i] * (cos[k] * t1 + sin[k] * s1)
+                generators[r + k, 2] = n2 + mu[i] * (cos[k] * t2 + sin[k] * s2)
         for k in range(count):
             g = generators[r + k]
             for c in range(nv):
                 rows[r + k, c] = g[0] * J[i, 0, c] + g[1] * J[i, 1, c] + g[2] * J[i, 2, c]
             if acceleration:  # the row's drift; Baumgarte on the normal rate, the slip stopped in the step
-                u_n = n[0] * u[i, 0] + n[1] * u[i, 1] + n[2] * u[i, 2]
+                u_n = n0 * u[i, 0] + n1 * u[i, 1] + n2 * u[i, 2]
                 slip_rate = g[0] * u[i, 0] + g[1] * u[i, 1] + g[2] * u[i, 2] - u_n
                 row_drift = g[0] * drift[i, 0] + g[1] * drift[i, 1] + g[2] * drift[i, 2]
                 normal_bound = bound_of(level, dt, stabilisation, gap[i], u_n, row_drift, True)
                 bound[r + k] = normal_bound - slip_rate / dt
             else:
                 bound[r + k] = contact_bound[i]
-    if sliding.any():
+    if any_sliding:
         return total, sliding, force
     return total, None, None
 

@@ -46,19 +46,30 @@ def active_set_candidate(H, g, A, b, C, l, x, multipliers, tolerance, floor, x_o
     residuals = kkt_residuals(H, g, A, b, C, l, x, multipliers[:n_eq], multipliers[n_eq:])
     if residuals[1] <= tolerance:
         return 1, residuals
-    inequality = multipliers[n_eq:]
-    least = floor * inequality.max() if len(inequality) else 0.0  # what an active row's exceeds
-    active = np.flatnonzero(inequality > max(least, 0.0))
-    k = n_eq + len(active)
+    largest = 0.0  # an active row's multiplier exceeds floor times the largest (and 0)
+    for i in range(n_eq, len(multipliers)):
+        largest = max(largest, multipliers[i])
+    least = max(floor * largest, 0.0)
+    active = np.empty(len(l), np.int64)
+    k = n_eq
+    for i in range(len(l)):
+        if multipliers[n_eq + i] > least:
+            active[k - n_eq] = i
+            k += 1
     K, r = np.empty((k, nv)), np.empty(k)
-    K[:n_eq], r[:n_eq] = A, b
-    for i in range(len(active)):
-        K[n_eq + i], r[n_eq + i] = C[active[i]], l[active[i]]
+    for i in range(k):
+        row = i if i < n_eq else active[i - n_eq]
+        for j in range(nv):
+            K[i, j] = A[row, j] if i < n_eq else C[row, j]
+        r[i] = b[row] if i < n_eq else l[row]
     L = cholesky(H, 0.0)
     if L is None:
         return 0, residuals
     W = forward(L, K)  # the rows of K L^-T, (k, nv)
-    h = forward(L, g.copy().reshape((1, nv)))[0]  # L^-1 g
+    h = np.empty((1, nv))
+    for j in range(nv):
+        h[0, j] = g[j]
+    h = forward(L, h)[0]  # L^-1 g
     G, rhs, largest = np.empty((k, k)), r, 0.0
     for i in range(k):
         for j in range(i + 1):
@@ -68,18 +79,26 @@ def active_set_candidate(H, g, A, b, C, l, x, multipliers, tolerance, floor, x_o
     LG = cholesky(G, ACTIVE_SET_SHIFT * largest)
     if LG is None:
         return 0, residuals
-    lam = np.zeros(k)
+    lam, step = np.zeros(k), np.empty((1, k))
     for _ in range(ACTIVE_SET_REFINEMENTS):
-        step = rhs - matvec(G, lam)
-        lam += backward(LG, forward(LG, step.reshape((1, k)))[0])
-    y = -h  # W^T lam - h, then L^-T of it
+        product = matvec(G, lam)
+        for i in range(k):
+            step[0, i] = rhs[i] - product[i]
+        correction = backward(LG, forward(LG, step)[0])
+        for i in range(k):
+            lam[i] += correction[i]
+    y = np.empty(nv)  # W^T lam - h, then L^-T of it
+    for j in range(nv):
+        y[j] = -h[j]
     for i in range(k):
         for j in range(nv):
             y[j] += lam[i] * W[i, j]
-    x_out[:] = backward(L, y)
-    multipliers_out[:] = 0.0
-    multipliers_out[:n_eq] = lam[:n_eq]
-    for i in range(len(active)):
+    backward(L, y)
+    for j in range(nv):
+        x_out[j] = y[j]
+    for i in range(len(multipliers_out)):
+        multipliers_out[i] = lam[i] if i < n_eq else 0.0
+    for i in range(k - n_eq):
         multipliers_out[n_eq + active[i]] = lam[n_eq + i]
     residuals = kkt_residuals(H, g, A, b, C, l, x_out, multipliers_out[:n_eq], multipliers_out[n_eq:])
     return 2 if residuals[1] <= tolerance else 0, residuals

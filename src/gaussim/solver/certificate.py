@@ -161,7 +161,9 @@ def kkt_residuals(H, g, A, b, C, l, x, y, z):  # type: ignore[no-untyped-def]
     size = 1.0
     for i in range(len(g)):
         size = max(size, abs(g[i]))
-    stationarity = matvec(H, x) + g
+    stationarity = matvec(H, x)
+    for k in range(len(g)):
+        stationarity[k] += g[k]
     for i in range(len(b)):
         for k in range(len(g)):  # loops, not array expressions: those allocate a temporary each
             stationarity[k] -= y[i] * A[i, k]

@@ -280,7 +280,10 @@ def _read(H, g, A, b, C, l, x, y, z):  # type: ignore[no-untyped-def]
     ProxQP's results."""
     n_eq, n_in = len(b), len(l)
     x, multipliers = x.copy(), np.empty(n_eq + n_in)
-    multipliers[:n_eq], multipliers[n_eq:] = -y[:n_eq], -z[:n_in]
+    for i in range(n_eq):
+        multipliers[i] = -y[i]
+    for i in range(n_in):
+        multipliers[n_eq + i] = -z[i]
     return (x, multipliers, *kkt_residuals(H, g, A, b, C, l, x, multipliers[:n_eq], multipliers[n_eq:]))
 
 
