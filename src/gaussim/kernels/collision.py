@@ -36,6 +36,7 @@ def ground_hulls(
     ``deepest`` and ``narrow_at``): fills the first k entries of the ``*_out`` arrays with the contacts, hull
     by hull; returns (k, the least gap of all the hulls). ``patch``: (PATCH_TOLERANCE, PATCH_MIN_EXTENT) of
     :mod:`gaussim.collision.contacts`.
+
     The deepest vertex is found by descent along the hull's edges from the last one: a vertex no
     neighbour of which is deeper is the deepest of a convex polyhedron (a linear function has no
     other local minimum on its vertex graph)."""

@@ -20,7 +20,7 @@ from numba.core import types
 from numba.core.registry import CPUDispatcher
 
 _DTYPES = {"f": types.float64, "i": types.int64, "b": types.boolean}
-_CODES = {dtype: code for code, dtype in _DTYPES.items()}
+_CODES: dict[types.Type, str] = {dtype: code for code, dtype in _DTYPES.items()}
 
 _SIDES = ("f2 f1 f2 f1", "f2 f1 f2r f1r", "f2r f1r f2 f1")
 
@@ -84,7 +84,7 @@ def _parse_one(token: str) -> types.Type:
 def code_of(signature: tuple[types.Type, ...]) -> str | None:
     """The code of a signature of argument types, None when it holds a type the codes do not write."""
     tokens = [_code_of_one(t) for t in signature]
-    return None if None in tokens else " ".join(tokens)  # type: ignore[arg-type]
+    return " ".join(t for t in tokens if t is not None) if None not in tokens else None
 
 
 def _code_of_one(t: types.Type) -> str | None:
