@@ -311,7 +311,7 @@ def test_velocity_scheme_closes_a_fast_approach_at_any_step(ball, dt):
 
 def _slips_reference(J, slip, starts, x, normal, mu, tolerance):
     """The slip update of gaussim.kernels.contact.slips, written plainly with numpy."""
-    from gaussim.constraints.contact import SLIP_SPEED
+    from gaussim.kernels.contact import SLIP_SPEED
 
     result, moved = slip.copy(), False
     for i in range(len(slip)):
