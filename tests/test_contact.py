@@ -310,8 +310,8 @@ def test_velocity_scheme_closes_a_fast_approach_at_any_step(ball, dt):
 
 
 def _slips_reference(J, slip, starts, x, normal, mu, tolerance):
-    """The slip update of contact.py's _slips, written plainly with numpy."""
-    from gaussim.constraints.contact import SLIP_SPEED
+    """The slip update of gaussim.kernels.contact.slips, written plainly with numpy."""
+    from gaussim.kernels.contact import SLIP_SPEED
 
     result, moved = slip.copy(), False
     for i in range(len(slip)):
@@ -330,7 +330,7 @@ def test_slip_update_matches_its_plain_statement(tolerance):
     """The compiled slip update (scalars, two passes) gives the plain one's answer: every moving
     contact's new slip once any moved by more than the tolerance, else None; sticking contacts (one
     row), resting ones (slow) and the moving ones below the tolerance included."""
-    from gaussim.constraints.contact import SLIP_SPEED, _slips
+    from gaussim.kernels.contact import SLIP_SPEED, slips
 
     rng = np.random.default_rng(7)
     m, nv, facets = 6, 9, 4
@@ -346,7 +346,7 @@ def test_slip_update_matches_its_plain_statement(tolerance):
     packed = np.concatenate([J.ravel(), rng.normal(size=3 * rows), slip.ravel(), rng.normal(size=3 * m)])
     assert facets * m - 3 == rows
     expected = _slips_reference(J, slip, starts, x, normal, mu, tolerance)
-    got = _slips(packed, starts, x, normal, mu, tolerance)
+    got = slips(packed, starts, x, normal, mu, tolerance)
     if expected is None:
         assert got is None
     else:

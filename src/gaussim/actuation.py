@@ -17,9 +17,9 @@ from collections.abc import Mapping
 
 import numpy as np
 import pinocchio as pin
-from numba import njit
 
 from .exceptions import InvalidState, shown
+from .kernels.actuation import damped_torque
 from .state import real_array
 from .world import World
 
@@ -124,22 +124,3 @@ class Actuation:
                 raise InvalidState(f"{name}['{body}'] must have shape {listed}, got {arr.shape}")
             full[layout.v if arr.shape == (nv,) else layout.actuated] = arr
         return full
-
-
-@njit(cache=True)
-def damped_torque(tau, damping, v, previous):  # type: ignore[no-untyped-def]
-    """(code, tau - D v, D == previous) for an implicit damping D at velocity v, all (nv,); code 1
-    when tau is not finite, 2 when D is not finite or negative (one kernel: this runs every damped
-    step)."""
-    nv = len(v)
-    full = np.empty(nv)
-    code = 0
-    same = len(previous) == nv
-    for i in range(nv):
-        if not np.isfinite(tau[i]):
-            code = 1
-        if not (damping[i] >= 0 and np.isfinite(damping[i])):
-            code = 2
-        full[i] = tau[i] - damping[i] * v[i]
-        same = same and damping[i] == previous[i]
-    return code, full, same

@@ -7,10 +7,16 @@ from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
-from numba import njit
 
 from .exceptions import InvalidState, SolverError
-from .linalg import dot, finite, matvec
+from .kernels.dynamics import (
+    floating_terms,
+    free_velocity,
+    linear_term,
+    negated_product,
+    point_jacobians_into,
+    unloaded,
+)
 
 LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 _WORLD = pin.Convention.WORLD
@@ -93,7 +99,7 @@ class FloatingBases:
         free = self.rigid.copy()
         for report in reports:
             for _, rows, multipliers in getattr(report, "blocks", ()):
-                _unloaded(rows.J, multipliers, self.velocity, free)
+                unloaded(rows.J, multipliers, self.velocity, free)
         return free
 
     def frame_acceleration(self, v: np.ndarray) -> np.ndarray:
@@ -191,30 +197,14 @@ def compute_dynamics(
     if acceleration:  # the drifts of the bases' velocity coordinates: the frame's turn is part of them
         pin.forwardKinematics(model, data, q, v, bases.frame_acceleration(v))
     f, g = np.empty(len(v)), np.empty(len(v))  # filled by the kernel: cheaper than its new arrays
-    if not _linear_term(M, v, tau, nle, 0.0 if acceleration else dt, f, g):
+    if not linear_term(M, v, tau, nle, 0.0 if acceleration else dt, f, g):
         raise InvalidState.non_finite("tau", tau)
     pin.cholesky.decompose(model, data)
     x_free = pin.cholesky.solve(model, data, f)
     if len(bases):
         floating_terms(v, x_free, dt, acceleration, bases.velocity, bases.inertias, bases.rigid)
-        g = _negated_product(M, x_free)
+        g = negated_product(M, x_free)
     return Dynamics(M, g, x_free)
-
-
-@njit(cache=True)
-def _linear_term(M, v, tau, nle, dt, f, g):  # type: ignore[no-untyped-def]
-    """Fill f = M v + dt F at the velocity level (dt > 0), F at the acceleration level (dt = 0), with
-    F = tau - b, and g = -f; False when tau is not finite."""
-    for i in range(len(nle)):
-        if not np.isfinite(tau[i]):
-            return False
-        f[i] = tau[i] - nle[i]
-    if dt > 0:
-        for i in range(len(f)):
-            f[i] = dot(M[i], v) + dt * f[i]
-    for i in range(len(f)):
-        g[i] = -f[i]
-    return True
 
 
 def gauss_problem(model: pin.Model, data: pin.Data, q: np.ndarray, x_free: np.ndarray) -> Dynamics:
@@ -222,72 +212,7 @@ def gauss_problem(model: pin.Model, data: pin.Data, q: np.ndarray, x_free: np.nd
     :meth:`DynamicsStage.free_motion`): M and the joint Jacobians data.J (one CRBA pass, WORLD
     convention) and g = -M x_free."""
     M = pin.crba(model, data, q, _WORLD)  # a copy of data.M
-    return Dynamics(M, _negated_product(M, x_free), x_free)
-
-
-@njit(cache=True)
-def free_velocity(v, a_free, dt, out, bases, inertias, rigid):  # type: ignore[no-untyped-def]
-    """out = v + dt a_free, the next velocity when nothing restricts the motion, with the floating bases
-    posed as :func:`floating_terms` poses them; returns the reach sum_i |v_i| + |out_i| (see
-    DynamicsStage.reach), NaN when out is not finite."""
-    for i in range(len(v)):
-        out[i] = v[i] + dt * a_free[i]
-    floating_terms(v, out, dt, False, bases, inertias, rigid)
-    reach = 0.0
-    for i in range(len(v)):
-        reach += abs(v[i]) + abs(out[i])
-    return reach if finite(out) else np.nan
-
-
-# Newton iterations of a rigid base's midpoint gyroscopic term stop below this relative change.
-_MIDPOINT_TOLERANCE = 1e-15
-
-
-@njit(cache=True)
-def floating_terms(v, x, dt, acceleration, bases, inertias, rigid):  # type: ignore[no-untyped-def]
-    """Pose the free solution x of the floating ``bases`` (first velocity indices) as
-    :class:`FloatingBases` says, in place: x = v + dt a (velocity level) or x = a (``acceleration``
-    level) from ABA's a, time step ``dt`` [s]. ``inertias`` (k, 3, 3) and ``rigid`` (k,) as there."""
-    h = 1.0 if acceleration else dt
-    for k in range(len(bases)):
-        i = bases[k]
-        vl, w = v[i : i + 3], v[i + 3 : i + 6]
-        x[i] += h * (w[1] * vl[2] - w[2] * vl[1])  # + w x v_l: the frame's turn leaves the acceleration
-        x[i + 1] += h * (w[2] * vl[0] - w[0] * vl[2])
-        x[i + 2] += h * (w[0] * vl[1] - w[1] * vl[0])
-        if rigid[k]:
-            turn = x[i + 3 : i + 6]
-            u = _midpoint_turn(inertias[k], w, dt * turn if acceleration else turn - w, dt)
-            turn[:] = u / dt if acceleration else w + u
-
-
-@njit(cache=True)
-def _midpoint_turn(I, w, u, dt):  # type: ignore[no-untyped-def]
-    """The change u of a rigid body's angular velocity w [rad/s] in a step dt [s] with the gyroscopic
-    term at the midpoint, I u = dt tau - dt w_m x I w_m, w_m = w + u / 2, from the explicit change u
-    (whose torque is dt tau = I u + dt w x I w); Newton's method on the 3 x 3 system."""
-    rhs = I @ u + dt * np.cross(w, I @ w)
-    for _ in range(20):
-        wm = w + 0.5 * u
-        Iwm = I @ wm
-        r = I @ u + dt * np.cross(wm, Iwm) - rhs
-        # d r / d u = I + dt / 2 ([w_m]x I - [I w_m]x)
-        K = I.copy()
-        for c in range(3):
-            e = np.zeros(3)
-            e[c] = 1.0
-            K[:, c] += 0.5 * dt * (np.cross(e, Iwm) + np.cross(wm, I[:, c]))
-        step = np.linalg.solve(K, r)
-        u = u - step
-        if np.sqrt(step @ step) <= _MIDPOINT_TOLERANCE * (np.sqrt(u @ u) + np.sqrt(w @ w)):
-            break
-    return u
-
-
-@njit(cache=True)
-def _negated_product(M, x):  # type: ignore[no-untyped-def]
-    """-M x."""
-    return -matvec(M, x)
+    return Dynamics(M, negated_product(M, x_free), x_free)
 
 
 def point_placements(
@@ -319,29 +244,16 @@ def point_jacobians(
     the point moves at v_O + w x p over the columns of the joint's ancestors, and the ancestors the
     two bodies share cancel.
     """
-    return point_jacobians_from(joint_jacobians(data), masks, joints, other_joints, points)
+    J = joint_jacobians(data)
+    result = np.empty((len(joints), 3, J.shape[1]))
+    point_jacobians_into(result, J, masks, joints, other_joints, points)
+    return result
 
 
 def joint_jacobians(data: pin.Data) -> np.ndarray:
     """data.J, shape (6, nv), as a view (eigenpy returns a 6 x 1 matrix as a vector of shape (6,): a
     one-dof robot's)."""
     return data.J.reshape(6, -1)
-
-
-@njit(cache=True)
-def point_jacobians_from(J, masks, joints, other_joints, points):  # type: ignore[no-untyped-def]
-    """:func:`point_jacobians` from the joint Jacobians J (6, nv) (compiled, for other kernels)."""
-    m, nv = len(joints), J.shape[1]
-    result = np.zeros((m, 3, nv))
-    for i in range(m):
-        px, py, pz = points[i, 0], points[i, 1], points[i, 2]
-        for k in range(nv):
-            moving = masks[joints[i], k] - masks[other_joints[i], k]
-            if moving != 0.0:  # v_O + w x p, with v_O at the world origin
-                result[i, 0, k] = moving * (J[0, k] + J[4, k] * pz - J[5, k] * py)
-                result[i, 1, k] = moving * (J[1, k] + J[5, k] * px - J[3, k] * pz)
-                result[i, 2, k] = moving * (J[2, k] + J[3, k] * py - J[4, k] * px)
-    return result
 
 
 def point_drifts(
@@ -354,18 +266,3 @@ def point_drifts(
     return np.array(
         [pin.getFrameClassicalAcceleration(model, data, j, M, LWA).linear for j, M in zip(joints, placements)]
     )
-
-
-@njit(cache=True)
-def _unloaded(J, multipliers, velocity, free):  # type: ignore[no-untyped-def]
-    """Clear ``free[k]`` for each base k (its velocity at ``velocity[k]``) that a row of J with a
-    nonzero multiplier reads."""
-    for r in range(len(multipliers)):
-        if multipliers[r] == 0.0:
-            continue
-        for k in range(len(velocity)):
-            if free[k]:
-                for i in range(velocity[k], velocity[k] + 6):
-                    if J[r, i] != 0.0:
-                        free[k] = False
-                        break

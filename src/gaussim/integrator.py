@@ -17,10 +17,9 @@ from __future__ import annotations
 
 import numpy as np
 import pinocchio as pin
-from numba import njit
 
 from .dynamics import FloatingBases
-from .linalg import finite
+from .kernels.integrator import displacement, midpoint_turns, move_bases
 
 
 def integrate(
@@ -39,60 +38,13 @@ def integrate(
     ``free`` (k,): which bases turn by the midpoint rule (rigid bases no row touched; None: none).
     The velocity returned is ``v_next`` itself unless a floating base re-expresses it.
     """
-    if not _displacement(v_next, dt, scratch):
+    if not displacement(v_next, dt, scratch):
         return None
     if free is not None:
-        _midpoint_turns(v, v_next, dt, bases.velocity, free, scratch)
+        midpoint_turns(v, v_next, dt, bases.velocity, free, scratch)
     q_next = pin.integrate(model, q, scratch)
     if not len(bases):
         return q_next, v_next
     v_out = v_next.copy()
-    _move_bases(q, q_next, v_out, dt, bases.configuration, bases.velocity)
+    move_bases(q, q_next, v_out, dt, bases.configuration, bases.velocity)
     return q_next, v_out
-
-
-@njit(cache=True)
-def _displacement(v, dt, out):  # type: ignore[no-untyped-def]
-    """out = dt v; False when v is not finite."""
-    for i in range(len(v)):
-        out[i] = dt * v[i]
-    return finite(v)
-
-
-@njit(cache=True)
-def _midpoint_turns(v, v_next, dt, velocity, free, out):  # type: ignore[no-untyped-def]
-    """For each ``free`` base, its turn in the displacement ``out``: the rotation vector of the Cayley
-    map of dt w_m, 2 atan(dt |w_m| / 2) w_m / |w_m|."""
-    for k in range(len(velocity)):
-        if free[k]:
-            i = velocity[k] + 3
-            wm = 0.5 * (v[i : i + 3] + v_next[i : i + 3])
-            speed = np.sqrt(wm @ wm)
-            if speed > 0.0:
-                out[i : i + 3] = (2.0 * np.arctan(0.5 * dt * speed) / speed) * wm
-
-
-@njit(cache=True)
-def _move_bases(q, q_next, v, dt, configuration, velocity):  # type: ignore[no-untyped-def]
-    """For each floating base: q_next's origin = q's + dt R v_l (R the frame of q), and v_l, in place,
-    re-expressed in q_next's frame (R_next^T R v_l). In scalars: this runs every step."""
-    for k in range(len(configuration)):
-        p, i = configuration[k], velocity[k]
-        x, y, z = _turned(q[p + 3 : p + 7], v[i], v[i + 1], v[i + 2], 1.0)
-        q_next[p] = q[p] + dt * x
-        q_next[p + 1] = q[p + 1] + dt * y
-        q_next[p + 2] = q[p + 2] + dt * z
-        v[i], v[i + 1], v[i + 2] = _turned(q_next[p + 3 : p + 7], x, y, z, -1.0)
-
-
-@njit(cache=True, inline="always")
-def _turned(quaternion, x, y, z, sign):  # type: ignore[no-untyped-def]
-    """The vector (x, y, z) turned by the unit quaternion (qx, qy, qz, qw) (Pinocchio's order), or by
-    its inverse for sign -1: v + 2 w (u x v) + 2 u x (u x v), u the quaternion's vector part."""
-    ux, uy, uz, w = sign * quaternion[0], sign * quaternion[1], sign * quaternion[2], quaternion[3]
-    cx, cy, cz = uy * z - uz * y, uz * x - ux * z, ux * y - uy * x
-    return (
-        x + 2.0 * (w * cx + uy * cz - uz * cy),
-        y + 2.0 * (w * cy + uz * cx - ux * cz),
-        z + 2.0 * (w * cz + ux * cy - uy * cx),
-    )

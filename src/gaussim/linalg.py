@@ -1,5 +1,7 @@
 """Small compiled vector helpers for the kernels: loops, not BLAS (at a robot's sizes a BLAS call costs
-more than the arithmetic it does, and its code evicts the step's own from the instruction cache)."""
+more than the arithmetic it does, and its code evicts the step's own from the instruction cache), and
+not numba's array expressions or np.cross / np.linalg (each drags seconds of first-run compilation in:
+broadcasting and its shape-error messages, LAPACK wrappers)."""
 
 from __future__ import annotations
 
@@ -14,6 +16,12 @@ def dot(a, b):  # type: ignore[no-untyped-def]
     for i in range(len(a)):
         total += a[i] * b[i]
     return total
+
+
+@njit(cache=True, inline="always")
+def cross(a0, a1, a2, b0, b1, b2):  # type: ignore[no-untyped-def]
+    """a x b of two 3-vectors given by their components, as a tuple."""
+    return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
 
 
 @njit(cache=True)
@@ -77,3 +85,32 @@ def backward(L, y):  # type: ignore[no-untyped-def]
             total -= L[j, i] * y[j]
         y[i] = total / L[i, i]
     return y
+
+
+@njit(cache=True)
+def solve3(K, r0, r1, r2):  # type: ignore[no-untyped-def]
+    """K^-1 r for a nonsingular K (3, 3) and r = (r0, r1, r2), by Cramer's rule, as a tuple."""
+    c00 = K[1, 1] * K[2, 2] - K[1, 2] * K[2, 1]  # the cofactors of K's first row
+    c01 = K[1, 2] * K[2, 0] - K[1, 0] * K[2, 2]
+    c02 = K[1, 0] * K[2, 1] - K[1, 1] * K[2, 0]
+    det = K[0, 0] * c00 + K[0, 1] * c01 + K[0, 2] * c02
+    return (
+        (
+            c00 * r0
+            + (K[0, 2] * K[2, 1] - K[0, 1] * K[2, 2]) * r1
+            + (K[0, 1] * K[1, 2] - K[0, 2] * K[1, 1]) * r2
+        )
+        / det,
+        (
+            c01 * r0
+            + (K[0, 0] * K[2, 2] - K[0, 2] * K[2, 0]) * r1
+            + (K[0, 2] * K[1, 0] - K[0, 0] * K[1, 2]) * r2
+        )
+        / det,
+        (
+            c02 * r0
+            + (K[0, 1] * K[2, 0] - K[0, 0] * K[2, 1]) * r1
+            + (K[0, 0] * K[1, 1] - K[0, 1] * K[1, 0]) * r2
+        )
+        / det,
+    )

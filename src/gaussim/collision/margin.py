@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pinocchio as pin
-from numba import njit
 
+from ..kernels.collision import travel
 from .pairs import Pair
 
 
@@ -69,9 +69,9 @@ class MarginSchedule:
             if self.clearance - 2 * coarse > self.base_margin:
                 self.clearance -= coarse
                 return False
-        travel = _travel(*self.levers, v, x, dt, x_scale)
-        self.clearance -= travel
-        needed = self.base_margin + travel
+        distance = travel(*self.levers, v, x, dt, x_scale)
+        self.clearance -= distance
+        needed = self.base_margin + distance
         if needed > self.margin or (self.margin > self.base_margin and 3 * needed < self.margin):
             self.margin = max(self.base_margin, 1.5 * needed)
         return not self.clearance > self.margin
@@ -110,17 +110,3 @@ def _speed_levers(model: pin.Model, joint: int, center: np.ndarray, radius: floa
         reach += float(np.linalg.norm(model.jointPlacements[joint].translation))
         joint = model.parents[joint]
     return levers
-
-
-@njit(cache=True)
-def _travel(starts, coordinates, levers, v, x, dt, x_scale):  # type: ignore[no-untyped-def]
-    """The farthest a pair can close in a step: max_k dt sum_i levers[k, i] (|v_i| + x_scale |x_i|),
-    the levers in CSR form (see MarginSchedule.levers)."""
-    farthest = 0.0
-    for k in range(len(starts) - 1):
-        total = 0.0
-        for j in range(starts[k], starts[k + 1]):
-            i = coordinates[j]
-            total += levers[j] * (abs(v[i]) + x_scale * abs(x[i]))
-        farthest = max(farthest, total)
-    return dt * farthest

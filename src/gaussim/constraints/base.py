@@ -19,9 +19,9 @@ from typing import Any, Generic, Literal, TypeVar
 
 import numpy as np
 import pinocchio as pin
-from numba import vectorize
 
 from ..collision import Contacts
+from ..kernels.contact import bound_of
 from ..options import Options
 
 Level = Literal["velocity", "impulse", "acceleration"]
@@ -154,17 +154,6 @@ def stabilised_bound(
 
 # Levels as compiled code sees them.
 LEVELS = {"velocity": 0, "impulse": 1, "acceleration": 2}
-
-
-@vectorize(["float64(int64, float64, float64, float64, float64, float64, boolean)"], cache=True)
-def bound_of(level, dt, stabilisation, phi, rate, drift, unilateral):  # type: ignore[no-untyped-def]
-    """:func:`stabilised_bound` for a level code (LEVELS), elementwise; callable from compiled code."""
-    if level == 0:
-        return -(1.0 / dt if phi >= 0 and unilateral else stabilisation / dt) * phi
-    if level == 1:
-        return 0.0
-    gain = stabilisation / dt
-    return -drift - 2.0 * gain * rate - gain * gain * phi
 
 
 def is_active(ctx: Context, phi: np.ndarray, rate: np.ndarray, margin: float) -> np.ndarray:

@@ -44,23 +44,18 @@ from typing import Any
 import coal
 import numpy as np
 import pinocchio as pin
-from numba import njit
 
 from ..collision import Contacts
 from ..dynamics import (
     joint_jacobians,
     point_drifts,
     point_jacobians,
-    point_jacobians_from,
     point_placements,
     support_masks,
 )
-from ..linalg import dot
-from .base import LEVELS, ConstraintModule, Context, Rows, bound_of, is_active
+from ..kernels.contact import pyramids, slips, unpacked
+from .base import LEVELS, ConstraintModule, Context, Rows, is_active
 
-# Below this tangential speed a contact sticks: no sliding force at the acceleration level, no De
-# Saxce shift (a lagged slip that small is the step's own error, which mu would amplify) [m/s].
-SLIP_SPEED = 1e-4
 # Fixed-point iterations on the slip stop when max(1, mu) times its change is below this [m/s].
 SLIP_TOLERANCE = {"accurate": 1e-4, "exact": 1e-9}
 # Still above this after the step's passes, the iteration is far from its fixed point: the last QP
@@ -138,8 +133,9 @@ class ContactBatch:
     multipliers back into forces.
 
     Rows are grouped by contact: contact i owns rows starts[i] to starts[i + 1]. The per-step arrays
-    come from :func:`_pyramids` packed in one buffer (returning each would cost more than computing
-    it); :func:`_unpacked` gives views of them, read here only when asked for.
+    come from :func:`~gaussim.kernels.contact.pyramids` packed in one buffer (returning each would cost
+    more than computing it); :func:`~gaussim.kernels.contact.unpacked` gives views of them, read here
+    only when asked for.
 
     Attributes:
         contacts: m contacts.
@@ -168,7 +164,7 @@ class ContactBatch:
     def _views(self) -> tuple[np.ndarray, ...]:
         m = len(self.contacts)
         nv = (len(self.packed) - 3 * int(self.starts[-1]) - 6 * m) // (3 * m)
-        return _unpacked(self.packed, m, nv)
+        return unpacked(self.packed, m, nv)
 
     @property
     def J(self) -> np.ndarray:
@@ -199,22 +195,6 @@ def _tangential(u: np.ndarray, n: np.ndarray) -> np.ndarray:
     return u - _dot(u, n)[:, None] * n
 
 
-@njit(cache=True)
-def _unpacked(packed, m, nv):  # type: ignore[no-untyped-def]
-    """Views of the buffer :func:`_pyramids` fills: J (m, 3, nv), generators (R, 3), slip (m, 3),
-    friction (m, 3)."""
-    rows = (len(packed) - 3 * m * nv - 6 * m) // 3
-    a = 3 * m * nv  # where each part ends
-    b = a + 3 * rows
-    c = b + 3 * m
-    return (
-        packed[:a].reshape((m, 3, nv)),
-        packed[a:b].reshape((rows, 3)),
-        packed[b:c].reshape((m, 3)),
-        packed[c : c + 3 * m].reshape((m, 3)),
-    )
-
-
 def pyramid_rows(
     joint_jacobians: np.ndarray,
     masks: np.ndarray,
@@ -224,9 +204,9 @@ def pyramid_rows(
     iterate: tuple[np.ndarray, np.ndarray, np.ndarray],
     cone: tuple[np.ndarray, np.ndarray, bool],
 ) -> tuple[np.ndarray, ...]:
-    """Every contact's rows at ``ctx``'s level (:func:`_pyramids`, compiled): (rows (R, nv), bound (R,),
-    the packed buffer :class:`ContactBatch` reads, starts (m + 1,), sliding contacts or None, their
-    friction's generalized force or None).
+    """Every contact's rows at ``ctx``'s level (:func:`~gaussim.kernels.contact.pyramids`): (rows
+    (R, nv), bound (R,), the packed buffer :class:`ContactBatch` reads, starts (m + 1,), sliding
+    contacts or None, their friction's generalized force or None).
 
     Args:
         joint_jacobians, masks: what :func:`point_jacobians` reads.
@@ -241,7 +221,7 @@ def pyramid_rows(
     packed, starts = np.empty(3 * m * nv + 3 * most + 6 * m), np.empty(m + 1, np.int64)
     # read-only views whoever made them: one compiled signature (numba types writability)
     drift, iterate = _read_only(drift), tuple(_read_only(a) for a in iterate)  # type: ignore[assignment]
-    total, sliding, force = _pyramids(
+    total, sliding, force = pyramids(
         joint_jacobians,
         masks,
         contacts.joint,
@@ -275,129 +255,6 @@ def _read_only(array: np.ndarray) -> np.ndarray:
     view = array.view()
     view.flags.writeable = False
     return view
-
-
-@njit(cache=True)
-def _pyramids(  # type: ignore[no-untyped-def]
-    joint_jacobians,
-    masks,
-    joints,
-    other_joints,
-    points,
-    v,
-    x_free,
-    drift,
-    normal,
-    gap,
-    mu,
-    e,
-    slips,
-    stops,
-    normal_forces,
-    level,
-    cos,
-    sin,
-    pyramid,
-    bounds,
-    rows,
-    bound,
-    packed,
-    starts,
-):
-    """Every contact's rows, as the module docstring poses them; the per-contact work in one pass.
-
-    Args:
-        joint_jacobians, masks, joints, other_joints, points: what :func:`point_jacobians` reads.
-        v: the velocity (nv,); x_free: the unconstrained solution (nv,);
-        drift: Jdot v of the contacts at the acceleration level, else zeros, (m, 3).
-        slips: the lagged slip of each contact (m, 3), NaN where there is none (use the current one).
-        stops, normal_forces: acceleration-level sliding: contacts that stick instead, lagged lambda_n.
-        level: 0 velocity, 1 impulse, 2 acceleration; pyramid: fixed basis and no De Saxce shift.
-        bounds: (dt, stabilisation, restitution_threshold).
-
-    Fills the first R rows of ``rows`` (m facets, nv) and ``bound`` (m facets,), the first entries of
-    ``packed`` (the buffer :func:`_unpacked` reads: point Jacobians, generators, slip used, friction
-    force; room for m facets rows) and ``starts`` (m + 1,) (the first row of each contact, then R);
-    the caller allocates them, which costs less than a kernel's new arrays.
-
-    Returns:
-        R, and, when a contact gets an explicit friction force (acceleration-level sliding), which ones
-        (m,) and that force's generalized force (nv,), else None and None.
-    """
-    dt, stabilisation, threshold = bounds
-    m, nv, facets = len(joints), len(v), len(cos)
-    acceleration = level == 2
-    J3 = point_jacobians_from(joint_jacobians, masks, joints, other_joints, points)
-    starts[0], sliding = 0, np.zeros(m, np.bool_)
-    contact_bound, slip_used, u = np.empty(m), slips.copy(), np.empty((m, 3))
-    for i in range(m):
-        n = normal[i]
-        u0, u1, u2 = dot(J3[i, 0], v), dot(J3[i, 1], v), dot(J3[i, 2], v)
-        u[i] = (u0, u1, u2)
-        u_n = u0 * n[0] + u1 * n[1] + u2 * n[2]
-        if acceleration or np.isnan(slips[i, 0]):  # the current slip
-            slip_used[i] = (u0 - u_n * n[0], u1 - u_n * n[1], u2 - u_n * n[2])
-        speed = np.sqrt(slip_used[i, 0] ** 2 + slip_used[i, 1] ** 2 + slip_used[i, 2] ** 2)
-        sliding[i] = acceleration and mu[i] > 0 and speed > SLIP_SPEED and not stops[i]
-        starts[i + 1] = starts[i] + (1 if mu[i] == 0 or sliding[i] else facets)
-        contact_bound[i] = bound_of(level, dt, stabilisation, gap[i], 0.0, 0.0, True)
-        if not acceleration:
-            # restitution: an approaching contact that closes within the step leaves at -e u_n at least
-            # (velocity level: under the free motion, as the margin finds contacts earlier; impulse level:
-            # every contact here, is_active's closing test chose them); De Saxce shift mu |slip|
-            closes = level == 1 or gap[i] + dt * dot(n, J3[i] @ x_free) <= 0.0
-            if e[i] > 0 and -u_n > threshold and closes:
-                contact_bound[i] = max(contact_bound[i], -e[i] * u_n)
-            if not pyramid and speed > SLIP_SPEED:  # slower, it sticks: no shift to make
-                contact_bound[i] -= mu[i] * speed
-    total = starts[m]
-    J, generators, slip, friction = _unpacked(packed[: 3 * m * nv + 3 * total + 6 * m], m, nv)
-    J[:] = J3
-    slip[:] = slip_used
-    friction[:] = 0.0
-    force = np.zeros(nv)
-    for i in range(m):
-        n, r, count = normal[i], starts[i], starts[i + 1] - starts[i]
-        if sliding[i]:  # explicit Coulomb force opposite the slip, lambda_n iterated (module docstring)
-            speed = np.sqrt(slip[i, 0] ** 2 + slip[i, 1] ** 2 + slip[i, 2] ** 2)
-            for j in range(3):
-                friction[i, j] = -mu[i] * normal_forces[i] / speed * slip[i, j]
-                for k in range(nv):
-                    force[k] += friction[i, j] * J[i, j, k]
-        if count == 1:  # the normal row alone
-            generators[r] = n
-        else:  # friction opposes the tangential velocity the contact would have without it
-            # (acceleration level: the acceleration that keeps it, plus the one that stops it in the step)
-            tendency = np.array([dot(J[i, j], x_free) + drift[i, j] for j in range(3)])
-            if acceleration:
-                tendency += u[i] / dt
-            t = -tendency + (tendency[0] * n[0] + tendency[1] * n[1] + tendency[2] * n[2]) * n
-            norm = np.sqrt(t[0] ** 2 + t[1] ** 2 + t[2] ** 2)
-            if pyramid or norm <= 1e-12:  # a fixed basis: n x (the axis of n's smallest component)
-                axis = np.zeros(3)
-                axis[np.argmin(np.abs(n))] = 1.0
-                t = np.cross(n, axis)
-                norm = np.sqrt(t[0] ** 2 + t[1] ** 2 + t[2] ** 2)
-            t1 = t / norm
-            t2 = np.cross(n, t1)
-            for k in range(count):
-                for j in range(3):
-                    generators[r + k, j] = n[j] + mu[i] * (cos[k] * t1[j] + sin[k] * t2[j])
-        for k in range(count):
-            g = generators[r + k]
-            for c in range(nv):
-                rows[r + k, c] = g[0] * J[i, 0, c] + g[1] * J[i, 1, c] + g[2] * J[i, 2, c]
-            if acceleration:  # the row's drift; Baumgarte on the normal rate, the slip stopped in the step
-                u_n = n[0] * u[i, 0] + n[1] * u[i, 1] + n[2] * u[i, 2]
-                slip_rate = g[0] * u[i, 0] + g[1] * u[i, 1] + g[2] * u[i, 2] - u_n
-                row_drift = g[0] * drift[i, 0] + g[1] * drift[i, 1] + g[2] * drift[i, 2]
-                normal_bound = bound_of(level, dt, stabilisation, gap[i], u_n, row_drift, True)
-                bound[r + k] = normal_bound - slip_rate / dt
-            else:
-                bound[r + k] = contact_bound[i]
-    if sliding.any():
-        return total, sliding, force
-    return total, None, None
 
 
 class ContactModule(ConstraintModule[ContactBatch]):
@@ -516,12 +373,12 @@ class ContactModule(ConstraintModule[ContactBatch]):
             changed = not rows.settled
         if b.shifts and not b.relaxed:
             mu = b.contacts.friction
-            slip = _slips(b.packed, b.starts, x, normals, mu, SLIP_TOLERANCE[self.mode])
+            slip = slips(b.packed, b.starts, x, normals, mu, SLIP_TOLERANCE[self.mode])
             if slip is not None:
                 lagged = self._iterate(ctx)
                 lagged.passes += 1
                 last = lagged.passes >= ctx.options.friction_iterations - 1  # one QP left in the step
-                if last and _slips(b.packed, b.starts, x, normals, mu, RELAX_TOLERANCE) is not None:
+                if last and slips(b.packed, b.starts, x, normals, mu, RELAX_TOLERANCE) is not None:
                     lagged.relaxed = True  # far from the fixed point: that QP drops the shift
                     slip = np.zeros_like(slip)
                 lagged.slip = slip
@@ -561,43 +418,6 @@ def _anderson(history: tuple[list, list], x: np.ndarray, y: np.ndarray) -> np.nd
     R = Y - np.array(inputs)
     gamma = np.linalg.lstsq(np.diff(R, axis=0).T, R[-1], rcond=None)[0]
     return np.maximum(y - np.diff(Y, axis=0).T @ gamma, 0.0)
-
-
-@njit(cache=True)
-def _slips(packed, starts, x, normal, mu, tolerance):  # type: ignore[no-untyped-def]
-    """When the slip of a contact that refines its shift (one with a full pyramid) and is moving (a
-    sticking contact has no shift to refine) moved by more than ``tolerance`` / max(1, mu) (the
-    normal velocity error it causes is mu times that): the slips (m, 3) of solution x for those
-    contacts, the others' unchanged; else None. ``packed`` and ``starts`` are :func:`_pyramids`'.
-    (In scalars, no array per contact: this runs after every QP with friction.)"""
-    J, _, slip, _ = _unpacked(packed, len(normal), len(x))
-    moved = False
-    for i in range(len(slip)):
-        moving, u0, u1, u2 = _moving_slip(J, slip, starts, x, normal, i)
-        if moving:
-            change = max(abs(u0 - slip[i, 0]), abs(u1 - slip[i, 1]), abs(u2 - slip[i, 2]))
-            moved |= max(1.0, mu[i]) * change > tolerance
-    if not moved:
-        return None
-    result = slip.copy()
-    for i in range(len(slip)):
-        moving, u0, u1, u2 = _moving_slip(J, slip, starts, x, normal, i)
-        if moving:
-            result[i, 0], result[i, 1], result[i, 2] = u0, u1, u2
-    return result
-
-
-@njit(cache=True, inline="always")
-def _moving_slip(J, slip, starts, x, normal, i):  # type: ignore[no-untyped-def]
-    """(whether contact i refines its shift and its tangential velocity in solution x or its last
-    slip is moving, that velocity's 3 components)."""
-    if starts[i + 1] - starts[i] == 1:
-        return False, 0.0, 0.0, 0.0
-    u0, u1, u2 = dot(J[i, 0], x), dot(J[i, 1], x), dot(J[i, 2], x)
-    along = u0 * normal[i, 0] + u1 * normal[i, 1] + u2 * normal[i, 2]
-    u0, u1, u2 = u0 - along * normal[i, 0], u1 - along * normal[i, 1], u2 - along * normal[i, 2]
-    speed = np.sqrt(slip[i, 0] ** 2 + slip[i, 1] ** 2 + slip[i, 2] ** 2)
-    return speed > SLIP_SPEED or np.sqrt(u0**2 + u1**2 + u2**2) > SLIP_SPEED, u0, u1, u2
 
 
 def _drifts(ctx: Context, contacts: Contacts, radii: dict[str, float]) -> np.ndarray:

@@ -11,75 +11,12 @@ solution (a contact that keeps sticking, a limit that keeps holding); gaussim's 
 
 from __future__ import annotations
 
-import numpy as np
-from numba import njit
+from ..kernels.solver import active_set_candidate
 
-from ..linalg import backward, cholesky, dot, forward, matvec
-from .certificate import kkt_residuals
+__all__ = ["ACTIVE_SET_FLOOR", "active_set_candidate"]
 
-# Rounds of iterative refinement of the active-set solve: each divides the error of a multiplier
-# direction of curvature c by 1 + c / (ACTIVE_SET_SHIFT max diag G).
-ACTIVE_SET_REFINEMENTS = 2
-# The relative shift that makes the active rows' Delassus matrix G positive definite when those rows
-# are dependent (a sticking contact's four pyramid rows span three directions).
-ACTIVE_SET_SHIFT = 1e-12
 # In ProxQP's answer, an inequality row is active when its multiplier exceeds this fraction of the
 # largest one: ProxQP leaves multipliers of 1e-172 on inactive rows, which would make them equalities.
 # (The last solution keeps every positive multiplier's row: with this floor there, Talos with 16
 # friction facets met a QP that neither ProxQP nor its active set solves.)
 ACTIVE_SET_FLOOR = 1e-12
-
-
-@njit(cache=True, fastmath={"reassoc", "contract"})
-def active_set_candidate(H, g, A, b, C, l, x, multipliers, tolerance, floor, x_out, multipliers_out):  # type: ignore[no-untyped-def]
-    """(how, the residuals of :func:`~gaussim.solver.certificate.kkt_residuals`) for the first of two
-    candidates built from a solution (x, multipliers) that the relative KKT residual certifies
-    (<= ``tolerance``): that solution itself (how 1), then the solution of the problem with the rows
-    it held active (its equalities and the inequalities with a multiplier above ``floor`` times the
-    largest, and > 0) as equalities (how 2, written into ``x_out`` and ``multipliers_out``; see the
-    module's docstring). how 0: neither is certified.
-
-    G is shifted by ACTIVE_SET_SHIFT max diag G and the solve refined ACTIVE_SET_REFINEMENTS times
-    (dependent rows make G singular; their multipliers' split is then one of many, which the check
-    accepts when it is >= 0)."""
-    n_eq, nv = len(b), len(g)
-    residuals = kkt_residuals(H, g, A, b, C, l, x, multipliers[:n_eq], multipliers[n_eq:])
-    if residuals[1] <= tolerance:
-        return 1, residuals
-    inequality = multipliers[n_eq:]
-    least = floor * inequality.max() if len(inequality) else 0.0  # what an active row's exceeds
-    active = np.flatnonzero(inequality > max(least, 0.0))
-    k = n_eq + len(active)
-    K, r = np.empty((k, nv)), np.empty(k)
-    K[:n_eq], r[:n_eq] = A, b
-    for i in range(len(active)):
-        K[n_eq + i], r[n_eq + i] = C[active[i]], l[active[i]]
-    L = cholesky(H, 0.0)
-    if L is None:
-        return 0, residuals
-    W = forward(L, K)  # the rows of K L^-T, (k, nv)
-    h = forward(L, g.copy().reshape((1, nv)))[0]  # L^-1 g
-    G, rhs, largest = np.empty((k, k)), r, 0.0
-    for i in range(k):
-        for j in range(i + 1):
-            G[i, j] = G[j, i] = dot(W[i], W[j])
-        rhs[i] += dot(W[i], h)
-        largest = max(largest, G[i, i])
-    LG = cholesky(G, ACTIVE_SET_SHIFT * largest)
-    if LG is None:
-        return 0, residuals
-    lam = np.zeros(k)
-    for _ in range(ACTIVE_SET_REFINEMENTS):
-        step = rhs - matvec(G, lam)
-        lam += backward(LG, forward(LG, step.reshape((1, k)))[0])
-    y = -h  # W^T lam - h, then L^-T of it
-    for i in range(k):
-        for j in range(nv):
-            y[j] += lam[i] * W[i, j]
-    x_out[:] = backward(L, y)
-    multipliers_out[:] = 0.0
-    multipliers_out[:n_eq] = lam[:n_eq]
-    for i in range(len(active)):
-        multipliers_out[n_eq + active[i]] = lam[n_eq + i]
-    residuals = kkt_residuals(H, g, A, b, C, l, x_out, multipliers_out[:n_eq], multipliers_out[n_eq:])
-    return 2 if residuals[1] <= tolerance else 0, residuals

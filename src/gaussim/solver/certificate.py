@@ -15,10 +15,9 @@ import enum
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 
 from ..assembly import GaussProblem
-from ..linalg import dot, matvec
+from ..kernels.solver import kkt_residuals
 
 # A solution is accepted when its relative KKT residual (see Certificate) is below KKT_RTOL * eps_abs.
 KKT_RTOL = 100.0
@@ -145,42 +144,3 @@ def kkt_residual(problem: GaussProblem, x: np.ndarray, lambda_eq: np.ndarray, la
     (see the module's docstring); NaN when any of them is not finite."""
     p = problem
     return kkt_residuals(p.H, p.g, p.A, p.b, p.C, p.l, x, lambda_eq, lambda_in)[0]
-
-
-@njit(cache=True)
-def kkt_residuals(H, g, A, b, C, l, x, y, z):  # type: ignore[no-untyped-def]
-    """(the residual of :func:`kkt_residual`, the same with each term relative to its size, the
-    primal violation, the stationarity residual, the duality gap sum_i z_i s_i): the relative
-    residual takes the stationarity residual and the sign violation -z_i (both in the units of g)
-    relative to max(1, |g|_inf), a complementarity |z_i s_i| relative to max(1, |z_i|), which makes it
-    the slack of a row with a large multiplier (a heavy body's contact). All NaN when any term is not
-    finite."""
-    primal = relative = gap = 0.0
-    complementarity = 0.0
-    finite = True
-    size = 1.0
-    for i in range(len(g)):
-        size = max(size, abs(g[i]))
-    stationarity = matvec(H, x) + g
-    for i in range(len(b)):
-        for k in range(len(g)):  # loops, not array expressions: those allocate a temporary each
-            stationarity[k] -= y[i] * A[i, k]
-        violation = abs(dot(A[i], x) - b[i])
-        primal, finite = max(primal, violation), finite and np.isfinite(violation) and np.isfinite(y[i])
-    for i in range(len(l)):
-        for k in range(len(g)):
-            stationarity[k] -= z[i] * C[i, k]
-        slack = dot(C[i], x) - l[i]
-        gap += z[i] * slack
-        primal = max(primal, -slack)
-        complementarity = max(complementarity, -z[i], abs(z[i] * slack))
-        relative = max(relative, -z[i] / size, abs(z[i] * slack) / max(1.0, abs(z[i])))
-        finite = finite and np.isfinite(slack) and np.isfinite(z[i])
-    dual = 0.0
-    for i in range(len(g)):
-        dual, finite = max(dual, abs(stationarity[i])), finite and np.isfinite(stationarity[i])
-    worst = max(primal, complementarity, dual)
-    relative = max(relative, primal, dual / size)
-    if not finite:
-        return np.nan, np.nan, np.nan, np.nan, np.nan
-    return worst, relative, primal, dual, abs(gap)

@@ -16,10 +16,10 @@ from typing import Any
 
 import numpy as np
 import scipy.sparse
-from numba import njit
 
 from ..assembly import GaussProblem
 from ..exceptions import GaussimWarning
+from ..kernels.solver import read_results
 from ..options import Options
 from ..portable import portable_proxsuite
 from .active_set import ACTIVE_SET_FLOOR, active_set_candidate
@@ -213,7 +213,7 @@ class GaussSolver:
         x, y, z, info = self._results
         p = problem
         # copies (ProxQP's arrays are overwritten by the next solve); the multipliers are -y, -z
-        x, multipliers, residual, relative, _, _, _ = _read(p.H, p.g, p.A, p.b, p.C, p.l, x, y, z)
+        x, multipliers, residual, relative, _, _, _ = read_results(p.H, p.g, p.A, p.b, p.C, p.l, x, y, z)
         status = info.status
         certificate = Certificate(  # ProxQP's info gives Python ints and floats
             Status.SOLVED if status is _SOLVED else _STATUS[status],
@@ -290,16 +290,6 @@ class GaussSolver:
         _initialise(qp, p, equalities, inequalities)
         qp.solve()
         return np.array(qp.results.x)
-
-
-@njit(cache=True)
-def _read(H, g, A, b, C, l, x, y, z):  # type: ignore[no-untyped-def]
-    """(x, the multipliers [-y; -z], the residuals of :func:`kkt_residuals` there), copied out of
-    ProxQP's results."""
-    n_eq, n_in = len(b), len(l)
-    x, multipliers = x.copy(), np.empty(n_eq + n_in)
-    multipliers[:n_eq], multipliers[n_eq:] = -y[:n_eq], -z[:n_in]
-    return (x, multipliers, *kkt_residuals(H, g, A, b, C, l, x, multipliers[:n_eq], multipliers[n_eq:]))
 
 
 def _mended(rescued: Solution, source: Solution) -> Solution:

@@ -1,0 +1,165 @@
+"""Compiled kernels of the collision stage: hulls on the ground plane (:mod:`gaussim.collision.ground`),
+the travel bound of the margin schedule (:mod:`gaussim.collision.margin`)."""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+# A polyhedron on the ground found to touch at one point keeps that verdict while its orientation
+# cannot have brought a vertex this much closer to the ground than the deepest one [m].
+NARROW_SLACK = 2e-3
+
+
+@njit(cache=True)
+def ground_hulls(
+    rotations,
+    translations,
+    plane,
+    columns,
+    first,
+    neighbours,
+    deepest,
+    narrow_at,
+    turn2,
+    rounding,
+    directions,
+    margin,
+    patch,
+    pair,
+    pairs_out,
+    points_out,
+    normals_out,
+    gaps_out,
+):  # type: ignore[no-untyped-def]
+    """The compiled pass of :func:`gaussim.collision.ground.touching` (the arrays of its ``Hulls``; updates
+    ``deepest`` and ``narrow_at``): fills the first k entries of the ``*_out`` arrays with the contacts, hull
+    by hull; returns (k, the least gap of all the hulls). ``patch``: (PATCH_TOLERANCE, PATCH_MIN_EXTENT) of
+    :mod:`gaussim.collision.contacts`.
+
+    The deepest vertex is found by descent along the hull's edges from the last one: a vertex no
+    neighbour of which is deeper is the deepest of a convex polyhedron (a linear function has no
+    other local minimum on its vertex graph)."""
+    count, size = columns.shape[0], columns.shape[2]
+    tolerance, extent = patch
+    c = np.empty(4)  # the ground seen from the joint: (n^T R, n^T p - height)
+    heights, world = np.empty(size), np.empty((size, 3))
+    chosen = np.zeros(size, np.bool_)
+    out = 0
+    least = np.inf
+    for k in range(count):
+        R, p, X = rotations[k], translations[k], columns[k]
+        for j in range(3):
+            c[j] = plane[k, 0] * R[0, j] + plane[k, 1] * R[1, j] + plane[k, 2] * R[2, j]
+        c[3] = plane[k, 0] * p[0] + plane[k, 1] * p[1] + plane[k, 2] * p[2] + plane[k, 3]
+        i = deepest[k]
+        lowest = c[0] * X[0, i] + c[1] * X[1, i] + c[2] * X[2, i] + c[3]
+        descending = True
+        while descending:
+            descending = False
+            for e in range(first[k, i], first[k, i + 1]):
+                j = neighbours[k, e]
+                height = c[0] * X[0, j] + c[1] * X[1, j] + c[2] * X[2, j] + c[3]
+                if height < lowest:
+                    i, lowest, descending = j, height, True
+                    break
+        deepest[k] = i
+        gap = lowest - rounding[k]
+        least = min(least, gap)
+        if gap > margin:
+            continue
+        turned = (c[0] - narrow_at[k, 0]) ** 2 + (c[1] - narrow_at[k, 1]) ** 2 + (c[2] - narrow_at[k, 2]) ** 2
+        narrow = turned <= turn2[k]  # False where no verdict was kept (NaN)
+        if not narrow:
+            low, high = _unbounded()
+            for v in range(size):
+                if (
+                    c[0] * X[0, v] + c[1] * X[1, v] + c[2] * X[2, v] + c[3]
+                    <= lowest + tolerance + NARROW_SLACK
+                ):
+                    for j in range(3):
+                        low[j], high[j] = min(low[j], X[j, v]), max(high[j], X[j, v])
+            narrow = _extent(low, high) <= extent
+            for j in range(3):
+                narrow_at[k, j] = c[j] if narrow else np.nan
+        if narrow:
+            chosen[:] = False
+            chosen[i] = True
+            for j in range(3):
+                world[i, j] = R[j, 0] * X[0, i] + R[j, 1] * X[1, i] + R[j, 2] * X[2, i] + p[j]
+            heights[i] = gap
+        else:
+            _outline(c, R, p, X, rounding[k], directions[k], margin, patch, gap, heights, world, chosen)
+        for v in range(size):
+            if chosen[v]:
+                pairs_out[out], gaps_out[out] = pair[k], heights[v]
+                for j in range(3):
+                    points_out[out, j] = world[v, j] - rounding[k] * plane[k, j]
+                    normals_out[out, j] = plane[k, j]
+                out += 1
+    return out, least
+
+
+@njit(cache=True)
+def _outline(c, R, p, X, rounding, directions, margin, patch, gap, heights, world, chosen):  # type: ignore[no-untyped-def]
+    """A hull touching widely (ground ``c`` seen from its joint at (R, p), vertices X, the least
+    ``gap``): marks in ``chosen`` its vertices within PATCH_TOLERANCE of the deepest (or penetrating)
+    that are extreme along ``directions``, or the deepest alone when they span at most
+    PATCH_MIN_EXTENT, with their gaps in ``heights`` and world points in ``world``."""
+    size, (tolerance, extent) = X.shape[1], patch
+    bound = max(0.0, min(margin, gap + tolerance))
+    low, high = _unbounded()
+    deepest, lowest = -1, np.inf
+    for v in range(size):
+        heights[v] = c[0] * X[0, v] + c[1] * X[1, v] + c[2] * X[2, v] + c[3] - rounding
+        chosen[v] = False
+        if heights[v] <= bound:
+            for j in range(3):
+                world[v, j] = R[j, 0] * X[0, v] + R[j, 1] * X[1, v] + R[j, 2] * X[2, v] + p[j]
+                low[j], high[j] = min(low[j], world[v, j]), max(high[j], world[v, j])
+            if heights[v] < lowest:
+                deepest, lowest = v, heights[v]
+    if _extent(low, high) <= extent:
+        chosen[deepest] = True
+        return
+    for d in range(directions.shape[0]):
+        best, reach = -1, -np.inf
+        for v in range(size):
+            if heights[v] <= bound:
+                along = (
+                    world[v, 0] * directions[d, 0]
+                    + world[v, 1] * directions[d, 1]
+                    + world[v, 2] * directions[d, 2]
+                )
+                if along > reach:
+                    best, reach = v, along
+        chosen[best] = True
+
+
+@njit(cache=True, inline="always")
+def _unbounded():  # type: ignore[no-untyped-def]
+    """An empty bounding box: (low, high) = (+inf, -inf) in each of 3 coordinates."""
+    low, high = np.empty(3), np.empty(3)
+    for j in range(3):
+        low[j], high[j] = np.inf, -np.inf
+    return low, high
+
+
+@njit(cache=True, inline="always")
+def _extent(low, high):  # type: ignore[no-untyped-def]
+    """The largest side of the bounding box (low, high), each (3,)."""
+    return max(high[0] - low[0], high[1] - low[1], high[2] - low[2])
+
+
+@njit(cache=True)
+def travel(starts, coordinates, levers, v, x, dt, x_scale):  # type: ignore[no-untyped-def]
+    """The farthest a pair can close in a step: max_k dt sum_i levers[k, i] (|v_i| + x_scale |x_i|),
+    the levers in CSR form (row starts, coordinates, values; see MarginSchedule.levers)."""
+    farthest = 0.0
+    for k in range(len(starts) - 1):
+        total = 0.0
+        for j in range(starts[k], starts[k + 1]):
+            i = coordinates[j]
+            total += levers[j] * (abs(v[i]) + x_scale * abs(x[i]))
+        farthest = max(farthest, total)
+    return dt * farthest

@@ -1,0 +1,217 @@
+"""Compiled kernels of the contact rows (:mod:`gaussim.constraints.contact`)."""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, vectorize
+
+from ..linalg import cross, dot
+from .dynamics import point_jacobians_into
+
+
+@vectorize(["float64(int64, float64, float64, float64, float64, float64, boolean)"], cache=True)
+def bound_of(level, dt, stabilisation, phi, rate, drift, unilateral):  # type: ignore[no-untyped-def]
+    """:func:`gaussim.constraints.base.stabilised_bound` for a level code (its LEVELS), elementwise;
+    callable from compiled code."""
+    if level == 0:
+        return -(1.0 / dt if phi >= 0 and unilateral else stabilisation / dt) * phi
+    if level == 1:
+        return 0.0
+    gain = stabilisation / dt
+    return -drift - 2.0 * gain * rate - gain * gain * phi
+
+
+# Below this tangential speed a contact sticks: no sliding force at the acceleration level, no De
+# Saxce shift (a lagged slip that small is the step's own error, which mu would amplify) [m/s].
+SLIP_SPEED = 1e-4
+
+
+@njit(cache=True)
+def unpacked(packed, m, nv):  # type: ignore[no-untyped-def]
+    """Views of the buffer :func:`pyramids` fills: J (m, 3, nv), generators (R, 3), slip (m, 3),
+    friction (m, 3)."""
+    rows = (len(packed) - 3 * m * nv - 6 * m) // 3
+    a = 3 * m * nv  # where each part ends
+    b = a + 3 * rows
+    c = b + 3 * m
+    return (
+        packed[:a].reshape((m, 3, nv)),
+        packed[a:b].reshape((rows, 3)),
+        packed[b:c].reshape((m, 3)),
+        packed[c : c + 3 * m].reshape((m, 3)),
+    )
+
+
+@njit(cache=True)
+def pyramids(  # type: ignore[no-untyped-def]
+    joint_jacobians,
+    masks,
+    joints,
+    other_joints,
+    points,
+    v,
+    x_free,
+    drift,
+    normal,
+    gap,
+    mu,
+    e,
+    slips,
+    stops,
+    normal_forces,
+    level,
+    cos,
+    sin,
+    pyramid,
+    bounds,
+    rows,
+    bound,
+    packed,
+    starts,
+):
+    """Every contact's rows, as :mod:`gaussim.constraints.contact` poses them, in one pass.
+
+    Args:
+        joint_jacobians, masks, joints, other_joints, points: what
+            :func:`gaussim.dynamics.point_jacobians` reads.
+        v: the velocity (nv,); x_free: the unconstrained solution (nv,);
+        drift: Jdot v of the contacts at the acceleration level, else zeros, (m, 3).
+        slips: the lagged slip of each contact (m, 3), NaN where there is none (use the current one).
+        stops, normal_forces: acceleration-level sliding: contacts that stick instead, lagged lambda_n.
+        level: 0 velocity, 1 impulse, 2 acceleration; pyramid: fixed basis and no De Saxce shift.
+        bounds: (dt, stabilisation, restitution_threshold).
+
+    Fills the first R rows of ``rows`` (m facets, nv) and ``bound`` (m facets,), the first entries of
+    ``packed`` (the buffer :func:`unpacked` reads: point Jacobians, generators, slip used, friction
+    force; room for m facets rows) and ``starts`` (m + 1,) (the first row of each contact, then R);
+    the caller allocates them, which costs less than a kernel's new arrays.
+
+    Returns:
+        R, and, when a contact gets an explicit friction force (acceleration-level sliding), which ones
+        (m,) and that force's generalized force (nv,), else None and None.
+    """
+    dt, stabilisation, threshold = bounds
+    m, nv, facets = len(joints), len(v), len(cos)
+    acceleration = level == 2
+    J = packed[: 3 * m * nv].reshape((m, 3, nv))  # the buffer's first part, whatever R is
+    point_jacobians_into(J, joint_jacobians, masks, joints, other_joints, points)
+    starts[0], sliding, any_sliding = 0, np.zeros(m, np.bool_), False
+    contact_bound, slip_used, u, free = np.empty(m), np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 3))
+    for i in range(m):
+        n0, n1, n2 = normal[i, 0], normal[i, 1], normal[i, 2]
+        u0, u1, u2 = dot(J[i, 0], v), dot(J[i, 1], v), dot(J[i, 2], v)
+        u[i, 0], u[i, 1], u[i, 2] = u0, u1, u2
+        free[i, 0], free[i, 1], free[i, 2] = dot(J[i, 0], x_free), dot(J[i, 1], x_free), dot(J[i, 2], x_free)
+        u_n = u0 * n0 + u1 * n1 + u2 * n2
+        if acceleration or np.isnan(slips[i, 0]):  # the current slip
+            slip_used[i, 0], slip_used[i, 1], slip_used[i, 2] = u0 - u_n * n0, u1 - u_n * n1, u2 - u_n * n2
+        else:
+            slip_used[i, 0], slip_used[i, 1], slip_used[i, 2] = slips[i, 0], slips[i, 1], slips[i, 2]
+        speed = np.sqrt(slip_used[i, 0] ** 2 + slip_used[i, 1] ** 2 + slip_used[i, 2] ** 2)
+        sliding[i] = acceleration and mu[i] > 0 and speed > SLIP_SPEED and not stops[i]
+        any_sliding |= sliding[i]
+        starts[i + 1] = starts[i] + (1 if mu[i] == 0 or sliding[i] else facets)
+        contact_bound[i] = bound_of(level, dt, stabilisation, gap[i], 0.0, 0.0, True)
+        if not acceleration:
+            # restitution: an approaching contact that closes within the step leaves at -e u_n at least
+            # (velocity level: under the free motion, as the margin finds contacts earlier; impulse level:
+            # every contact here, is_active's closing test chose them); De Saxce shift mu |slip|
+            closes = level == 1 or gap[i] + dt * (n0 * free[i, 0] + n1 * free[i, 1] + n2 * free[i, 2]) <= 0.0
+            if e[i] > 0 and -u_n > threshold and closes:
+                contact_bound[i] = max(contact_bound[i], -e[i] * u_n)
+            if not pyramid and speed > SLIP_SPEED:  # slower, it sticks: no shift to make
+                contact_bound[i] -= mu[i] * speed
+    total = starts[m]
+    J, generators, slip, friction = unpacked(packed[: 3 * m * nv + 3 * total + 6 * m], m, nv)
+    for i in range(m):
+        for j in range(3):
+            slip[i, j], friction[i, j] = slip_used[i, j], 0.0
+    force = np.zeros(nv)
+    for i in range(m):
+        n0, n1, n2 = normal[i, 0], normal[i, 1], normal[i, 2]
+        r, count = starts[i], starts[i + 1] - starts[i]
+        if sliding[
+            i
+        ]:  # explicit Coulomb force opposite the slip, lambda_n iterated (gaussim.constraints.contact)
+            speed = np.sqrt(slip[i, 0] ** 2 + slip[i, 1] ** 2 + slip[i, 2] ** 2)
+            for j in range(3):
+                friction[i, j] = -mu[i] * normal_forces[i] / speed * slip[i, j]
+                for k in range(nv):
+                    force[k] += friction[i, j] * J[i, j, k]
+        if count == 1:  # the normal row alone
+            generators[r, 0], generators[r, 1], generators[r, 2] = n0, n1, n2
+        else:  # friction opposes the tangential velocity the contact would have without it
+            # (acceleration level: the acceleration that keeps it, plus the one that stops it in the step)
+            d0, d1, d2 = free[i, 0] + drift[i, 0], free[i, 1] + drift[i, 1], free[i, 2] + drift[i, 2]
+            if acceleration:
+                d0, d1, d2 = d0 + u[i, 0] / dt, d1 + u[i, 1] / dt, d2 + u[i, 2] / dt
+            along = d0 * n0 + d1 * n1 + d2 * n2
+            t0, t1, t2 = -d0 + along * n0, -d1 + along * n1, -d2 + along * n2
+            norm = np.sqrt(t0**2 + t1**2 + t2**2)
+            if pyramid or norm <= 1e-12:  # a fixed basis: n x (the axis of n's smallest component)
+                a0, a1, a2 = abs(n0), abs(n1), abs(n2)
+                if a0 <= a1 and a0 <= a2:
+                    t0, t1, t2 = cross(n0, n1, n2, 1.0, 0.0, 0.0)
+                elif a1 <= a2:
+                    t0, t1, t2 = cross(n0, n1, n2, 0.0, 1.0, 0.0)
+                else:
+                    t0, t1, t2 = cross(n0, n1, n2, 0.0, 0.0, 1.0)
+                norm = np.sqrt(t0**2 + t1**2 + t2**2)
+            t0, t1, t2 = t0 / norm, t1 / norm, t2 / norm
+            s0, s1, s2 = cross(n0, n1, n2, t0, t1, t2)
+            for k in range(count):
+                generators[r + k, 0] = n0 + mu[i] * (cos[k] * t0 + sin[k] * s0)
+                generators[r + k, 1] = n1 + mu[i] * (cos[k] * t1 + sin[k] * s1)
+                generators[r + k, 2] = n2 + mu[i] * (cos[k] * t2 + sin[k] * s2)
+        for k in range(count):
+            g = generators[r + k]
+            for c in range(nv):
+                rows[r + k, c] = g[0] * J[i, 0, c] + g[1] * J[i, 1, c] + g[2] * J[i, 2, c]
+            if acceleration:  # the row's drift; Baumgarte on the normal rate, the slip stopped in the step
+                u_n = n0 * u[i, 0] + n1 * u[i, 1] + n2 * u[i, 2]
+                slip_rate = g[0] * u[i, 0] + g[1] * u[i, 1] + g[2] * u[i, 2] - u_n
+                row_drift = g[0] * drift[i, 0] + g[1] * drift[i, 1] + g[2] * drift[i, 2]
+                normal_bound = bound_of(level, dt, stabilisation, gap[i], u_n, row_drift, True)
+                bound[r + k] = normal_bound - slip_rate / dt
+            else:
+                bound[r + k] = contact_bound[i]
+    if any_sliding:
+        return total, sliding, force
+    return total, None, None
+
+
+@njit(cache=True)
+def slips(packed, starts, x, normal, mu, tolerance):  # type: ignore[no-untyped-def]
+    """When the slip of a contact that refines its shift (one with a full pyramid) and is moving (a
+    sticking contact has no shift to refine) moved by more than ``tolerance`` / max(1, mu) (the
+    normal velocity error it causes is mu times that): the slips (m, 3) of solution x for those
+    contacts, the others' unchanged; else None. ``packed`` and ``starts`` are :func:`pyramids`'.
+    (In scalars, no array per contact: this runs after every QP with friction.)"""
+    J, _, slip, _ = unpacked(packed, len(normal), len(x))
+    moved = False
+    for i in range(len(slip)):
+        moving, u0, u1, u2 = _moving_slip(J, slip, starts, x, normal, i)
+        if moving:
+            change = max(abs(u0 - slip[i, 0]), abs(u1 - slip[i, 1]), abs(u2 - slip[i, 2]))
+            moved |= max(1.0, mu[i]) * change > tolerance
+    if not moved:
+        return None
+    result = slip.copy()
+    for i in range(len(slip)):
+        moving, u0, u1, u2 = _moving_slip(J, slip, starts, x, normal, i)
+        if moving:
+            result[i, 0], result[i, 1], result[i, 2] = u0, u1, u2
+    return result
+
+
+@njit(cache=True, inline="always")
+def _moving_slip(J, slip, starts, x, normal, i):  # type: ignore[no-untyped-def]
+    """(whether contact i refines its shift and its tangential velocity in solution x or its last
+    slip is moving, that velocity's 3 components)."""
+    if starts[i + 1] - starts[i] == 1:
+        return False, 0.0, 0.0, 0.0
+    u0, u1, u2 = dot(J[i, 0], x), dot(J[i, 1], x), dot(J[i, 2], x)
+    along = u0 * normal[i, 0] + u1 * normal[i, 1] + u2 * normal[i, 2]
+    u0, u1, u2 = u0 - along * normal[i, 0], u1 - along * normal[i, 1], u2 - along * normal[i, 2]
+    speed = np.sqrt(slip[i, 0] ** 2 + slip[i, 1] ** 2 + slip[i, 2] ** 2)
+    return speed > SLIP_SPEED or np.sqrt(u0**2 + u1**2 + u2**2) > SLIP_SPEED, u0, u1, u2

@@ -1,0 +1,150 @@
+"""Compiled kernels of the dynamics stage (:mod:`gaussim.dynamics`): the free motion's linear term, the
+floating bases' terms, point Jacobians."""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from ..linalg import cross, dot, finite, solve3
+
+
+@njit(cache=True)
+def linear_term(M, v, tau, nle, dt, f, g):  # type: ignore[no-untyped-def]
+    """Fill f = M v + dt F at the velocity level (dt > 0), F at the acceleration level (dt = 0), with
+    F = tau - b, and g = -f; False when tau is not finite."""
+    for i in range(len(nle)):
+        if not np.isfinite(tau[i]):
+            return False
+        f[i] = tau[i] - nle[i]
+    if dt > 0:
+        for i in range(len(f)):
+            f[i] = dot(M[i], v) + dt * f[i]
+    for i in range(len(f)):
+        g[i] = -f[i]
+    return True
+
+
+@njit(cache=True)
+def free_velocity(v, a_free, dt, out, bases, inertias, rigid):  # type: ignore[no-untyped-def]
+    """out = v + dt a_free, the next velocity when nothing restricts the motion, with the floating bases
+    posed as :func:`floating_terms` poses them; returns the reach sum_i |v_i| + |out_i| (see
+    gaussim.dynamics.DynamicsStage.reach), NaN when out is not finite."""
+    for i in range(len(v)):
+        out[i] = v[i] + dt * a_free[i]
+    floating_terms(v, out, dt, False, bases, inertias, rigid)
+    reach = 0.0
+    for i in range(len(v)):
+        reach += abs(v[i]) + abs(out[i])
+    return reach if finite(out) else np.nan
+
+
+# Newton iterations of a rigid base's midpoint gyroscopic term stop below this relative change.
+_MIDPOINT_TOLERANCE = 1e-15
+
+
+@njit(cache=True)
+def floating_terms(v, x, dt, acceleration, bases, inertias, rigid):  # type: ignore[no-untyped-def]
+    """Pose the free solution x of the floating ``bases`` (first velocity indices) as
+    :class:`gaussim.dynamics.FloatingBases` says, in place: x = v + dt a (velocity level) or x = a
+    (``acceleration`` level) from ABA's a, time step ``dt`` [s]. ``inertias`` (k, 3, 3) and ``rigid``
+    (k,) as there."""
+    h = 1.0 if acceleration else dt
+    for k in range(len(bases)):
+        i = bases[k]
+        w0, w1, w2 = v[i + 3], v[i + 4], v[i + 5]
+        x[i] += h * (w1 * v[i + 2] - w2 * v[i + 1])  # + w x v_l: the frame's turn leaves the acceleration
+        x[i + 1] += h * (w2 * v[i] - w0 * v[i + 2])
+        x[i + 2] += h * (w0 * v[i + 1] - w1 * v[i])
+        if rigid[k]:
+            t0, t1, t2 = x[i + 3], x[i + 4], x[i + 5]
+            if acceleration:
+                u0, u1, u2 = midpoint_turn(inertias[k], w0, w1, w2, dt * t0, dt * t1, dt * t2, dt)
+                x[i + 3], x[i + 4], x[i + 5] = u0 / dt, u1 / dt, u2 / dt
+            else:
+                u0, u1, u2 = midpoint_turn(inertias[k], w0, w1, w2, t0 - w0, t1 - w1, t2 - w2, dt)
+                x[i + 3], x[i + 4], x[i + 5] = w0 + u0, w1 + u1, w2 + u2
+
+
+@njit(cache=True)
+def midpoint_turn(I, w0, w1, w2, u0, u1, u2, dt):  # type: ignore[no-untyped-def]
+    """The change u of a rigid body's angular velocity w [rad/s] in a step dt [s] with the gyroscopic
+    term at the midpoint, I u = dt tau - dt w_m x I w_m, w_m = w + u / 2, from the explicit change u
+    (whose torque is dt tau = I u + dt w x I w); Newton's method on the 3 x 3 system. In scalars, as
+    tuples."""
+    a0, a1, a2 = _times(I, u0, u1, u2)
+    b0, b1, b2 = _times(I, w0, w1, w2)
+    c0, c1, c2 = cross(w0, w1, w2, b0, b1, b2)
+    rhs0, rhs1, rhs2 = a0 + dt * c0, a1 + dt * c1, a2 + dt * c2
+    K = np.empty((3, 3))
+    for _ in range(20):
+        m0, m1, m2 = w0 + 0.5 * u0, w1 + 0.5 * u1, w2 + 0.5 * u2
+        n0, n1, n2 = _times(I, m0, m1, m2)
+        a0, a1, a2 = _times(I, u0, u1, u2)
+        c0, c1, c2 = cross(m0, m1, m2, n0, n1, n2)
+        r0, r1, r2 = a0 + dt * c0 - rhs0, a1 + dt * c1 - rhs1, a2 + dt * c2 - rhs2
+        # d r / d u = I + dt / 2 ([w_m]x I - [I w_m]x), column by column
+        for c in range(3):
+            e0, e1, e2 = cross(
+                1.0 if c == 0 else 0.0, 1.0 if c == 1 else 0.0, 1.0 if c == 2 else 0.0, n0, n1, n2
+            )
+            f0, f1, f2 = cross(m0, m1, m2, I[0, c], I[1, c], I[2, c])
+            K[0, c] = I[0, c] + 0.5 * dt * (e0 + f0)
+            K[1, c] = I[1, c] + 0.5 * dt * (e1 + f1)
+            K[2, c] = I[2, c] + 0.5 * dt * (e2 + f2)
+        s0, s1, s2 = solve3(K, r0, r1, r2)
+        u0, u1, u2 = u0 - s0, u1 - s1, u2 - s2
+        size = np.sqrt(u0 * u0 + u1 * u1 + u2 * u2) + np.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+        if np.sqrt(s0 * s0 + s1 * s1 + s2 * s2) <= _MIDPOINT_TOLERANCE * size:
+            break
+    return u0, u1, u2
+
+
+@njit(cache=True, inline="always")
+def _times(I, x0, x1, x2):  # type: ignore[no-untyped-def]
+    """I x for I (3, 3) and x = (x0, x1, x2), as a tuple."""
+    return (
+        I[0, 0] * x0 + I[0, 1] * x1 + I[0, 2] * x2,
+        I[1, 0] * x0 + I[1, 1] * x1 + I[1, 2] * x2,
+        I[2, 0] * x0 + I[2, 1] * x1 + I[2, 2] * x2,
+    )
+
+
+@njit(cache=True)
+def negated_product(M, x):  # type: ignore[no-untyped-def]
+    """-M x."""
+    result = np.empty(M.shape[0])
+    for i in range(M.shape[0]):
+        result[i] = -dot(M[i], x)
+    return result
+
+
+@njit(cache=True)
+def point_jacobians_into(out, J, masks, joints, other_joints, points):  # type: ignore[no-untyped-def]
+    """:func:`gaussim.dynamics.point_jacobians` from the joint Jacobians J (6, nv), written into
+    ``out`` (m, 3, nv)."""
+    for i in range(len(joints)):
+        px, py, pz = points[i, 0], points[i, 1], points[i, 2]
+        for k in range(J.shape[1]):
+            moving = masks[joints[i], k] - masks[other_joints[i], k]
+            if moving != 0.0:  # v_O + w x p, with v_O at the world origin
+                out[i, 0, k] = moving * (J[0, k] + J[4, k] * pz - J[5, k] * py)
+                out[i, 1, k] = moving * (J[1, k] + J[5, k] * px - J[3, k] * pz)
+                out[i, 2, k] = moving * (J[2, k] + J[3, k] * py - J[4, k] * px)
+            else:
+                out[i, 0, k] = out[i, 1, k] = out[i, 2, k] = 0.0
+
+
+@njit(cache=True)
+def unloaded(J, multipliers, velocity, free):  # type: ignore[no-untyped-def]
+    """Clear ``free[k]`` for each base k (its velocity at ``velocity[k]``) that a row of J with a
+    nonzero multiplier reads."""
+    for r in range(len(multipliers)):
+        if multipliers[r] == 0.0:
+            continue
+        for k in range(len(velocity)):
+            if free[k]:
+                for i in range(velocity[k], velocity[k] + 6):
+                    if J[r, i] != 0.0:
+                        free[k] = False
+                        break

@@ -1,0 +1,120 @@
+"""Compile the kernels into numba's cache ahead of the first run: ``python -m gaussim.kernels.prebuild``.
+
+The build runs it (setup.py) on the package it installs, so that the numba cache files
+(``__pycache__/*.nbi``, ``*.nbc``) ship beside the kernels. numba takes a cached kernel when its source
+file's content, numba's version and the machine's CPU match the ones it was compiled with; else it
+compiles the kernel at its first call, as without this module.
+
+Each signature is written in a short code, one token per argument: ``f``, ``i``, ``b`` (float64, int64,
+bool scalars), ``f2`` (a float64 array of 2 dimensions, C order), ``F`` after the dimensions for
+Fortran order, ``r`` for a read-only array (``f1r``), ``*n`` for a tuple of n of them (``f2F*4``).
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+import time
+
+from numba.core import types
+from numba.core.registry import CPUDispatcher
+
+_DTYPES = {"f": types.float64, "i": types.int64, "b": types.boolean}
+_CODES: dict[types.Type, str] = {dtype: code for code, dtype in _DTYPES.items()}
+
+_SIDES = ("f2 f1 f2 f1", "f2 f1 f2r f1r", "f2r f1r f2 f1")
+
+# The signatures the shipped scenes call the kernels with from Python (both schemes): tests/test_kernels.py
+# checks that the main job needs no other.
+SIGNATURES = {
+    "dynamics.linear_term": [
+        "f2 f1 f1r f1 f f1 f1",
+        "f2 f1 f1 f1 f f1 f1",
+        "f2 f1r f1 f1 f f1 f1",
+        "f2 f1r f1r f1 f f1 f1",
+    ],
+    "dynamics.free_velocity": ["f1r f1 f f1 i1 f3 b1"],
+    "dynamics.floating_terms": ["f1r f1 f b i1 f3 b1", "f1 f1 f b i1 f3 b1"],
+    "dynamics.negated_product": ["f2 f1"],
+    "dynamics.point_jacobians_into": ["f3 f2F f2 i1r i1r f2", "f3 f2F f2 i1 i1 f2"],
+    "dynamics.unloaded": ["f2 f1 i1 b1"],
+    "integrator.displacement": ["f1 f f1"],
+    "integrator.midpoint_turns": ["f1r f1 f i1 b1 f1"],
+    "integrator.move_bases": ["f1r f1 f1 f i1 i1"],
+    "actuation.damped_torque": ["f1 f1 f1r f1"],
+    "collision.ground_hulls": [
+        f"f2F*{n} f1*{n} f2 f3 i2 i2 i1 f2 f1 f1 f3 f f*2 i1 i1 f2 f2 f1" for n in (1, 2, 4, 5)
+    ],
+    "collision.travel": ["i1 i1 f1 f1r f1 f f"],
+    "contact.unpacked": ["f1 i i"],
+    "contact.pyramids": [
+        f"f2F f2 {joints} {joints} f2 {v} {x} f2r f2 f1 {mu} {mu} f2r b1r f1r i f1 f1 b f*3 f2 f1 f1 i1"
+        for joints, mu in (("i1", "f1"), ("i1r", "f1r"))  # all the contacts, or those a level keeps
+        for v, x in (("f1", "f1"), ("f1r", "f1"), ("f1r", "f1r"))
+    ],
+    "contact.slips": ["f1 i1 f1 f2 f1 f", "f1 i1 f1 f2 f1r f"],
+    # the equalities (A, b) or the inequalities (C, l) of a problem are read-only when empty
+    "solver.kkt_residuals": [f"f2 f1 {sides} f1 f1 f1" for sides in _SIDES],
+    "solver.active_set_candidate": [
+        "f2 f1 f2 f1 f2 f1 f1 f1 f f f1 f1",
+        "f2 f1 f2 f1 f2r f1r f1 f1 f f f1 f1",
+        "f2 f1 f2 f1 f2r f1r f1r f1 f f f1 f1",
+        "f2 f1 f2r f1r f2 f1 f1 f1 f f f1 f1",
+        "f2 f1 f2r f1r f2 f1 f1r f1 f f f1 f1",
+    ],
+    "solver.read_results": [f"f2 f1 {sides} f1 f1 f1" for sides in _SIDES],
+}
+
+
+def parse(code: str) -> tuple[types.Type, ...]:
+    """The argument types a signature code (module docstring) stands for."""
+    return tuple(_parse_one(token) for token in code.split())
+
+
+def _parse_one(token: str) -> types.Type:
+    if "*" in token:
+        item, count = token.split("*")
+        return types.UniTuple(_parse_one(item), int(count))
+    dtype = _DTYPES[token[0]]
+    if len(token) == 1:
+        return dtype
+    return types.Array(dtype, int(token[1]), "F" if "F" in token else "C", readonly="r" in token)
+
+
+def code_of(signature: tuple[types.Type, ...]) -> str | None:
+    """The code of a signature of argument types, None when it holds a type the codes do not write."""
+    tokens = [_code_of_one(t) for t in signature]
+    return " ".join(t for t in tokens if t is not None) if None not in tokens else None
+
+
+def _code_of_one(t: types.Type) -> str | None:
+    if isinstance(t, types.UniTuple):
+        item = _code_of_one(t.dtype)
+        return None if item is None else f"{item}*{t.count}"
+    if isinstance(t, types.Array):
+        if t.dtype not in _CODES or t.layout not in "CF" or (t.ndim < 2 and t.layout == "F"):
+            return None
+        return f"{_CODES[t.dtype]}{t.ndim}{'F' if t.layout == 'F' else ''}{'r' if not t.mutable else ''}"
+    return _CODES.get(t)
+
+
+def kernel(name: str) -> CPUDispatcher:
+    """The kernel ``module.function`` of gaussim.kernels."""
+    module, function = name.split(".")
+    return getattr(importlib.import_module(f"gaussim.kernels.{module}"), function)
+
+
+def main() -> int:
+    """Compile every kernel for its SIGNATURES (a cached one is loaded, not compiled again)."""
+    start = time.perf_counter()
+    for name, codes in SIGNATURES.items():
+        dispatcher = kernel(name)
+        for code in codes:
+            dispatcher.compile(parse(code))
+    count = sum(map(len, SIGNATURES.values()))
+    print(f"gaussim: {count} kernel signatures compiled in {time.perf_counter() - start:.0f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

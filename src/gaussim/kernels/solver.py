@@ -1,0 +1,146 @@
+"""Compiled kernels of the solve (:mod:`gaussim.solver`): the KKT residuals, the active-set candidate,
+ProxQP's results read out."""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from ..linalg import backward, cholesky, dot, forward, matvec
+
+
+@njit(cache=True)
+def kkt_residuals(H, g, A, b, C, l, x, y, z):  # type: ignore[no-untyped-def]
+    """(the residual of :func:`gaussim.solver.certificate.kkt_residual`, the same with each term relative to
+    its size, the primal violation, the stationarity residual, the duality gap sum_i z_i s_i): the relative
+    residual takes the stationarity residual and the sign violation -z_i (both in the units of g) relative to
+    max(1, |g|_inf), a complementarity |z_i s_i| relative to max(1, |z_i|), which makes it the slack of a row
+    with a large multiplier (a heavy body's contact). All NaN when any term is not finite."""
+    primal = relative = gap = 0.0
+    complementarity = 0.0
+    finite = True
+    size = 1.0
+    for i in range(len(g)):
+        size = max(size, abs(g[i]))
+    stationarity = matvec(H, x)
+    for k in range(len(g)):
+        stationarity[k] += g[k]
+    for i in range(len(b)):
+        for k in range(len(g)):  # loops, not array expressions: those allocate a temporary each
+            stationarity[k] -= y[i] * A[i, k]
+        violation = abs(dot(A[i], x) - b[i])
+        primal, finite = max(primal, violation), finite and np.isfinite(violation) and np.isfinite(y[i])
+    for i in range(len(l)):
+        for k in range(len(g)):
+            stationarity[k] -= z[i] * C[i, k]
+        slack = dot(C[i], x) - l[i]
+        gap += z[i] * slack
+        primal = max(primal, -slack)
+        complementarity = max(complementarity, -z[i], abs(z[i] * slack))
+        relative = max(relative, -z[i] / size, abs(z[i] * slack) / max(1.0, abs(z[i])))
+        finite = finite and np.isfinite(slack) and np.isfinite(z[i])
+    dual = 0.0
+    for i in range(len(g)):
+        dual, finite = max(dual, abs(stationarity[i])), finite and np.isfinite(stationarity[i])
+    worst = max(primal, complementarity, dual)
+    relative = max(relative, primal, dual / size)
+    if not finite:
+        return np.nan, np.nan, np.nan, np.nan, np.nan
+    return worst, relative, primal, dual, abs(gap)
+
+
+# Rounds of iterative refinement of the active-set solve: each divides the error of a multiplier
+# direction of curvature c by 1 + c / (ACTIVE_SET_SHIFT max diag G).
+ACTIVE_SET_REFINEMENTS = 2
+
+
+# The relative shift that makes the active rows' Delassus matrix G positive definite when those rows
+# are dependent (a sticking contact's four pyramid rows span three directions).
+ACTIVE_SET_SHIFT = 1e-12
+
+
+@njit(cache=True, fastmath={"reassoc", "contract"})
+def active_set_candidate(H, g, A, b, C, l, x, multipliers, tolerance, floor, x_out, multipliers_out):  # type: ignore[no-untyped-def]
+    """(how, the residuals of :func:`kkt_residuals`) for the first of two
+    candidates built from a solution (x, multipliers) that the relative KKT residual certifies
+    (<= ``tolerance``): that solution itself (how 1), then the solution of the problem with the rows
+    it held active (its equalities and the inequalities with a multiplier above ``floor`` times the
+    largest, and > 0) as equalities (how 2, written into ``x_out`` and ``multipliers_out``; see the
+    docstring of :mod:`gaussim.solver.active_set`). how 0: neither is certified.
+
+    G is shifted by ACTIVE_SET_SHIFT max diag G and the solve refined ACTIVE_SET_REFINEMENTS times
+    (dependent rows make G singular; their multipliers' split is then one of many, which the check
+    accepts when it is >= 0)."""
+    n_eq, nv = len(b), len(g)
+    residuals = kkt_residuals(H, g, A, b, C, l, x, multipliers[:n_eq], multipliers[n_eq:])
+    if residuals[1] <= tolerance:
+        return 1, residuals
+    largest = 0.0  # an active row's multiplier exceeds floor times the largest (and 0)
+    for i in range(n_eq, len(multipliers)):
+        largest = max(largest, multipliers[i])
+    least = max(floor * largest, 0.0)
+    active = np.empty(len(l), np.int64)
+    k = n_eq
+    for i in range(len(l)):
+        if multipliers[n_eq + i] > least:
+            active[k - n_eq] = i
+            k += 1
+    K, r = np.empty((k, nv)), np.empty(k)
+    for i in range(k):
+        row = i if i < n_eq else active[i - n_eq]
+        for j in range(nv):
+            K[i, j] = A[row, j] if i < n_eq else C[row, j]
+        r[i] = b[row] if i < n_eq else l[row]
+    L = cholesky(H, 0.0)
+    if L is None:
+        return 0, residuals
+    W = forward(L, K)  # the rows of K L^-T, (k, nv)
+    h = np.empty((1, nv))
+    for j in range(nv):
+        h[0, j] = g[j]
+    h = forward(L, h)[0]  # L^-1 g
+    G, rhs, largest = np.empty((k, k)), r, 0.0
+    for i in range(k):
+        for j in range(i + 1):
+            G[i, j] = G[j, i] = dot(W[i], W[j])
+        rhs[i] += dot(W[i], h)
+        largest = max(largest, G[i, i])
+    LG = cholesky(G, ACTIVE_SET_SHIFT * largest)
+    if LG is None:
+        return 0, residuals
+    lam, step = np.zeros(k), np.empty((1, k))
+    for _ in range(ACTIVE_SET_REFINEMENTS):
+        product = matvec(G, lam)
+        for i in range(k):
+            step[0, i] = rhs[i] - product[i]
+        correction = backward(LG, forward(LG, step)[0])
+        for i in range(k):
+            lam[i] += correction[i]
+    y = np.empty(nv)  # W^T lam - h, then L^-T of it
+    for j in range(nv):
+        y[j] = -h[j]
+    for i in range(k):
+        for j in range(nv):
+            y[j] += lam[i] * W[i, j]
+    backward(L, y)
+    for j in range(nv):
+        x_out[j] = y[j]
+    for i in range(len(multipliers_out)):
+        multipliers_out[i] = lam[i] if i < n_eq else 0.0
+    for i in range(k - n_eq):
+        multipliers_out[n_eq + active[i]] = lam[n_eq + i]
+    residuals = kkt_residuals(H, g, A, b, C, l, x_out, multipliers_out[:n_eq], multipliers_out[n_eq:])
+    return 2 if residuals[1] <= tolerance else 0, residuals
+
+
+@njit(cache=True)
+def read_results(H, g, A, b, C, l, x, y, z):  # type: ignore[no-untyped-def]
+    """(x, the multipliers [-y; -z], the residuals of :func:`kkt_residuals` there), copied out of
+    ProxQP's results."""
+    n_eq, n_in = len(b), len(l)
+    x, multipliers = x.copy(), np.empty(n_eq + n_in)
+    for i in range(n_eq):
+        multipliers[i] = -y[i]
+    for i in range(n_in):
+        multipliers[n_eq + i] = -z[i]
+    return (x, multipliers, *kkt_residuals(H, g, A, b, C, l, x, multipliers[:n_eq], multipliers[n_eq:]))
