@@ -43,9 +43,11 @@ INNER_ITERATIONS = 100
 # speed suite's bin (120 coordinates, 290 rows) it solves in half the dense backend's time; on a robot's
 # (18 coordinates, 150 rows) the dense primal-dual factorization is twice as fast as the sparse one.
 SPARSE_FROM = 64
-# The dense backend's factorization: the primal-dual one takes half the iterations of the primal one
-# that ProxQP picks for problems with more rows than coordinates (a robot's contacts).
-_DENSE_ARGS = (False, proxqp.dense.HessianType.Dense, proxqp.dense.DenseBackend.PrimalDualLDLT)
+# Up to this many coordinates and rows, the dense backend factorizes ProxQP's primal-dual system, which
+# takes half the iterations of the primal one ProxQP picks for more rows than coordinates (a robot's
+# contacts); larger, each refactorization of that system costs more than the iterations it saves (a
+# pile's 120 coordinates and 320 rows: 0.4 s a solve).
+PRIMAL_DUAL_UP_TO = 200
 # The status of a candidate of active_set_candidate, by its ``how``.
 _FROM_LAST = {1: Status.PREVIOUS_SOLUTION_CERTIFIED, 2: Status.ACTIVE_SET_CERTIFIED}
 
@@ -101,7 +103,9 @@ class GaussSolver:
     def _recover(
         self, problem: GaussProblem, dims: tuple[int, int, int], equalities: tuple, inequalities: tuple
     ) -> Solution:
-        """After an answer the KKT check refused (not an infeasibility), the first certified of:
+        """After an answer the KKT check refused (not an infeasibility), the first certified of the
+        following, each solved by the dense backend (the sparse one's answers to a large pile's
+        degenerate QPs are the less accurate: 2e-6 where the dense one's reach 1e-10):
 
         1. a cold start in a new QP object: ProxQP 0.8, warm-started, may return the previous solution
            after 0 iterations when only the bounds changed (a stale contact force on a ball that left
@@ -117,7 +121,7 @@ class GaussSolver:
 
         Else the cold start's answer, its status KKT_CHECK_FAILED when ProxQP said solved."""
         p = problem
-        self._fresh(p, dims, equalities, inequalities)
+        self._fresh(p, dims, equalities, inequalities, sparse=False)
         solution = self._run(problem)
         solution.certificate.restarted = True
         if self._certified(solution):
@@ -125,7 +129,7 @@ class GaussSolver:
         rescued = self._warm(problem, solution.x, solution.multipliers, ACTIVE_SET_FLOOR)
         if rescued is not None:
             return _mended(rescued, solution)
-        self._fresh(p, dims, equalities, inequalities)
+        self._fresh(p, dims, equalities, inequalities, sparse=False)
         settings, eps = self._qp.settings, self.options.eps_abs
         settings.eps_abs = settings.eps_duality_gap_abs = eps / KKT_RTOL
         tight = self._run(problem)
@@ -141,10 +145,16 @@ class GaussSolver:
         return solution
 
     def _fresh(
-        self, p: GaussProblem, dims: tuple[int, int, int], equalities: tuple, inequalities: tuple
+        self,
+        p: GaussProblem,
+        dims: tuple[int, int, int],
+        equalities: tuple,
+        inequalities: tuple,
+        sparse: bool | None = None,
     ) -> None:
-        """A new QP object for the problem's sizes, initialised with it."""
-        self._qp, self._cap = self._new(*dims), 0
+        """A new QP object for the problem's sizes (its backend as :meth:`_new` chooses), initialised
+        with it."""
+        self._qp, self._cap = self._new(*dims, sparse=sparse), 0
         _initialise(self._qp, p, equalities, inequalities)
         self._dims = dims
         results = self._qp.results  # views that every solve of this QP object writes into
@@ -241,7 +251,13 @@ class GaussSolver:
         """A QP object of ProxQP's sparse backend (default: for SPARSE_FROM coordinates or more) or its
         dense one, with gaussim's settings."""
         sparse = n >= SPARSE_FROM if sparse is None else sparse
-        qp = proxqp.sparse.QP(n, n_eq, n_in) if sparse else proxqp.dense.QP(n, n_eq, n_in, *_DENSE_ARGS)
+        if sparse:
+            qp = proxqp.sparse.QP(n, n_eq, n_in)
+        else:
+            backends = proxqp.dense.DenseBackend
+            small = n + n_eq + n_in <= PRIMAL_DUAL_UP_TO
+            backend = backends.PrimalDualLDLT if small else backends.Automatic
+            qp = proxqp.dense.QP(n, n_eq, n_in, False, proxqp.dense.HessianType.Dense, backend)
         settings = qp.settings
         settings.eps_abs = self.options.eps_abs
         settings.eps_rel = 0.0
