@@ -48,6 +48,8 @@ DT = 1e-3
 CLEARANCE = 0.01  # [m]
 # A state this far gone is an explosion: no robot of the corpora moves at 1 km/s or leaves 100 m.
 MAX_SPEED, MAX_DISTANCE = 1e3, 100.0
+# The issue's target on the spread of a run's step times: its p90 within this many times its median.
+P90_SPREAD = 3.0
 # PD hold gains per kilogram of robot [N m / rad / kg], [N m s / rad / kg]
 KP_PER_KG, KD_PER_KG = 20.0, 0.5
 
@@ -267,6 +269,21 @@ def _lost(entry: tuple[str, str, str], why: str, outcome: str = "crash") -> list
     return [Row(entry[0], entry[1], run, outcome=outcome, message=why) for run in PASSES]
 
 
+def summary(rows: list[Row]) -> list[str]:
+    """The runs' step-time spread (p90 over median, the issue's measure) and their worst residuals."""
+    ran = [r for r in rows if r.outcome == "ok"]
+    if not ran:
+        return []
+    spread = sorted(ran, key=lambda r: r.p90_ms / r.median_ms, reverse=True)
+    within = sum(r.p90_ms <= P90_SPREAD * r.median_ms for r in ran)
+    worst = ", ".join(f"{r.robot} {r.run} {r.p90_ms / r.median_ms:.1f}" for r in spread[:5])
+    return [
+        f"p90 step within {P90_SPREAD:g} x the median on {within} of {len(ran)} runs; the widest: {worst}.",
+        f"Largest relative KKT residual accepted: {max(r.max_kkt for r in ran):.2g}; deepest penetration: "
+        f"{max(r.max_penetration_mm for r in ran):.3g} mm.",
+    ]
+
+
 def write(rows: list[Row], markdown: Path, command: str, duration: float) -> None:
     """The table as Markdown (with the counts) and as a CSV beside it."""
     markdown.parent.mkdir(parents=True, exist_ok=True)
@@ -292,6 +309,7 @@ def write(rows: list[Row], markdown: Path, command: str, duration: float) -> Non
     for outcome in OUTCOMES:
         counts = [sum(r.outcome == outcome and r.run == run for r in rows) for run in PASSES]
         lines.append(f"| {outcome} | " + " | ".join(map(str, counts)) + " |")
+    lines += ["", *summary(rows)]
     lines += [
         "",
         "| robot | corpus | pass | nq/nv | geoms | outcome | steps | median [ms] | p90 [ms] | "
@@ -330,6 +348,7 @@ def main(argv: list[str] | None = None) -> int:
     counts = Counter((r.run, r.outcome) for r in rows)
     for run in PASSES:
         print(run + ": " + ", ".join(f"{o} {counts[run, o]}" for o in OUTCOMES if counts[run, o]))
+    print("\n".join(summary(rows)))
     return 0
 
 
