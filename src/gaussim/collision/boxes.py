@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .compiled import ASK_COAL, FAR, FOUND, CompiledPairs, place
+from .compiled import ASK_COAL, FAR, FOUND, CompiledPairs, place, stacked
 from .contacts import PATCH_MIN_EXTENT, PATCH_TOLERANCE
 from .pairs import Pair
 
@@ -91,11 +91,12 @@ def _box_pairs(
     FOUND or ASK_COAL), ``gaps`` (a lower bound when FAR, the gap of a patch), and for a patch its
     normal (from the other box to the robot's) and its ``sizes`` points on the robot's box (ordered
     by their place on it, as :class:`~.narrow.NarrowPhase` orders them)."""
+    joint_rotations, joint_translations = stacked(rotations, translations)
     R = np.empty((2, 3, 3))
     p = np.empty((2, 3))
     for k in range(near.shape[0]):
         i = near[k]
-        place(rotations, translations, side, local_rotation, local_translation, i, R, p)
+        place(joint_rotations, joint_translations, side, local_rotation, local_translation, i, R, p)
         if thin[i]:
             answer[k] = ASK_COAL
             continue

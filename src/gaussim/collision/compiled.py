@@ -107,16 +107,32 @@ def _other_placement(pair: Pair) -> pin.SE3:
     return pair.obstacle.placement()  # type: ignore[union-attr]
 
 
-@njit(cache=True, inline="always")  # a call would copy and count references to every joint's arrays
+@njit(cache=True)
+def stacked(rotations, translations):  # type: ignore[no-untyped-def]
+    """The joints' placements, tuples of views, as arrays (J, 3, 3) and (J, 3): once per kernel call
+    (a call that takes the tuples copies them and counts references to every view)."""
+    R = np.empty((len(rotations), 3, 3))
+    p = np.empty((len(rotations), 3))
+    for j in range(len(rotations)):
+        Rj, pj = rotations[j], translations[j]
+        for a in range(3):
+            p[j, a] = pj[a]
+            for b in range(3):
+                R[j, a, b] = Rj[a, b]
+    return R, p
+
+
+@njit(cache=True)
 def place(rotations, translations, side, local_rotation, local_translation, i, R, p):  # type: ignore[no-untyped-def]
     """Both sides of pair ``i`` in the world: (R[s] (columns: its axes), p[s]) for s = 0 (the robot's)
-    and 1, its joint's placement times its own."""
+    and 1, its joint's placement (``rotations`` (J, 3, 3), ``translations`` (J, 3), see
+    :func:`stacked`) times its own."""
     for s in range(2):
-        Rj, pj = rotations[side[i, s]], translations[side[i, s]]
+        j = side[i, s]
         for a in range(3):  # loops: a BLAS call per 3 x 3 product costs more than its arithmetic
-            p[s, a] = pj[a]
+            p[s, a] = translations[j, a]
             for b in range(3):
                 R[s, a, b] = 0.0
-                p[s, a] += Rj[a, b] * local_translation[i, s, b]
+                p[s, a] += rotations[j, a, b] * local_translation[i, s, b]
                 for c in range(3):
-                    R[s, a, b] += Rj[a, c] * local_rotation[i, s, c, b]
+                    R[s, a, b] += rotations[j, a, c] * local_rotation[i, s, c, b]

@@ -29,7 +29,7 @@ from numba import njit
 
 from ..linalg import dot
 from .boxes import _order
-from .compiled import ASK_COAL, FAR, FOUND, CompiledPairs, place
+from .compiled import ASK_COAL, FAR, FOUND, CompiledPairs, place, stacked
 from .contacts import PATCH_MIN_EXTENT, PATCH_TOLERANCE
 from .pairs import Pair
 
@@ -123,11 +123,12 @@ def _primitive_pairs(
     (FAR, FOUND or ASK_COAL), ``gaps`` (the gap when FAR or FOUND), and when FOUND its normal (from
     the other side to the robot's) and its ``sizes`` points on the robot's geometry (a patch ordered
     by their place on it, as :class:`~.narrow.NarrowPhase` orders them)."""
+    joint_rotations, joint_translations = stacked(rotations, translations)
     R = np.empty((2, 3, 3))
     p = np.empty((2, 3))
     for k in range(near.shape[0]):
         i = near[k]
-        place(rotations, translations, side, local_rotation, local_translation, i, R, p)
+        place(joint_rotations, joint_translations, side, local_rotation, local_translation, i, R, p)
         answer[k], gaps[k], sizes[k] = _pair(kind[i], dims[i], R, p, margin, normals[k], points[k])
 
 
