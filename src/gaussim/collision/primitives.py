@@ -497,8 +497,8 @@ def _box_support(R, p, half, direction, support):  # type: ignore[no-untyped-def
 
 @njit(cache=True)
 def _face(R, p, half, direction):  # type: ignore[no-untyped-def]
-    """The corners (4, 3), in order around it, of the box's face whose normal is nearest
-    ``direction`` (its support set when that has 4 corners)."""
+    """The corners (4, 3), in order around it, of the box's face that is its support set of 4 corners
+    along ``direction``: across the axis along which the box reaches farthest."""
     along = np.empty(3)
     fixed = 0
     for a in range(3):
