@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 
+import coal
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -12,10 +13,12 @@ from scipy.optimize import lsq_linear
 
 import gaussim
 from gaussim import FreeBody
-from gaussim.collision import ContactDetector
+from gaussim.bench.scenes import bin_pile
+from gaussim.collision import ContactDetector, driver
 from gaussim.collision.boxes import BoxPairs
 from gaussim.collision.ground import GroundHulls
 from gaussim.collision.narrow import NarrowPhase
+from gaussim.collision.primitives import PrimitivePairs
 
 # Both compute the same closest points of two boxes in floating point; they may round differently [m].
 AGREEMENT = 1e-9
@@ -169,3 +172,295 @@ def test_a_capsule_on_ground_matches_coal(normal):
     ends = centre + np.outer([-length / 2, length / 2], axis) - radius * n
     np.testing.assert_allclose(contacts.point, ends, atol=1e-15)
     np.testing.assert_allclose(contacts.gap, 1e-4, atol=1e-15)
+
+
+# coal's closed forms (sphere-sphere, sphere-capsule, sphere-box, capsule-capsule), computed in the
+# same order of operations: they agree to round-off [m].
+SAME = 1e-12
+# coal's GJK (a capsule against a box) at its tightest tolerance: its box support moves a box's
+# negative sides out by 1e-10 of the half side once a query in the process had a zero direction
+# component (a function-static), and its normal stops this far from the closest points' [m].
+GJK_AGREEMENT = 1e-9
+GJK_NORMAL_AGREEMENT = 1e-7
+SPHERE_RADIUS, CAPSULE_RADIUS, CAPSULE_LENGTH = 0.03, 0.02, 0.06
+OBSTACLE_BOX, OBSTACLE_SPHERE = np.array([0.2, 0.1, 0.05]), 0.05
+ORIGIN = pin.SE3.Identity()
+PRIMITIVE_CASES = [
+    (a, b, fixed)
+    for a in ("sphere", "capsule", "box")
+    for b in ("sphere", "capsule", "box")
+    for fixed in (False, True)
+    if not (a == b == "box") and not (fixed and b == "capsule")  # fixed obstacles: boxes, spheres
+]
+
+
+def _body(kind: str, name: str) -> FreeBody:
+    """A free sphere, capsule (along its z) or box of the sizes above."""
+    if kind == "sphere":
+        return FreeBody.sphere(name, SPHERE_RADIUS, mass=1.0)
+    if kind == "capsule":
+        return FreeBody.capsule(name, CAPSULE_RADIUS, CAPSULE_LENGTH, mass=1.0)
+    return FreeBody.box(name, tuple(2 * HALF_A), mass=1.0)
+
+
+def _scene(a: str, b: str, fixed: bool, pose_b: pin.SE3 = ORIGIN) -> gaussim.Scene:
+    """Body ``a`` against body ``b``, or against a fixed box (OBSTACLE_BOX) or sphere at ``pose_b``."""
+    if not fixed:
+        return gaussim.Scene(bodies={"a": _body(a, "a"), "b": _body(b, "b")})
+    if b == "sphere":
+        obstacle = gaussim.Sphere("b", OBSTACLE_SPHERE, position=pose_b.translation)
+    else:
+        obstacle = gaussim.Box(
+            "b", tuple(OBSTACLE_BOX), position=pose_b.translation, rotation=pose_b.rotation
+        )
+    return gaussim.Scene(bodies={"a": _body(a, "a")}, obstacles=[obstacle])
+
+
+def _place(scene: gaussim.Scene, data: pin.Data, pose_a: pin.SE3, pose_b: pin.SE3) -> None:
+    """Forward kinematics with body a at ``pose_a`` (and body b, when it is one, at ``pose_b``)."""
+    q = pin.SE3ToXYZQUAT(pose_a)
+    if len(scene.bodies) == 2:
+        q = np.concatenate([q, pin.SE3ToXYZQUAT(pose_b)])
+    pin.forwardKinematics(scene.robot.model, data, q)
+
+
+def _asking(routine: PrimitivePairs) -> list[str]:
+    """The names of the pairs ``routine`` hands to coal, as it does."""
+    asked: list[str] = []
+    collide = routine.coal.collide
+
+    def counted(pair, data):
+        asked.append(pair.name)
+        return collide(pair, data)
+
+    routine.coal.collide = counted  # type: ignore[method-assign]
+    return asked
+
+
+def _segment_box_distance(capsule: pin.SE3, box: pin.SE3, half: np.ndarray) -> float:
+    """The distance of a capsule's segment (along its z) to a box (scipy's bounded least squares over
+    the segment's parameter and the box's local coordinates), less the capsule's radius."""
+    axis = capsule.rotation[:, 2] * CAPSULE_LENGTH
+    start = capsule.translation - axis / 2
+    A = np.column_stack([axis, -box.rotation])
+    bounds = np.concatenate([[0.5], half])
+    solution = lsq_linear(
+        A, box.translation - start - axis / 2, bounds=(-bounds, bounds), method="bvls", tol=1e-15
+    )
+    return float(np.linalg.norm(A @ solution.x - (box.translation - start - axis / 2))) - CAPSULE_RADIUS
+
+
+@pytest.mark.parametrize(("a", "b", "fixed"), PRIMITIVE_CASES)
+def test_primitive_pairs_match_coal(a, b, fixed):
+    """Shape a against shape b (another body's, or a fixed obstacle) near contact, at random poses and
+    at poses with their axes aligned (a capsule lying on a face or on another capsule): the compiled
+    pairs find a contact exactly when coal does, and where they answer themselves their points (as
+    many), normal and gap are those of coal at its tightest tolerances; a capsule's gap on a box is
+    also the distance of its segment to the box (scipy) less its radius."""
+    rng = np.random.default_rng(7)
+    pose_b = pin.SE3(pin.rpy.rpyToMatrix(*rng.uniform(-np.pi, np.pi, 3)), rng.uniform(-0.1, 0.1, 3))
+    scene = _scene(a, b, fixed, pose_b)
+    detector = ContactDetector(scene, MARGIN)
+    assert [type(r) for r in detector.routines] == [PrimitivePairs]
+    routine = detector.routines[0]
+    asked = _asking(routine)
+    reference = _tight(detector.pairs, [0])
+    data = scene.robot.model.createData()
+    agreement, normal_agreement = (
+        (GJK_AGREEMENT, GJK_NORMAL_AGREEMENT) if {a, b} == {"capsule", "box"} else (SAME, SAME)
+    )
+    samples, answered, patches = 90, 0, 0
+    for k in range(samples):
+        R = pin.rpy.rpyToMatrix(*rng.uniform(-np.pi, np.pi, 3))
+        towards = rng.normal(size=3)
+        if k % 3 == 0:  # axes aligned to within 0 to 1e-4 rad, along a face normal of b
+            R = pose_b.rotation @ pin.rpy.rpyToMatrix(
+                *(rng.integers(0, 4, 3) * np.pi / 2 + rng.choice([0.0, 1e-7, 1e-4], 3))
+            )
+            towards = (
+                pose_b.rotation[:, rng.integers(3)] * rng.choice([-1.0, 1.0]) + rng.normal(size=3) * 0.05
+            )
+        towards /= np.linalg.norm(towards)
+        low, high = 0.0, 0.5  # the offset along ``towards`` at which they touch, by bisection on coal
+        reference.use_margin(0.0)
+        for _ in range(50):
+            middle = (low + high) / 2
+            _place(scene, data, pin.SE3(R, pose_b.translation + middle * towards), pose_b)
+            hit, _ = reference.collide(detector.pairs[0], data)
+            low, high = (middle, high) if hit is not None else (low, middle)
+        pose_a = pin.SE3(R, pose_b.translation + (low + rng.uniform(-MARGIN, MARGIN)) * towards)
+        _place(scene, data, pose_a, pose_b)
+        asked.clear()
+        mine, least = routine.detect(data, MARGIN)
+        expected, _ = reference.detect(data, MARGIN)
+        assert len(mine) == len(expected), k
+        if asked or not mine:
+            continue
+        answered += 1
+        (_, points, normals, gaps), (_, points_ref, normals_ref, gaps_ref) = mine[0], expected[0]
+        assert points.shape == points_ref.shape, k
+        patches += len(points) == 2
+        np.testing.assert_allclose(points, points_ref, atol=agreement, err_msg=str(k))
+        np.testing.assert_allclose(gaps, gaps_ref, atol=agreement, err_msg=str(k))
+        np.testing.assert_allclose(normals, normals_ref, atol=normal_agreement, err_msg=str(k))
+        assert least == gaps[0]
+        if {a, b} == {"capsule", "box"}:
+            capsule, box = (pose_a, pose_b) if a == "capsule" else (pose_b, pose_a)
+            half = OBSTACLE_BOX / 2 if fixed else HALF_A
+            assert gaps[0] == pytest.approx(_segment_box_distance(capsule, box, half), abs=SAME), k
+    assert answered >= 0.8 * samples, answered  # coal answers only what round-off could decide
+    if {a, b} == {"capsule", "box"}:
+        assert patches >= 10, patches  # a capsule lying on a face: coal's two points
+
+
+def _contacts(scene: gaussim.Scene, pose_a: pin.SE3, pose_b: pin.SE3 = ORIGIN):
+    """The detector's contacts at these poses, with coal's at its tightest tolerances, and whether the
+    compiled pairs answered themselves."""
+    detector = ContactDetector(scene, MARGIN)
+    (routine,) = detector.routines
+    asked = _asking(routine)
+    data = scene.robot.model.createData()
+    _place(scene, data, pose_a, pose_b)
+    contacts = detector.detect(data)
+    ((_, points, normals, gaps),) = _tight(detector.pairs, [0]).detect(data, MARGIN)[0]
+    np.testing.assert_allclose(contacts.point, points, atol=SAME)
+    np.testing.assert_allclose(contacts.normal, normals, atol=SAME)
+    np.testing.assert_allclose(contacts.gap, gaps, atol=SAME)
+    return contacts, not asked
+
+
+@pytest.mark.parametrize("gap", [2e-4, -2e-4])
+def test_a_sphere_on_a_sphere_and_on_a_box_face_edge_and_corner(gap):
+    """A ball against a ball: it touches at its point towards the other's centre, with their centres'
+    distance less both radii; against a box's face, edge and corner (a fixed box at a random pose, or
+    a body's box against a fixed ball): at the ball's point towards the feature, the normal along the
+    feature's outward direction, at the gap it was placed at; the compiled pairs answer, as coal does."""
+    rng = np.random.default_rng(11)
+    centre = rng.uniform(-0.1, 0.1, 3)
+    apart = rng.normal(size=3)
+    apart /= np.linalg.norm(apart)
+    other = centre - apart * (2 * SPHERE_RADIUS + gap)
+    contacts, answered = _contacts(
+        _scene("sphere", "sphere", False), pin.SE3(np.eye(3), centre), pin.SE3(np.eye(3), other)
+    )
+    assert answered and len(contacts) == 1
+    np.testing.assert_allclose(contacts.gap, gap, atol=SAME)
+    np.testing.assert_allclose(contacts.normal[0], apart, atol=SAME)
+    np.testing.assert_allclose(contacts.point[0], centre - SPHERE_RADIUS * apart, atol=SAME)
+    box = pin.SE3(pin.rpy.rpyToMatrix(*rng.uniform(-np.pi, np.pi, 3)), rng.uniform(-0.1, 0.1, 3))
+    half = OBSTACLE_BOX / 2
+    for feature in ([1.0, 0.3, -0.2], [1.0, -1.0, 0.4], [-1.0, 1.0, 1.0]):  # face, edge, corner
+        local = np.clip(feature, -1, 1) * half
+        outward = np.where(np.abs(feature) == 1, feature, 0.0)
+        outward = box.rotation @ (outward / np.linalg.norm(outward))
+        surface = box.act(local)
+        ball = surface + outward * (SPHERE_RADIUS + gap)
+        contacts, answered = _contacts(_scene("sphere", "box", True, box), pin.SE3(np.eye(3), ball))
+        assert answered and len(contacts) == 1
+        np.testing.assert_allclose(contacts.gap, gap, atol=SAME)
+        np.testing.assert_allclose(contacts.normal[0], outward, atol=SAME)
+        np.testing.assert_allclose(contacts.point[0], ball - SPHERE_RADIUS * outward, atol=SAME)
+        # the box a body's, the ball fixed (OBSTACLE_SPHERE): the point on the box's feature
+        ball = surface + outward * (OBSTACLE_SPHERE + gap)
+        scene = gaussim.Scene(
+            bodies={"a": FreeBody.box("a", tuple(OBSTACLE_BOX), mass=1.0)},
+            obstacles=[gaussim.Sphere("b", OBSTACLE_SPHERE, position=ball)],
+        )
+        contacts, answered = _contacts(scene, box)
+        assert answered and len(contacts) == 1
+        np.testing.assert_allclose(contacts.gap, gap, atol=SAME)
+        np.testing.assert_allclose(contacts.normal[0], -outward, atol=SAME)
+        np.testing.assert_allclose(contacts.point[0], surface, atol=SAME)
+
+
+def _lying(angle: float, centre: np.ndarray) -> pin.SE3:
+    """A capsule (along its z) lying horizontally at ``angle`` [rad] from the world's x."""
+    return pin.SE3(pin.utils.rotate("z", angle) @ pin.utils.rotate("y", np.pi / 2), centre)
+
+
+def test_capsules_lying_on_each_other_touch_as_coal_patches_them():
+    """Capsule a lying on capsule b (both along x, a shifted along them): coal's single point, below
+    a's end at -half length, on the parallel segments coal's patch leaves to one point. Crossed at
+    30 degrees one way, one point where they cross; the other way, coal's patch of two points, a's
+    ends projected onto b's axis, on a's underside."""
+    gap, half = 2e-4, CAPSULE_LENGTH / 2
+    height = 2 * CAPSULE_RADIUS + gap
+    scene = _scene("capsule", "capsule", False)
+    contacts, _ = _contacts(scene, _lying(0.0, np.array([0.01, 0.0, height])), _lying(0.0, np.zeros(3)))
+    np.testing.assert_allclose(contacts.point, [[0.01 - half, 0.0, height - CAPSULE_RADIUS]], atol=SAME)
+    np.testing.assert_allclose(contacts.normal, [[0.0, 0.0, 1.0]], atol=SAME)
+    np.testing.assert_allclose(contacts.gap, [gap], atol=SAME)
+    angle = np.radians(30)
+    contacts, answered = _contacts(
+        scene, _lying(angle, np.array([0.0, 0.0, height])), _lying(0.0, np.zeros(3))
+    )
+    assert answered
+    np.testing.assert_allclose(contacts.point, [[0.0, 0.0, height - CAPSULE_RADIUS]], atol=SAME)
+    contacts, answered = _contacts(
+        scene, _lying(-angle, np.array([0.0, 0.0, height])), _lying(0.0, np.zeros(3))
+    )
+    assert answered
+    ends = [[x, 0.0, height - CAPSULE_RADIUS] for x in (-half * np.cos(angle), half * np.cos(angle))]
+    np.testing.assert_allclose(contacts.point, ends, atol=SAME)
+    np.testing.assert_allclose(contacts.normal, np.tile([0.0, 0.0, 1.0], (2, 1)), atol=SAME)
+    np.testing.assert_allclose(contacts.gap, [gap, gap], atol=SAME)
+
+
+def test_a_capsule_lying_on_a_box_touches_at_its_ends_clipped_to_the_face():
+    """A capsule lying on a fixed box's top face: its two ends' undersides, at the gap it was placed
+    at; hanging over the face's edge, its segment clipped at that edge."""
+    gap, half = 2e-4, CAPSULE_LENGTH / 2
+    top = OBSTACLE_BOX[2] / 2
+    scene = _scene("capsule", "box", True)
+    for x, ends in ((0.0, (-half, half)), (0.09, (0.09 - half, OBSTACLE_BOX[0] / 2))):
+        contacts, answered = _contacts(scene, _lying(0.0, np.array([x, 0.01, top + CAPSULE_RADIUS + gap])))
+        assert answered
+        np.testing.assert_allclose(contacts.point, [[e, 0.01, top + gap] for e in ends], atol=SAME)
+        np.testing.assert_allclose(contacts.normal, np.tile([0.0, 0.0, 1.0], (2, 1)), atol=SAME)
+        np.testing.assert_allclose(contacts.gap, [gap, gap], atol=SAME)
+
+
+PILE_STEPS = 200
+
+
+def test_the_bin_pile_steps_as_with_coal(monkeypatch):
+    """examples/bin_pile.py's pile (spheres, capsules and boxes in a bin of boxes) for PILE_STEPS
+    steps: at every detection of the run with coal answering the primitives' pairs, the compiled pairs
+    find the same contacts (names, points, normals, gaps); and the run with the compiled pairs, but a
+    capsule's on a box (whose GJK answer coal's box support rounds, see GJK_AGREEMENT), is the same
+    run to round-off."""
+    setup = bin_pile()
+    compiled = ContactDetector(setup.scene, MARGIN)
+    routines = dict(driver.ROUTINES)
+
+    def run(skipped: set) -> tuple[np.ndarray, int]:
+        monkeypatch.setattr(driver, "ROUTINES", {k: v for k, v in routines.items() if k not in skipped})
+        sim = gaussim.Simulator(setup.scene, gaussim.Options(dt=setup.dt))
+        reference = sim.detector
+        detect, compared = reference.detect, []
+
+        def checked(data: pin.Data):
+            expected = detect(data)
+            compiled.schedule.margin = reference.schedule.margin
+            found = compiled.detect(data)
+            assert found.names == expected.names, (len(compared), set(found.names) ^ set(expected.names))
+            np.testing.assert_allclose(found.point, expected.point, atol=GJK_AGREEMENT)
+            np.testing.assert_allclose(found.normal, expected.normal, atol=GJK_AGREEMENT)
+            np.testing.assert_allclose(found.gap, expected.gap, atol=GJK_AGREEMENT)
+            compared.append(len(found))
+            return expected
+
+        reference.detect = checked
+        state = sim.reset(setup.q, setup.v)
+        trajectory = []
+        for _ in range(PILE_STEPS):
+            state = sim.step(state)
+            trajectory.append(state.q)
+        return np.array(trajectory), sum(compared)
+
+    new = {key for key, routine in routines.items() if routine is PrimitivePairs}
+    with_coal, contacts = run(new)
+    assert contacts > 1000  # the pile touches
+    capsule_on_box = {(coal.Capsule, coal.Box), (coal.Box, coal.Capsule)}
+    compiled_run, _ = run(capsule_on_box)
+    np.testing.assert_allclose(compiled_run, with_coal, rtol=0, atol=SAME)

@@ -14,11 +14,10 @@ PATCH_MIN_EXTENT), or apart at a distance the patch does not reach go to coal.
 from __future__ import annotations
 
 import numpy as np
-import pinocchio as pin
 from numba import njit
 
-from .contacts import PATCH_MIN_EXTENT, PATCH_TOLERANCE, Piece, one_pair
-from .narrow import BoundingSpheres, NarrowPhase
+from .compiled import ASK_COAL, FAR, FOUND, CompiledPairs, place, stacked
+from .contacts import PATCH_MIN_EXTENT, PATCH_TOLERANCE
 from .pairs import Pair
 
 # An edge-edge axis is taken over a face's normal only when it separates the boxes by this much
@@ -28,12 +27,10 @@ EDGE_PREFERENCE = 1e-9
 REACHED = 1e-12
 # Two patch points closer than this are one (a corner on the reference face's edge, clipped) [m].
 SAME_POINT = 1e-9
-# Answers of the kernel per pair.
-FAR, PATCH, ASK_COAL = 0, 1, 2
 MAX_POINTS = 8  # a quadrilateral clipped to a rectangle
 
 
-class BoxPairs:
+class BoxPairs(CompiledPairs):
     """All the declared pairs of a box with a box (a fixed one or another robot geometry).
 
     Only the pairs whose bounding spheres are within the margin reach the compiled test
@@ -45,37 +42,16 @@ class BoxPairs:
         index: which of them this routine answers, each a box against a box.
     """
 
+    max_points = MAX_POINTS
+
     def __init__(self, pairs: list[Pair], index: list[int]) -> None:
-        self.index = index
-        self.pairs = [pairs[k] for k in index]
-        self.spheres = BoundingSpheres(self.pairs)
-        self.coal = NarrowPhase(pairs, index)
-        # each side's box in the frame of its joint (a fixed box's joint is the world's, 0)
-        self.local_rotation = np.array(
-            [[p.local.rotation, _other_placement(p).rotation] for p in self.pairs]
-        ).reshape(-1, 2, 3, 3)
-        self.local_translation = np.array(
-            [[p.local.translation, _other_placement(p).translation] for p in self.pairs]
-        ).reshape(-1, 2, 3)
+        super().__init__(pairs, index)
         self.half = np.array(
             [[np.asarray(p.shape.halfSide), np.asarray(p.obstacle_shape.halfSide)] for p in self.pairs]
         ).reshape(-1, 2, 3)
         self.thin = np.array([2 * h.min() <= PATCH_TOLERANCE for h in self.half], dtype=bool).reshape(-1)
 
-    def detect(self, data: pin.Data, margin: float) -> tuple[list[Piece], float]:
-        """The contacts of the pairs within ``margin`` [m] at the placements held in ``data``, and a
-        lower bound on every pair's gap [m]."""
-        apart = self.spheres.gaps(data)
-        far = apart > margin
-        clearance = float(apart[far].min(initial=np.inf))
-        near = np.flatnonzero(~far)
-        if not len(near):
-            return [], clearance
-        rotations, translations = self.spheres.placements(data)
-        count = len(near)
-        answer, gaps = np.empty(count, np.int64), np.empty(count)
-        normals, points = np.empty((count, 3)), np.empty((count, MAX_POINTS, 3))
-        sizes = np.empty(count, np.int64)
+    def _kernel(self, rotations, translations, near, margin, answer, gaps, normals, points, sizes):  # type: ignore[no-untyped-def]
         _box_pairs(
             rotations,
             translations,
@@ -92,27 +68,6 @@ class BoxPairs:
             points,
             sizes,
         )
-        pieces: list[Piece] = []
-        self.coal.use_margin(margin)
-        for k, i in enumerate(near.tolist()):
-            if answer[k] == ASK_COAL:
-                hit, least = self.coal.collide(self.pairs[i], data)
-                clearance = min(clearance, least)
-                if hit is not None:
-                    pieces.append(one_pair(self.index[i], *hit))
-                continue
-            clearance = min(clearance, float(gaps[k]))
-            if answer[k] == PATCH:
-                size = int(sizes[k])
-                pieces.append(one_pair(self.index[i], normals[k], points[k, :size], np.full(size, gaps[k])))
-        return pieces, clearance
-
-
-def _other_placement(pair: Pair) -> pin.SE3:
-    """Where the pair's other box sits in the frame of its joint (a fixed box: in the world)."""
-    if pair.other_local is not None:
-        return pair.other_local
-    return pair.obstacle.placement()  # type: ignore[union-attr]
 
 
 @njit(cache=True)
@@ -133,22 +88,15 @@ def _box_pairs(
     sizes,
 ):  # type: ignore[no-untyped-def]
     """The compiled test of :class:`BoxPairs` on pairs ``near``: for each, fills ``answer`` (FAR,
-    PATCH or ASK_COAL), ``gaps`` (a lower bound when FAR, the gap of a PATCH), and for a PATCH its
+    FOUND or ASK_COAL), ``gaps`` (a lower bound when FAR, the gap of a patch), and for a patch its
     normal (from the other box to the robot's) and its ``sizes`` points on the robot's box (ordered
     by their place on it, as :class:`~.narrow.NarrowPhase` orders them)."""
+    joint_rotations, joint_translations = stacked(rotations, translations)
     R = np.empty((2, 3, 3))
     p = np.empty((2, 3))
     for k in range(near.shape[0]):
         i = near[k]
-        for s in range(2):  # each box in the world: its joint's placement times its own
-            Rj, pj = rotations[side[i, s]], translations[side[i, s]]
-            for a in range(3):  # loops: a BLAS call per 3 x 3 product costs more than its arithmetic
-                p[s, a] = pj[a]
-                for b in range(3):
-                    R[s, a, b] = 0.0
-                    p[s, a] += Rj[a, b] * local_translation[i, s, b]
-                    for c in range(3):
-                        R[s, a, b] += Rj[a, c] * local_rotation[i, s, c, b]
+        place(joint_rotations, joint_translations, side, local_rotation, local_translation, i, R, p)
         if thin[i]:
             answer[k] = ASK_COAL
             continue
@@ -227,7 +175,7 @@ def _box_box(R, p, half, margin, normal, points):  # type: ignore[no-untyped-def
         return ASK_COAL, lower, 0
     _order(points, count, R[0], p[0])
     normal[:] = n
-    return PATCH, gap, count
+    return FOUND, gap, count
 
 
 @njit(cache=True)
@@ -334,7 +282,15 @@ def _order(points, count, R, p):  # type: ignore[no-untyped-def]
     to 0.1 mm, x first (the order of :meth:`.NarrowPhase._patch`)."""
     keys = np.empty((count, 3))
     for j in range(count):
-        keys[j] = np.rint(((points[j] - p) @ R) * 1e4)
+        for c in range(3):
+            keys[j, c] = np.rint(
+                (
+                    (points[j, 0] - p[0]) * R[0, c]
+                    + (points[j, 1] - p[1]) * R[1, c]
+                    + (points[j, 2] - p[2]) * R[2, c]
+                )
+                * 1e4
+            )
     for j in range(1, count):  # insertion sort: a handful of points
         m = j
         while m > 0 and _before(keys[m], keys[m - 1]):

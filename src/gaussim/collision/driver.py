@@ -17,6 +17,7 @@ from .ground import GroundHulls
 from .margin import MarginSchedule
 from .narrow import NarrowPhase
 from .pairs import Pair
+from .primitives import PrimitivePairs
 
 
 class Routine(Protocol):
@@ -36,6 +37,14 @@ ROUTINES: dict[tuple[type, type], Callable[[list[Pair], list[int]], Routine]] = 
     (coal.Sphere, coal.Halfspace): GroundHulls,
     (coal.Capsule, coal.Halfspace): GroundHulls,
     (coal.Box, coal.Box): BoxPairs,
+    (coal.Sphere, coal.Sphere): PrimitivePairs,
+    (coal.Sphere, coal.Capsule): PrimitivePairs,
+    (coal.Capsule, coal.Sphere): PrimitivePairs,
+    (coal.Sphere, coal.Box): PrimitivePairs,
+    (coal.Box, coal.Sphere): PrimitivePairs,
+    (coal.Capsule, coal.Capsule): PrimitivePairs,
+    (coal.Capsule, coal.Box): PrimitivePairs,
+    (coal.Box, coal.Capsule): PrimitivePairs,
 }
 
 
@@ -51,8 +60,10 @@ def routine_of(pair: Pair) -> Callable[[list[Pair], list[int]], Routine]:
 class ContactDetector:
     """Finds the contact points of the scene's declared pairs that are closer than the margin.
 
-    A polyhedron, a sphere or a capsule on a ground plane goes to :class:`~.ground.GroundHulls` (one compiled
-    pass for all of them), every other pair to :class:`~.narrow.NarrowPhase` (coal). The
+    A polyhedron, a sphere or a capsule on a ground plane goes to :class:`~.ground.GroundHulls`, a box
+    on a box to :class:`~.boxes.BoxPairs`, a sphere, capsule or box on a sphere, capsule or box to
+    :class:`~.primitives.PrimitivePairs` (each one compiled pass for all its pairs), every other pair
+    to :class:`~.narrow.NarrowPhase` (coal). The
     :class:`~.margin.MarginSchedule` widens the margin to what a step can travel and says when a step
     need not look (:meth:`cover`); :meth:`detect` itself always looks.
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import coal
 import numpy as np
 import pinocchio as pin
+from numba import njit
 
 from ..exceptions import ContactError
 from ..linalg import finite
@@ -147,7 +148,30 @@ class BoundingSpheres:
         """The spheres' gaps at the joint placements held in ``data``, shape (P,) [m] (-inf against a
         ground)."""
         rotations, translations = self.placements(data)
-        R, p = np.array(rotations)[self.side], np.array(translations)[self.side]  # (P, 2, 3, 3), (P, 2, 3)
-        world = np.einsum("psij,psj->psi", R, self.centers) + p
-        d = world[:, 0] - world[:, 1]
-        return np.sqrt(np.einsum("pi,pi->p", d, d)) - self.radius - self.obstacle_radius
+        gaps = np.empty(len(self.radius))
+        if len(gaps):
+            _sphere_gaps(
+                rotations, translations, self.side, self.centers, self.radius, self.obstacle_radius, gaps
+            )
+        return gaps
+
+
+@njit(cache=True)
+def _sphere_gaps(rotations, translations, side, centers, radius, obstacle_radius, gaps):  # type: ignore[no-untyped-def]
+    """The compiled pass of :meth:`BoundingSpheres.gaps`: each pair's centres in the world, and the
+    distance of the two spheres into ``gaps``."""
+    for i in range(gaps.shape[0]):
+        squared = 0.0
+        for a in range(3):
+            d = 0.0
+            for s in range(2):
+                R, p = rotations[side[i, s]], translations[side[i, s]]
+                x = (
+                    p[a]
+                    + R[a, 0] * centers[i, s, 0]
+                    + R[a, 1] * centers[i, s, 1]
+                    + R[a, 2] * centers[i, s, 2]
+                )
+                d += x if s == 0 else -x
+            squared += d * d
+        gaps[i] = np.sqrt(squared) - radius[i] - obstacle_radius[i]

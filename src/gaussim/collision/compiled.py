@@ -1,0 +1,138 @@
+"""What the compiled routine families share: the bounding-sphere broad phase, each side's placement
+in the frame of its joint, one kernel call over the pairs within the margin, and coal's narrow phase
+for the pairs the kernel hands back."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+from numba import njit
+
+from .contacts import Piece, one_pair
+from .narrow import BoundingSpheres, NarrowPhase
+from .pairs import Pair
+
+# Answers of a kernel per pair: farther apart than the margin, points found, or coal's to answer.
+FAR, FOUND, ASK_COAL = 0, 1, 2
+
+
+class CompiledPairs:
+    """A family of declared pairs answered by one compiled kernel (:meth:`_kernel`, in a subclass).
+
+    Only the pairs whose bounding spheres are within the margin reach the kernel; it answers each with
+    FAR (and a lower bound on its gap), FOUND (a normal, a gap and up to ``max_points`` points on the
+    robot's geometry, all at that gap) or ASK_COAL, and those go to :class:`~.narrow.NarrowPhase`.
+
+    Args:
+        pairs: the declared pairs of the scene.
+        index: which of them this family answers.
+    """
+
+    max_points = 1
+
+    def __init__(self, pairs: list[Pair], index: list[int]) -> None:
+        self.index = index
+        self.owner = np.array(index, dtype=np.int64)
+        self.pairs = [pairs[k] for k in index]
+        self.spheres = BoundingSpheres(self.pairs)
+        self.coal = NarrowPhase(pairs, index)
+        # each side's shape in the frame of its joint (a fixed obstacle's joint is the world's, 0)
+        self.local_rotation = np.array(
+            [[p.local.rotation, _other_placement(p).rotation] for p in self.pairs]
+        ).reshape(-1, 2, 3, 3)
+        self.local_translation = np.array(
+            [[p.local.translation, _other_placement(p).translation] for p in self.pairs]
+        ).reshape(-1, 2, 3)
+
+    def detect(self, data: pin.Data, margin: float) -> tuple[list[Piece], float]:
+        """The contacts of the pairs within ``margin`` [m] at the placements held in ``data``, and a
+        lower bound on every pair's gap [m]."""
+        apart = self.spheres.gaps(data)
+        far = apart > margin
+        clearance = float(apart[far].min(initial=np.inf))
+        near = np.flatnonzero(~far)
+        if not len(near):
+            return [], clearance
+        rotations, translations = self.spheres.placements(data)
+        count = len(near)
+        answer, gaps = np.empty(count, np.int64), np.empty(count)
+        normals, points = np.empty((count, 3)), np.empty((count, self.max_points, 3))
+        sizes = np.empty(count, np.int64)
+        self._kernel(rotations, translations, near, margin, answer, gaps, normals, points, sizes)
+        clearance = float(gaps[answer != ASK_COAL].min(initial=clearance))
+        pieces: list[Piece] = []
+        found = np.flatnonzero(answer == FOUND)
+        if len(found):  # one piece for all of them: a piece per pair costs more than the kernel
+            counts = sizes[found]
+            chosen = np.arange(self.max_points) < counts[:, None]
+            pieces.append(
+                (
+                    np.repeat(self.owner[near[found]], counts),
+                    points[found][chosen],
+                    np.repeat(normals[found], counts, axis=0),
+                    np.repeat(gaps[found], counts),
+                )
+            )
+        self.coal.use_margin(margin)
+        for k in np.flatnonzero(answer == ASK_COAL).tolist():
+            hit, least = self.coal.collide(self.pairs[near[k]], data)
+            clearance = min(clearance, least)
+            if hit is not None:
+                pieces.append(one_pair(self.index[near[k]], *hit))
+        return pieces, clearance
+
+    def _kernel(
+        self,
+        rotations: tuple[np.ndarray, ...],
+        translations: tuple[np.ndarray, ...],
+        near: np.ndarray,
+        margin: float,
+        answer: np.ndarray,
+        gaps: np.ndarray,
+        normals: np.ndarray,
+        points: np.ndarray,
+        sizes: np.ndarray,
+    ) -> None:
+        """Fills, for each pair ``near[k]`` (an index into :attr:`pairs`), ``answer[k]``, ``gaps[k]``,
+        ``normals[k]`` (from the other side towards the robot's) and the ``sizes[k]`` points
+        ``points[k]``, at the joint placements (``rotations``, ``translations``) of
+        :attr:`spheres`."""
+        raise NotImplementedError
+
+
+def _other_placement(pair: Pair) -> pin.SE3:
+    """Where the pair's other side sits in the frame of its joint (a fixed obstacle: in the world)."""
+    if pair.other_local is not None:
+        return pair.other_local
+    return pair.obstacle.placement()  # type: ignore[union-attr]
+
+
+@njit(cache=True)
+def stacked(rotations, translations):  # type: ignore[no-untyped-def]
+    """The joints' placements, tuples of views, as arrays (J, 3, 3) and (J, 3): once per kernel call
+    (a call that takes the tuples copies them and counts references to every view)."""
+    R = np.empty((len(rotations), 3, 3))
+    p = np.empty((len(rotations), 3))
+    for j in range(len(rotations)):
+        Rj, pj = rotations[j], translations[j]
+        for a in range(3):
+            p[j, a] = pj[a]
+            for b in range(3):
+                R[j, a, b] = Rj[a, b]
+    return R, p
+
+
+@njit(cache=True)
+def place(rotations, translations, side, local_rotation, local_translation, i, R, p):  # type: ignore[no-untyped-def]
+    """Both sides of pair ``i`` in the world: (R[s] (columns: its axes), p[s]) for s = 0 (the robot's)
+    and 1, its joint's placement (``rotations`` (J, 3, 3), ``translations`` (J, 3), see
+    :func:`stacked`) times its own."""
+    for s in range(2):
+        j = side[i, s]
+        for a in range(3):  # loops: a BLAS call per 3 x 3 product costs more than its arithmetic
+            p[s, a] = translations[j, a]
+            for b in range(3):
+                R[s, a, b] = 0.0
+                p[s, a] += rotations[j, a, b] * local_translation[i, s, b]
+                for c in range(3):
+                    R[s, a, b] += rotations[j, a, c] * local_rotation[i, s, c, b]
