@@ -12,7 +12,7 @@ from gaussim.assembly import GaussProblem
 from gaussim.solver import KKT_RTOL, GaussSolver, Status, kkt_residual
 from gaussim.solver.active_set import ACTIVE_SET_FLOOR, active_set_candidate
 from gaussim.solver.certificate import kkt_residuals
-from gaussim.solver.proxqp import SPARSE_FROM, _initialise, _sides, proxqp
+from gaussim.solver.proxqp import _initialise, _sides
 
 DATA = Path(__file__).parent / "data"
 
@@ -311,25 +311,3 @@ def test_an_answer_with_a_wrong_sign_multiplier_is_certified_by_nonnegative_ones
     assert kkt_residuals(p.H, p.g, p.A, p.b, p.C, p.l, x_tight, np.zeros(0), z_tight)[1] < 1e-11
     difference = solution.x - x_tight  # in the norm of M [sqrt(kg) m/s]: its rotations are light
     assert np.sqrt(difference @ p.H @ difference) < 1e-9
-
-
-def test_large_problems_take_the_sparse_backend_and_agree_with_the_dense_one():
-    """An island of SPARSE_FROM coordinates or more goes to ProxQP's sparse backend. On a QP saved from
-    twenty bodies settling in a bin (120 unknowns, 284 contact rows), the motion it gives equals the
-    dense backend's to the solver's tolerance, in the metric of M."""
-    problem = _saved_problem("pile_wrong_sign_multiplier_full_rank.npz")
-    solver = GaussSolver(gaussim.Options())
-    assert len(problem.g) >= SPARSE_FROM
-    answers = {}
-    for sparse in (True, False):
-        dims, equalities, inequalities = _sides(problem)
-        qp = solver._new(*dims, sparse=sparse)
-        _initialise(qp, problem, equalities, inequalities)
-        qp.solve()
-        answers[sparse] = qp.results.x.copy()
-    assert isinstance(solver._new(*_sides(problem)[0]), proxqp.sparse.QP)
-    d = answers[True] - answers[False]
-    assert np.sqrt(d @ problem.H @ d) < 1e-6 * np.sqrt(answers[False] @ problem.H @ answers[False])
-    solution = solver.solve(problem)
-    assert solution.certificate.converged
-    assert np.abs(solution.x - answers[False]).max() < 1e-6

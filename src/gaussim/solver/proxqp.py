@@ -1,8 +1,4 @@
-"""The solve: one ProxQP object, reused while the problem keeps its size, after the active set.
-
-A problem of fewer than SPARSE_FROM coordinates goes to ProxQP's dense backend (its primal-dual
-factorization), a larger one (an island of many bodies) to its sparse backend: a contact row reads the
-coordinates of two bodies at most.
+"""The solve: one dense ProxQP object, reused while the problem keeps its size, after the active set.
 
 Each QP is first tried on what the last one left (:mod:`.active_set`), then warm-started in ProxQP;
 an answer gaussim's KKT check refuses is recovered by cold starts (:meth:`GaussSolver._recover`), and a
@@ -15,7 +11,6 @@ import warnings
 from typing import Any
 
 import numpy as np
-import scipy.sparse
 
 from ..assembly import GaussProblem
 from ..exceptions import GaussimWarning
@@ -39,10 +34,6 @@ WARM_START_ITERATIONS = 100
 # reach eps_abs, the inner loop may exhaust that cap at each outer iteration; the inner solves that
 # converge take a few iterations.
 INNER_ITERATIONS = 100
-# Problems with at least this many coordinates take ProxQP's sparse backend. On problems saved from the
-# speed suite's bin (120 coordinates, 290 rows) it solves in half the dense backend's time; on a robot's
-# (18 coordinates, 150 rows) the dense primal-dual factorization is twice as fast as the sparse one.
-SPARSE_FROM = 64
 # Up to this many coordinates and rows, the dense backend factorizes ProxQP's primal-dual system, which
 # takes half the iterations of the primal one ProxQP picks for more rows than coordinates (a robot's
 # contacts); larger, each refactorization of that system costs more than the iterations it saves (a
@@ -85,11 +76,6 @@ class GaussSolver:
         if dims != self._dims:
             self._fresh(p, dims, equalities, inequalities)
             solution = self._run(problem)
-        elif isinstance(self._qp, proxqp.sparse.QP):  # its update keeps the factorization's sparsity
-            self._fresh(p, dims, equalities, inequalities)  # pattern, which new contacts change
-            x, multipliers = self._last
-            start = (x, -multipliers[: dims[1]], -multipliers[dims[1] :])
-            solution = self._run(problem, WARM_START_ITERATIONS, start)
         else:
             self._qp.update(p.H, p.g, *equalities, *inequalities)  # the upper bounds stay +inf
             solution = self._run(problem, WARM_START_ITERATIONS)
@@ -103,9 +89,7 @@ class GaussSolver:
     def _recover(
         self, problem: GaussProblem, dims: tuple[int, int, int], equalities: tuple, inequalities: tuple
     ) -> Solution:
-        """After an answer the KKT check refused (not an infeasibility), the first certified of the
-        following, each solved by the dense backend (the sparse one's answers to a large pile's
-        degenerate QPs are the less accurate: 2e-6 where the dense one's reach 1e-10):
+        """After an answer the KKT check refused (not an infeasibility), the first certified of:
 
         1. a cold start in a new QP object: ProxQP 0.8, warm-started, may return the previous solution
            after 0 iterations when only the bounds changed (a stale contact force on a ball that left
@@ -121,7 +105,7 @@ class GaussSolver:
 
         Else the cold start's answer, its status KKT_CHECK_FAILED when ProxQP said solved."""
         p = problem
-        self._fresh(p, dims, equalities, inequalities, sparse=False)
+        self._fresh(p, dims, equalities, inequalities)
         solution = self._run(problem)
         solution.certificate.restarted = True
         if self._certified(solution):
@@ -129,7 +113,7 @@ class GaussSolver:
         rescued = self._warm(problem, solution.x, solution.multipliers, ACTIVE_SET_FLOOR)
         if rescued is not None:
             return _mended(rescued, solution)
-        self._fresh(p, dims, equalities, inequalities, sparse=False)
+        self._fresh(p, dims, equalities, inequalities)
         settings, eps = self._qp.settings, self.options.eps_abs
         settings.eps_abs = settings.eps_duality_gap_abs = eps / KKT_RTOL
         tight = self._run(problem)
@@ -145,16 +129,10 @@ class GaussSolver:
         return solution
 
     def _fresh(
-        self,
-        p: GaussProblem,
-        dims: tuple[int, int, int],
-        equalities: tuple,
-        inequalities: tuple,
-        sparse: bool | None = None,
+        self, p: GaussProblem, dims: tuple[int, int, int], equalities: tuple, inequalities: tuple
     ) -> None:
-        """A new QP object for the problem's sizes (its backend as :meth:`_new` chooses), initialised
-        with it."""
-        self._qp, self._cap = self._new(*dims, sparse=sparse), 0
+        """A new QP object for the problem's sizes, initialised with it."""
+        self._qp, self._cap = self._new(*dims), 0
         _initialise(self._qp, p, equalities, inequalities)
         self._dims = dims
         results = self._qp.results  # views that every solve of this QP object writes into
@@ -200,7 +178,7 @@ class GaussSolver:
         size = max(float(np.abs(stationarity).max(initial=0.0)), np.finfo(float).tiny)
         multipliers = np.zeros(n_eq + len(p.l))
         if n_eq + k:
-            qp = self._new(n_eq + k, 0, k, sparse=False)
+            qp = self._new(n_eq + k, 0, k)
             qp.settings.eps_abs = qp.settings.eps_duality_gap_abs = self.options.eps_abs / KKT_RTOL
             signs = np.hstack([np.zeros((k, n_eq)), np.eye(k)])  # lambda_k >= 0, lambda_eq free
             bounds = (signs, np.zeros(k), np.full(k, np.inf)) if k else (None, None, None)
@@ -210,16 +188,12 @@ class GaussSolver:
             multipliers[n_eq + near] = size * np.maximum(qp.results.x[n_eq:], 0.0)  # its bound, met to eps
         return _checked(problem, x.copy(), multipliers, Status.MULTIPLIERS_CERTIFIED, tolerance)
 
-    def _run(self, problem: GaussProblem, cap: int | None = None, start: tuple | None = None) -> Solution:
-        """Solve with at most ``cap`` outer iterations (default and largest: Options.max_iter), from
-        ``start`` (x, y, z) when given, else from the QP object's last result."""
+    def _run(self, problem: GaussProblem, cap: int | None = None) -> Solution:
+        """Solve with at most ``cap`` outer iterations (default and largest: Options.max_iter)."""
         cap = min(cap or self.options.max_iter, self.options.max_iter)
         if cap != self._cap:  # a settings write costs as much as a small update: only on a change
             self._qp.settings.max_iter = self._cap = cap
-        if start is None:
-            self._qp.solve()
-        else:
-            self._qp.solve(*start)
+        self._qp.solve()
         x, y, z, info = self._results
         p = problem
         # copies (ProxQP's arrays are overwritten by the next solve); the multipliers are -y, -z
@@ -247,17 +221,12 @@ class GaussSolver:
             c.status = Status.CERTIFIED_AT_MAX_ITER
         return c.converged
 
-    def _new(self, n: int, n_eq: int, n_in: int, sparse: bool | None = None) -> Any:
-        """A QP object of ProxQP's sparse backend (default: for SPARSE_FROM coordinates or more) or its
-        dense one, with gaussim's settings."""
-        sparse = n >= SPARSE_FROM if sparse is None else sparse
-        if sparse:
-            qp = proxqp.sparse.QP(n, n_eq, n_in)
-        else:
-            backends = proxqp.dense.DenseBackend
-            small = n + n_eq + n_in <= PRIMAL_DUAL_UP_TO
-            backend = backends.PrimalDualLDLT if small else backends.Automatic
-            qp = proxqp.dense.QP(n, n_eq, n_in, False, proxqp.dense.HessianType.Dense, backend)
+    def _new(self, n: int, n_eq: int, n_in: int) -> Any:
+        """A dense QP object (its factorization chosen by size, see PRIMAL_DUAL_UP_TO) with gaussim's
+        settings."""
+        backends = proxqp.dense.DenseBackend
+        backend = backends.PrimalDualLDLT if n + n_eq + n_in <= PRIMAL_DUAL_UP_TO else backends.Automatic
+        qp = proxqp.dense.QP(n, n_eq, n_in, False, proxqp.dense.HessianType.Dense, backend)
         settings = qp.settings
         settings.eps_abs = self.options.eps_abs
         settings.eps_rel = 0.0
@@ -349,17 +318,4 @@ def _sides(p: GaussProblem) -> tuple[tuple[int, int, int], tuple, tuple]:
 def _initialise(qp: Any, p: GaussProblem, equalities: tuple, inequalities: tuple) -> None:
     """Initialise a new QP object with the problem (every inequality row is one-sided: u = +inf)."""
     upper = np.full(len(p.l), np.inf) if len(p.l) else None
-    if isinstance(qp, proxqp.sparse.QP):
-        qp.init(*_sparse(p, equalities, inequalities), upper)
-    else:
-        qp.init(p.H, p.g, *equalities, *inequalities, upper)
-
-
-def _sparse(p: GaussProblem, equalities: tuple, inequalities: tuple) -> tuple:
-    """(H's upper triangle, g, A, b, C, l) as the sparse backend takes them."""
-    (A, b), (C, l) = equalities, inequalities
-
-    def csc(matrix: np.ndarray | None) -> scipy.sparse.csc_matrix | None:
-        return None if matrix is None else scipy.sparse.csc_matrix(matrix)
-
-    return csc(np.triu(p.H)), p.g, csc(A), b, csc(C), l
+    qp.init(p.H, p.g, *equalities, *inequalities, upper)
