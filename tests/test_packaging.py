@@ -50,21 +50,27 @@ def test_the_wheel_holds_every_shipped_robot_and_scene(wheel):
     assert SHIPPED and not missing, missing
 
 
-def test_an_installed_package_runs_every_shipped_scene(wheel, tmp_path):
-    """``pip install .`` (here: the wheel unpacked as an install would lay it) found no robot of its own
-    through the source tree's path: 6 of the 8 shipped scenes exited 2."""
+def _run_installed(wheel: Path, tmp_path: Path, script: str, env: dict) -> subprocess.CompletedProcess:
+    """``script`` run by Python from outside the source tree, with ``wheel`` unpacked as ``pip install .``
+    lays it out first on the path."""
     target = tmp_path / "site"
     zipfile.ZipFile(wheel).extractall(target)
-    result = subprocess.run(
-        [sys.executable, "-c", RUN_EVERY_SCENE],
+    return subprocess.run(
+        [sys.executable, "-c", script],
         capture_output=True,
         text=True,
         timeout=600,
         cwd=tmp_path,
-        # the kernels as plain Python: this checks where the package finds its files, not the kernels,
-        # whose compiling at the installed copy's paths would take a minute
-        env={**_environment(), "PYTHONPATH": str(target), "NUMBA_DISABLE_JIT": "1"},
+        env={**env, "PYTHONPATH": str(target)},
     )
+
+
+def test_an_installed_package_runs_every_shipped_scene(wheel, tmp_path):
+    """``pip install .`` (here: the wheel unpacked as an install would lay it) found no robot of its own
+    through the source tree's path: 6 of the 8 shipped scenes exited 2."""
+    # the kernels as plain Python: this checks where the package finds its files, not the kernels,
+    # whose compiling at the installed copy's paths would take a minute
+    result = _run_installed(wheel, tmp_path, RUN_EVERY_SCENE, {**_environment(), "NUMBA_DISABLE_JIT": "1"})
     assert result.returncode == 0, result.stderr
     scenes = sorted(p.name for p in (ROOT / "robots" / "scenes").glob("*.toml"))
     assert result.stdout.split() == [word for name in scenes for word in ("ran", name)]
@@ -92,17 +98,8 @@ print(*compiled)
 def test_an_installed_package_runs_the_main_job_without_compiling(wheel, tmp_path):
     """The build compiled the kernels into numba's cache in the wheel (setup.py): the first run after
     ``pip install .`` took 37 s when it compiled them."""
-    target = tmp_path / "site"
-    zipfile.ZipFile(wheel).extractall(target)
     env = {k: v for k, v in _environment().items() if not k.startswith("NUMBA_")}  # the cache beside them
-    result = subprocess.run(
-        [sys.executable, "-c", RUN_THE_MAIN_JOB],
-        capture_output=True,
-        text=True,
-        timeout=600,
-        cwd=tmp_path,
-        env={**env, "PYTHONPATH": str(target)},
-    )
+    result = _run_installed(wheel, tmp_path, RUN_THE_MAIN_JOB, env)
     assert result.returncode == 0, result.stderr
     assert result.stdout.split() == [], result.stdout
 

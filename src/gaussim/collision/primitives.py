@@ -239,11 +239,7 @@ def _sphere_capsule(c, r, R, p, radius, half_length, w, n):  # type: ignore[no-u
             closest[j] = ends[1, j]
         else:
             closest[j] = ends[0, j] + v[j] * (c1 / c2)
-        u[j] = closest[j] - c[j]
-    length = np.sqrt(dot(u, u))
-    if length <= COINCIDENT:
-        return np.nan
-    return _surface_points(c, r, closest, radius, u, length, w, n)
+    return _sphere_sphere(c, r, closest, radius, w, n)
 
 
 @njit(cache=True)
