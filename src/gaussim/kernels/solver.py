@@ -54,6 +54,10 @@ def kkt_residuals(H, g, A, b, C, l, x, y, z):  # type: ignore[no-untyped-def]
 ACTIVE_SET_REFINEMENTS = 2
 
 
+# Primal-dual active-set steps after the first working set (:func:`active_set_candidate`).
+ACTIVE_SET_ITERATIONS = 3
+
+
 # The relative shift that makes the active rows' Delassus matrix G positive definite when those rows
 # are dependent (a sticking contact's four pyramid rows span three directions).
 ACTIVE_SET_SHIFT = 1e-12
@@ -61,12 +65,16 @@ ACTIVE_SET_SHIFT = 1e-12
 
 @njit(cache=True, fastmath={"reassoc", "contract"})
 def active_set_candidate(H, g, A, b, C, l, x, multipliers, tolerance, floor, x_out, multipliers_out):  # type: ignore[no-untyped-def]
-    """(how, the residuals of :func:`kkt_residuals`) for the first of two
-    candidates built from a solution (x, multipliers) that the relative KKT residual certifies
-    (<= ``tolerance``): that solution itself (how 1), then the solution of the problem with the rows
-    it held active (its equalities and the inequalities with a multiplier above ``floor`` times the
-    largest, and > 0) as equalities (how 2, written into ``x_out`` and ``multipliers_out``; see the
-    docstring of :mod:`gaussim.solver.active_set`). how 0: neither is certified.
+    """(how, the residuals of :func:`kkt_residuals`) for the first candidate built from a solution
+    (x, multipliers) that the relative KKT residual certifies (<= ``tolerance``): that solution itself
+    (how 1), then the solutions of the problem with a working set of rows as equalities (how 2, written
+    into ``x_out`` and ``multipliers_out``; see the docstring of :mod:`gaussim.solver.active_set`).
+    how 0: none is certified.
+
+    The first working set is the rows the solution held active (its equalities and the inequalities
+    with a multiplier above ``floor`` times the largest, and > 0); each of at most
+    ACTIVE_SET_ITERATIONS more is the last one's rows with a multiplier >= 0 and the rows its solution
+    violates by more than ``tolerance`` (a primal-dual active-set step), while that changes it.
 
     G is shifted by ACTIVE_SET_SHIFT max diag G and the solve refined ACTIVE_SET_REFINEMENTS times
     (dependent rows make G singular; their multipliers' split is then one of many, which the check
@@ -79,26 +87,51 @@ def active_set_candidate(H, g, A, b, C, l, x, multipliers, tolerance, floor, x_o
     for i in range(n_eq, len(multipliers)):
         largest = max(largest, multipliers[i])
     least = max(floor * largest, 0.0)
-    active = np.empty(len(l), np.int64)
-    k = n_eq
+    working = np.empty(len(l), np.bool_)
     for i in range(len(l)):
-        if multipliers[n_eq + i] > least:
-            active[k - n_eq] = i
-            k += 1
-    K, r = np.empty((k, nv)), np.empty(k)
-    for i in range(k):
-        row = i if i < n_eq else active[i - n_eq]
-        for j in range(nv):
-            K[i, j] = A[row, j] if i < n_eq else C[row, j]
-        r[i] = b[row] if i < n_eq else l[row]
+        working[i] = multipliers[n_eq + i] > least
     L = cholesky(H, 0.0)
     if L is None:
         return 0, residuals
-    W = forward(L, K)  # the rows of K L^-T, (k, nv)
     h = np.empty((1, nv))
     for j in range(nv):
         h[0, j] = g[j]
     h = forward(L, h)[0]  # L^-1 g
+    for _ in range(1 + ACTIVE_SET_ITERATIONS):
+        if not _solve_on(L, h, A, b, C, l, working, x_out, multipliers_out):
+            return 0, residuals
+        residuals = kkt_residuals(H, g, A, b, C, l, x_out, multipliers_out[:n_eq], multipliers_out[n_eq:])
+        if residuals[1] <= tolerance:
+            return 2, residuals
+        changed = False
+        for i in range(len(l)):
+            keep = multipliers_out[n_eq + i] >= 0.0 if working[i] else dot(C[i], x_out) - l[i] < -tolerance
+            changed |= keep != working[i]
+            working[i] = keep
+        if not changed:
+            break
+    return 0, residuals
+
+
+@njit(cache=True, fastmath={"reassoc", "contract"})
+def _solve_on(L, h, A, b, C, l, working, x_out, multipliers_out):  # type: ignore[no-untyped-def]
+    """The Gauss problem (H = L L^T, h = L^-1 g) with the equalities and the ``working`` inequalities
+    as equalities, solved into ``x_out`` and ``multipliers_out`` (0 off the working set); False when
+    the shifted G is not positive definite."""
+    n_eq, nv = len(b), len(h)
+    k = n_eq
+    rows = np.empty(len(l), np.int64)
+    for i in range(len(l)):
+        if working[i]:
+            rows[k - n_eq] = i
+            k += 1
+    K, r = np.empty((k, nv)), np.empty(k)
+    for i in range(k):
+        row = i if i < n_eq else rows[i - n_eq]
+        for j in range(nv):
+            K[i, j] = A[row, j] if i < n_eq else C[row, j]
+        r[i] = b[row] if i < n_eq else l[row]
+    W = forward(L, K)  # the rows of K L^-T, (k, nv)
     G, rhs, largest = np.empty((k, k)), r, 0.0
     for i in range(k):
         for j in range(i + 1):
@@ -107,7 +140,7 @@ def active_set_candidate(H, g, A, b, C, l, x, multipliers, tolerance, floor, x_o
         largest = max(largest, G[i, i])
     LG = cholesky(G, ACTIVE_SET_SHIFT * largest)
     if LG is None:
-        return 0, residuals
+        return False
     lam, step = np.zeros(k), np.empty((1, k))
     for _ in range(ACTIVE_SET_REFINEMENTS):
         product = matvec(G, lam)
@@ -128,9 +161,8 @@ def active_set_candidate(H, g, A, b, C, l, x, multipliers, tolerance, floor, x_o
     for i in range(len(multipliers_out)):
         multipliers_out[i] = lam[i] if i < n_eq else 0.0
     for i in range(k - n_eq):
-        multipliers_out[n_eq + active[i]] = lam[n_eq + i]
-    residuals = kkt_residuals(H, g, A, b, C, l, x_out, multipliers_out[:n_eq], multipliers_out[n_eq:])
-    return 2 if residuals[1] <= tolerance else 0, residuals
+        multipliers_out[n_eq + rows[i]] = lam[n_eq + i]
+    return True
 
 
 @njit(cache=True)

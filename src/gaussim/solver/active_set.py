@@ -7,6 +7,9 @@ multiplier) taken as equalities K x = r, the Gauss problem min 1/2 x^T H x + g^T
 
 (G the rows' Delassus matrix). The answer is exact when the active set did not change since that
 solution (a contact that keeps sticking, a limit that keeps holding); gaussim's KKT check decides.
+When it refuses, a few primal-dual active-set steps follow (rows with a negative multiplier leave,
+rows the answer violates join): a contact that starts or stops sliding, or lands, or leaves, changes
+a few rows, which those steps find at the cost of a linear solve each instead of a ProxQP solve.
 """
 
 from __future__ import annotations
