@@ -89,10 +89,11 @@ def _check(run: dict[str, object]) -> None:
 
 
 def test_a_pile_of_twenty_mixed_bodies_settles():
-    """MuJoCo's friction relaxation (one QP a step): the pile is at rest within 2 s (measured: 1.3 s;
-    a pile is chaotic, so when it comes to rest moves with the last bits of any change), its energy
+    """MuJoCo's friction relaxation (one QP a step): the pile is at rest within 3 s (measured: 1.3 s,
+    then 2.3 s since the solver's active-set steps, a ball's last roll down the bin's tilted floor; a
+    pile is chaotic, so when it comes to rest moves with the last bits of any change), its energy
     never grew (it need not even for the stabilisation)."""
-    run = _settle("pyramid", duration=2.0)
+    run = _settle("pyramid", duration=3.0)
     _check(run)
     assert run["growth"].max() <= ENERGY_ROUND_OFF
 
