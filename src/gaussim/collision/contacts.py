@@ -6,9 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-# Surface points within this distance of the support plane belong to a contact patch [m]; on the
-# ground, plus what the pairs may close within the step (the margin schedule's travel: a turning body
-# brings other points down, which a patch of the resting tolerance alone would leave to penetrate).
+# Surface points within this distance of the support plane belong to a contact patch [m].
 PATCH_TOLERANCE = 1e-3
 # A contact patch narrower than this is one point (the rounded foot of a mesh hull touches on a
 # ring of nearby vertices; several points there would only add redundant rows) [m].

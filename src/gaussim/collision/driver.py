@@ -23,12 +23,9 @@ from .primitives import PrimitivePairs
 class Routine(Protocol):
     """A routine family: built once from the pairs it answers (``index`` into the declared pairs)."""
 
-    def detect(self, data: pin.Data, margin: float, travel: float) -> tuple[list[Piece], float]:
+    def detect(self, data: pin.Data, margin: float) -> tuple[list[Piece], float]:
         """The contacts of its pairs within ``margin`` [m] at the placements held in ``data``, and a
-        lower bound on every one of its pairs' gaps [m]. ``travel`` is what the pairs may close within
-        the step (the margin's widening [m]): the polyhedra on the ground take the points within
-        PATCH_TOLERANCE + ``travel`` of their deepest (coal's patches, and the compiled pairs that
-        reproduce them, keep PATCH_TOLERANCE)."""
+        lower bound on every one of its pairs' gaps [m]."""
         ...
 
 
@@ -105,9 +102,8 @@ class ContactDetector:
         schedule's clearance."""
         pieces: list[Piece] = []
         least = []
-        margin = self.schedule.margin
         for routine in self.routines:
-            found, bound = routine.detect(data, margin, margin - self.schedule.base_margin)
+            found, bound = routine.detect(data, self.schedule.margin)
             pieces += found
             least.append(bound)
         self.schedule.clearance = min(least, default=np.inf)

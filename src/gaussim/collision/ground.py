@@ -81,11 +81,10 @@ class GroundHulls:
         self.placements = JointPlacements([pair.joint for pair in self.pairs])
         self.hulls = _hulls(self.pairs)
 
-    def detect(self, data: pin.Data, margin: float, travel: float = 0.0) -> tuple[list[Piece], float]:
+    def detect(self, data: pin.Data, margin: float) -> tuple[list[Piece], float]:
         """The contacts of the hulls within ``margin`` [m] of the ground at the placements held in
-        ``data`` (patches widened by ``travel``, see :class:`~.driver.Routine`), and the least gap of
-        all the hulls [m]."""
-        found, least = touching(*self.placements(data), self.hulls, margin, self.index, travel)
+        ``data``, and the least gap of all the hulls [m]."""
+        found, least = touching(*self.placements(data), self.hulls, margin, self.index)
         return ([found] if len(found[0]) else []), least
 
 
@@ -95,15 +94,13 @@ def touching(
     hulls: Hulls,
     margin: float,
     index: np.ndarray,
-    travel: float = 0.0,
 ) -> tuple[Piece, float]:
     """One compiled pass over the hulls (:func:`~gaussim.kernels.collision.ground_hulls`, which updates
     ``hulls.deepest`` and ``hulls.narrow_at``) at their joints' placements (P rotations (3, 3), translations
-    (3,)), for the contacts within ``margin`` [m], patches PATCH_TOLERANCE + ``travel`` deep; ``index``: the
-    declared pair of each hull, shape (P,).
+    (3,)), for the contacts within ``margin`` [m]; ``index``: the declared pair of each hull, shape (P,).
     Returns: the contacts of the hulls (a :data:`Piece`, hull by hull) and the least gap of all the
     hulls [m]."""
-    count = len(index) * (hulls.directions.shape[1] + 1)  # at most: the outline and the deepest
+    count = len(index) * hulls.directions.shape[1]  # at most this many points: the kernel says how many
     pairs, points, normals, gaps = (
         np.empty(count, np.int64),
         np.empty((count, 3)),
@@ -123,7 +120,7 @@ def touching(
         hulls.rounding,
         hulls.directions,
         margin,
-        (PATCH_TOLERANCE + travel, PATCH_MIN_EXTENT),
+        (PATCH_TOLERANCE, PATCH_MIN_EXTENT),
         index,
         pairs,
         points,

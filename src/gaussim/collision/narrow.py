@@ -38,10 +38,9 @@ class NarrowPhase:
         self.patch_result = coal.ContactPatchResult(self.patch_request)
         self.spheres = BoundingSpheres(self.pairs)
 
-    def detect(self, data: pin.Data, margin: float, travel: float = 0.0) -> tuple[list[Piece], float]:
+    def detect(self, data: pin.Data, margin: float) -> tuple[list[Piece], float]:
         """The contacts of the pairs within ``margin`` [m] at the placements held in ``data``, and a
-        lower bound on every pair's gap [m]. ``travel`` is not used: coal's patches keep
-        PATCH_TOLERANCE, which the compiled primitive pairs reproduce (tests/test_primitives.py)."""
+        lower bound on every pair's gap [m]."""
         self.use_margin(margin)
         apart = self.spheres.gaps(data)
         far = apart > margin

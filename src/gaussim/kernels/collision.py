@@ -103,9 +103,9 @@ def ground_hulls(
 @njit(cache=True)
 def _outline(c, R, p, X, rounding, directions, margin, patch, gap, heights, world, chosen):  # type: ignore[no-untyped-def]
     """A hull touching widely (ground ``c`` seen from its joint at (R, p), vertices X, the least
-    ``gap``): marks in ``chosen`` its vertices within the patch tolerance of the deepest (or
-    penetrating) that are extreme along ``directions`` and the deepest, or the deepest alone when they
-    span at most PATCH_MIN_EXTENT, with their gaps in ``heights`` and world points in ``world``."""
+    ``gap``): marks in ``chosen`` its vertices within PATCH_TOLERANCE of the deepest (or penetrating)
+    that are extreme along ``directions``, or the deepest alone when they span at most
+    PATCH_MIN_EXTENT, with their gaps in ``heights`` and world points in ``world``."""
     size, (tolerance, extent) = X.shape[1], patch
     bound = max(0.0, min(margin, gap + tolerance))
     low, high = _unbounded()
@@ -134,7 +134,6 @@ def _outline(c, R, p, X, rounding, directions, margin, patch, gap, heights, worl
                 if along > reach:
                     best, reach = v, along
         chosen[best] = True
-    chosen[deepest] = True  # within a widened patch it need not be on the outline
 
 
 @njit(cache=True, inline="always")
