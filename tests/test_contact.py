@@ -414,4 +414,3 @@ def test_the_passes_stall_when_two_of_them_do_not_halve_the_residual():
     assert not _stalled([1e-3, 8e-4, 4.9e-4])  # halved over two passes: still converging
     assert _stalled([1e-3, 8e-4, 5.1e-4])
     assert _stalled([1e-3, 2e-3, 1e-3, 6e-4, 9e-4])  # a cycle
-
