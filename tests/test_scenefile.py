@@ -8,7 +8,8 @@ import pytest
 
 import gaussim
 from gaussim import Body, FreeBody, Material, pose
-from gaussim.scenefile import SceneFileError
+from gaussim.robot import ROBOTS_DIR
+from gaussim.scenefile import SceneFileError, load_scene
 
 SCENES = sorted((Path(__file__).resolve().parents[1] / "robots" / "scenes").glob("*.toml"))
 STEPS = 200
@@ -338,3 +339,16 @@ def test_a_bad_body_names_its_field(tmp_path, text, key, message):
     path = _write(tmp_path, text)
     with pytest.raises(SceneFileError, match=rf"^{path}: {key}: .*{message}"):
         gaussim.load_scene(path)
+
+
+def test_a_bare_name_reads_the_shipped_scene(tmp_path, monkeypatch):
+    """``gaussim run solo12_standing`` from anywhere (an installed package has no robots/ beside the
+    user): a bare name that is no file reads the shipped scene; one that is not shipped says which are."""
+    monkeypatch.chdir(tmp_path)
+    shipped = load_scene(ROBOTS_DIR / "scenes" / "solo12_standing.toml")
+    for name in ("solo12_standing", "solo12_standing.toml"):
+        spec = load_scene(name)
+        assert spec.scene.robot.name == shipped.scene.robot.name and spec.options == shipped.options
+    listed = r"solo12_walk: file: cannot read it: .*shipped scenes: .*solo12_standing"
+    with pytest.raises(SceneFileError, match=listed):
+        load_scene("solo12_walk")

@@ -57,7 +57,11 @@ def main(argv: list[str] | None = None) -> int:
     commands = parser.add_subparsers(dest="command", required=True)
 
     run = commands.add_parser("run", help="simulate a scene file, write its log and print a summary")
-    run.add_argument("scene", type=Path, help="scene file (TOML; the shipped ones are in robots/scenes)")
+    run.add_argument(
+        "scene",
+        type=Path,
+        help="scene file (TOML), or the name of a shipped one (robots/scenes: solo12_standing, ...)",
+    )
     run.add_argument(
         "--out",
         type=Path,

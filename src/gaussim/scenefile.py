@@ -42,7 +42,7 @@ import pinocchio as pin
 from .control import Command, Controller, PDHold, command, constant_torque, zero_torque
 from .exceptions import GaussimError, InvalidOptions, InvalidRobot, shown
 from .options import Options, is_real
-from .robot import Robot, load_robot
+from .robot import ROBOTS_DIR, Robot, load_robot
 from .scene import Anchor, Box, Ground, LoopClosure, Scene, Sphere
 from .state import BodyState, State
 from .world import SHAPES, Body, FreeBody, Material, World, pose
@@ -155,17 +155,21 @@ class _BodyEntry:
 
 
 def load_scene(path: str | Path, **overrides: Any) -> SceneSpec:
-    """Read and validate a scene file; ``overrides`` replace fields of its ``[options]`` (e.g. dt=1e-4).
+    """Read and validate a scene file, or the shipped scene a bare name names (:func:`shipped_scene`);
+    ``overrides`` replace fields of its ``[options]`` (e.g. dt=1e-4).
 
     Raises:
         SceneFileError: unreadable TOML, unknown key, wrong type or value (names file and key).
         GaussimError: an unknown robot, frame or geometry (the message lists the valid names).
     """
-    path = Path(path)
+    path = shipped_scene(Path(path))
     try:
         raw = path.read_bytes()
     except OSError as err:
-        raise SceneFileError(path, "file", f"cannot read it: {err.strerror}") from err
+        names = ", ".join(sorted(p.stem for p in (ROBOTS_DIR / "scenes").glob("*.toml")))
+        raise SceneFileError(
+            path, "file", f"cannot read it: {err.strerror} (shipped scenes: {names})"
+        ) from err
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as err:
@@ -173,6 +177,15 @@ def load_scene(path: str | Path, **overrides: Any) -> SceneSpec:
             path, "file", f"not a UTF-8 text file (byte {raw[err.start]:#04x} at offset {err.start})"
         ) from err
     return load_scene_text(text, path, **overrides)
+
+
+def shipped_scene(path: Path) -> Path:
+    """``path``, or the shipped scene it names when no such file exists (``solo12_standing`` or
+    ``solo12_standing.toml``: robots/scenes in a clone, the package's copy in an install)."""
+    if path.exists() or path.parent != Path():
+        return path
+    shipped = ROBOTS_DIR / "scenes" / path.with_suffix(".toml").name
+    return shipped if shipped.is_file() else path
 
 
 def load_scene_text(text: str, path: str | Path, **overrides: Any) -> SceneSpec:
