@@ -414,3 +414,30 @@ def test_the_passes_stall_when_two_of_them_do_not_halve_the_residual():
     assert not _stalled([1e-3, 8e-4, 4.9e-4])  # halved over two passes: still converging
     assert _stalled([1e-3, 8e-4, 5.1e-4])
     assert _stalled([1e-3, 2e-3, 1e-3, 6e-4, 9e-4])  # a cycle
+
+
+def test_a_turning_box_does_not_sink_the_corners_its_turn_brings_down(box):
+    """A box (0.2 m wide) resting on one bottom edge, tilted 0.03 rad, turning back to flat at
+    20 rad/s about that edge: its other edge, 6 mm up, comes down at 4 m/s, 4 mm a step. Its corners
+    are contact points before they reach the ground (the patch as deep as the box's turn in the
+    step times its size), so no corner goes below it (the eight corners from the placement, not from
+    the contacts; without the widening, 2 mm)."""
+    theta, w, a, h = 0.03, 20.0, 0.1, HALF_HEIGHT
+    R = pin.rpy.rpyToMatrix(0.0, theta, 0.0)
+    corners = np.array([[x, y, z] for x in (-a, a) for y in (-a, a) for z in (-h, h)])
+    pivot = R @ np.array([a, 0.0, -h])  # the low edge's midpoint from the centre
+    q = box.neutral()
+    q[:3] = [0.0, 0.0, -pivot[2]]
+    q[3:7] = pin.Quaternion(R).coeffs()
+    omega = np.array([0.0, -w, 0.0])
+    v = np.concatenate([R.T @ np.cross(omega, -pivot), R.T @ omega])  # the low edge at rest
+    assert (R @ corners.T)[2].min() + q[2] == pytest.approx(0.0, abs=1e-12)
+    sim = gaussim.Simulator(gaussim.Scene(box, ground=gaussim.Ground(friction=0.8)))
+    lowest = []
+
+    def record(state):
+        rotation = pin.Quaternion(state.q[3:7]).toRotationMatrix()
+        lowest.append(state.q[2] + (rotation @ corners.T)[2].min())
+
+    run(sim, sim.reset(q, v), 5, each=record)
+    assert min(lowest) > -1e-6, lowest

@@ -200,11 +200,11 @@ def test_cli_contact_failure_exits_1_and_keeps_the_log(tmp_path, monkeypatch, ca
     detect = BoxPairs.detect
     calls = []
 
-    def failing(self, data, margin):  # the 14th detection fails, as coal's NaN normal did
+    def failing(self, data, margin, turns):  # the 14th detection fails, as coal's NaN normal did
         calls.append(margin)
         if len(calls) == 14:
             raise gaussim.ContactError("a non-finite contact for pair 'top_0/middle_0'", "top_0/middle_0")
-        return detect(self, data, margin)
+        return detect(self, data, margin, turns)
 
     monkeypatch.setattr(BoxPairs, "detect", failing)
     out = tmp_path / "r.npz"

@@ -23,9 +23,13 @@ from .primitives import PrimitivePairs
 class Routine(Protocol):
     """A routine family: built once from the pairs it answers (``index`` into the declared pairs)."""
 
-    def detect(self, data: pin.Data, margin: float) -> tuple[list[Piece], float]:
+    def detect(self, data: pin.Data, margin: float, turns: np.ndarray) -> tuple[list[Piece], float]:
         """The contacts of its pairs within ``margin`` [m] at the placements held in ``data``, and a
-        lower bound on every one of its pairs' gaps [m]."""
+        lower bound on every one of its pairs' gaps [m]. ``turns``: per declared pair, the most its
+        geometry may turn within the step [rad] (:class:`~.margin.MarginSchedule`): a polyhedron on
+        the ground whose turn times its size exceeds PATCH_TOLERANCE takes its patch that deep, the
+        points the turn can bring down (coal's patches, and the compiled pairs that reproduce them,
+        keep PATCH_TOLERANCE)."""
         ...
 
 
@@ -103,7 +107,7 @@ class ContactDetector:
         pieces: list[Piece] = []
         least = []
         for routine in self.routines:
-            found, bound = routine.detect(data, self.schedule.margin)
+            found, bound = routine.detect(data, self.schedule.margin, self.schedule.turns)
             pieces += found
             least.append(bound)
         self.schedule.clearance = min(least, default=np.inf)

@@ -80,11 +80,20 @@ class GroundHulls:
         self.pairs = [pairs[k] for k in index]
         self.placements = JointPlacements([pair.joint for pair in self.pairs])
         self.hulls = _hulls(self.pairs)
+        vertices = self.hulls.columns[:, :3, :]  # the largest distance of two vertices of each hull
+        spread = vertices[:, :, :, None] - vertices[:, :, None, :]
+        self.diameters = np.sqrt((spread**2).sum(axis=1)).max(axis=(1, 2), initial=0.0)
+        self._still = np.zeros(len(index))
 
-    def detect(self, data: pin.Data, margin: float) -> tuple[list[Piece], float]:
+    def detect(
+        self, data: pin.Data, margin: float, turns: np.ndarray | None = None
+    ) -> tuple[list[Piece], float]:
         """The contacts of the hulls within ``margin`` [m] of the ground at the placements held in
-        ``data``, and the least gap of all the hulls [m]."""
-        found, least = touching(*self.placements(data), self.hulls, margin, self.index)
+        ``data`` (each patch as deep as its pair's turn in ``turns`` [rad] times the hull's diameter,
+        where that exceeds PATCH_TOLERANCE: see :class:`~.driver.Routine`), and the least gap of all
+        the hulls [m]."""
+        widening = self._still if turns is None else turns[self.index] * self.diameters
+        found, least = touching(*self.placements(data), self.hulls, margin, self.index, widening)
         return ([found] if len(found[0]) else []), least
 
 
@@ -94,13 +103,15 @@ def touching(
     hulls: Hulls,
     margin: float,
     index: np.ndarray,
+    widening: np.ndarray,
 ) -> tuple[Piece, float]:
     """One compiled pass over the hulls (:func:`~gaussim.kernels.collision.ground_hulls`, which updates
     ``hulls.deepest`` and ``hulls.narrow_at``) at their joints' placements (P rotations (3, 3), translations
-    (3,)), for the contacts within ``margin`` [m]; ``index``: the declared pair of each hull, shape (P,).
+    (3,)), for the contacts within ``margin`` [m], each hull's patch max(PATCH_TOLERANCE, ``widening``
+    (P,)) deep; ``index``: the declared pair of each hull, shape (P,).
     Returns: the contacts of the hulls (a :data:`Piece`, hull by hull) and the least gap of all the
     hulls [m]."""
-    count = len(index) * hulls.directions.shape[1]  # at most this many points: the kernel says how many
+    count = len(index) * (hulls.directions.shape[1] + 1)  # at most: the outline and the deepest
     pairs, points, normals, gaps = (
         np.empty(count, np.int64),
         np.empty((count, 3)),
@@ -121,6 +132,7 @@ def touching(
         hulls.directions,
         margin,
         (PATCH_TOLERANCE, PATCH_MIN_EXTENT),
+        widening,
         index,
         pairs,
         points,

@@ -29,19 +29,21 @@ class MarginSchedule:
             coordinates, levers); a pair moves with the coordinates of its two joints' chains only, so
             a pile's pairs cost in proportion to their number, not to it times nv.
         longest: the longest lever (see :meth:`cover`'s reach).
+        turn_levers: per pair and velocity coordinate, how fast (at most) the pair's robot geometry
+            turns per unit of |v_k| [rad/s per unit], in the same CSR form (its joint chain's angular
+            parts; for two robot geometries, their sum: how fast they turn relative to each other).
+        turns: per pair, the most it may turn within the step [rad], as of the last :meth:`cover`
+            that looked (0 before).
         clearance: the least gap of the last detection less what the pairs may have closed since
             [m] (-inf: unknown, so the next detection runs).
     """
 
     def __init__(self, model: pin.Model, pairs: list[Pair], margin: float) -> None:
         self.base_margin = self.margin = margin
-        dense = [_pair_levers(model, p) for p in pairs]
-        nonzero = [np.flatnonzero(row) for row in dense]
-        starts = np.cumsum([0] + [len(k) for k in nonzero])
-        coordinates = np.concatenate([np.zeros(0, np.int64), *nonzero]).astype(np.int64)
-        values = np.concatenate([np.zeros(0), *(row[k] for row, k in zip(dense, nonzero))])
-        self.levers = (starts, coordinates, values)
-        self.longest = float(values.max(initial=0.0))
+        self.levers = _csr([_pair_levers(model, p) for p in pairs])
+        self.longest = float(self.levers[2].max(initial=0.0))
+        self.turn_levers = _csr([_turn_levers(model, p) for p in pairs])
+        self.turns, self._closing = np.zeros(len(pairs)), np.zeros(len(pairs))
         self.clearance = -np.inf
 
     def forget(self) -> None:
@@ -69,12 +71,53 @@ class MarginSchedule:
             if self.clearance - 2 * coarse > self.base_margin:
                 self.clearance -= coarse
                 return False
-        distance = travel(*self.levers, v, x, dt, x_scale)
+        distance = travel(*self.levers, v, x, dt, x_scale, self._closing)
+        travel(*self.turn_levers, v, x, dt, x_scale, self.turns)
         self.clearance -= distance
         needed = self.base_margin + distance
         if needed > self.margin or (self.margin > self.base_margin and 3 * needed < self.margin):
             self.margin = max(self.base_margin, 1.5 * needed)
         return not self.clearance > self.margin
+
+
+def _csr(dense: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Rows of per-coordinate levers in CSR form: (row starts, coordinates, values)."""
+    nonzero = [np.flatnonzero(row) for row in dense]
+    starts = np.cumsum([0] + [len(k) for k in nonzero])
+    coordinates = np.concatenate([np.zeros(0, np.int64), *nonzero]).astype(np.int64)
+    values = np.concatenate([np.zeros(0), *(row[k] for row, k in zip(dense, nonzero))])
+    return starts, coordinates, values
+
+
+def _turn_levers(model: pin.Model, pair: Pair) -> np.ndarray:
+    """How fast (at most) the pair's robot geometry turns, relative to the other side, per unit |v_k|,
+    shape (nv,): the angular part of each coordinate of its joint's chain (and of the other's)."""
+    levers = _angular_levers(model, pair.joint)
+    if pair.other_local is None:
+        return levers
+    return levers + _angular_levers(model, pair.other_joint)
+
+
+def _angular_levers(model: pin.Model, joint: int) -> np.ndarray:
+    """|angular part| of each velocity coordinate of ``joint`` and its ancestors, shape (nv,)."""
+    levers = np.zeros(model.nv)
+    for j, S in _chain(model, joint):
+        jmodel = model.joints[j]
+        levers[jmodel.idx_v : jmodel.idx_v + jmodel.nv] = np.linalg.norm(S[3:], axis=0)
+    return levers
+
+
+def _chain(model: pin.Model, joint: int) -> list[tuple[int, np.ndarray]]:
+    """``joint`` and its ancestors, each with its motion subspace S (6, nv_j) at the neutral
+    configuration."""
+    chain, neutral = [], pin.neutral(model)
+    while joint > 0:
+        jmodel = model.joints[joint]
+        jdata = jmodel.createData()
+        jmodel.calc(jdata, neutral)
+        chain.append((joint, np.asarray(jdata.S).reshape(6, -1)))
+        joint = model.parents[joint]
+    return chain
 
 
 def _pair_levers(model: pin.Model, pair: Pair) -> np.ndarray:
@@ -90,13 +133,10 @@ def _speed_levers(model: pin.Model, joint: int, center: np.ndarray, radius: floa
     its points per unit |v_k|, shape (nv,): |linear| + |angular| reach for each velocity coordinate k
     of the joint and its ancestors, with reach the farthest the sphere can be from that joint's
     origin (the joint placements along the chain, a prismatic joint's limits, |center| + radius)."""
-    levers, neutral = np.zeros(model.nv), pin.neutral(model)
+    levers = np.zeros(model.nv)
     reach = float(np.linalg.norm(center)) + radius
-    while joint > 0:
-        jmodel = model.joints[joint]
-        jdata = jmodel.createData()
-        jmodel.calc(jdata, neutral)
-        S = np.asarray(jdata.S).reshape(6, -1)
+    for link, S in _chain(model, joint):
+        jmodel = model.joints[link]
         for i in range(jmodel.nv):
             levers[jmodel.idx_v + i] = np.linalg.norm(S[:3, i]) + np.linalg.norm(S[3:, i]) * reach
         if not np.linalg.norm(S[3:]):  # prismatic: how far it carries the body
@@ -107,6 +147,5 @@ def _speed_levers(model: pin.Model, joint: int, center: np.ndarray, radius: floa
                 ]
             )
             reach += float(np.abs(limits[np.isfinite(limits)]).max(initial=0.0))
-        reach += float(np.linalg.norm(model.jointPlacements[joint].translation))
-        joint = model.parents[joint]
+        reach += float(np.linalg.norm(model.jointPlacements[link].translation))
     return levers

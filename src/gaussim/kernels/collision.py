@@ -26,6 +26,7 @@ def ground_hulls(
     directions,
     margin,
     patch,
+    widening,
     pair,
     pairs_out,
     points_out,
@@ -35,13 +36,15 @@ def ground_hulls(
     """The compiled pass of :func:`gaussim.collision.ground.touching` (the arrays of its ``Hulls``; updates
     ``deepest`` and ``narrow_at``): fills the first k entries of the ``*_out`` arrays with the contacts, hull
     by hull; returns (k, the least gap of all the hulls). ``patch``: (PATCH_TOLERANCE, PATCH_MIN_EXTENT) of
-    :mod:`gaussim.collision.contacts`.
+    :mod:`gaussim.collision.contacts`; ``widening``: per hull, what its turn within the step can bring its
+    other vertices down by [m]: its patch reaches that deep where it exceeds PATCH_TOLERANCE (a resting
+    body's patch stays as it was, which bounds jitter of the bound would make flicker).
 
     The deepest vertex is found by descent along the hull's edges from the last one: a vertex no
     neighbour of which is deeper is the deepest of a convex polyhedron (a linear function has no
     other local minimum on its vertex graph)."""
     count, size = columns.shape[0], columns.shape[2]
-    tolerance, extent = patch
+    base, extent = patch
     c = np.empty(4)  # the ground seen from the joint: (n^T R, n^T p - height)
     heights, world = np.empty(size), np.empty((size, 3))
     chosen = np.zeros(size, np.bool_)
@@ -68,6 +71,7 @@ def ground_hulls(
         least = min(least, gap)
         if gap > margin:
             continue
+        tolerance = max(base, widening[k])
         turned = (c[0] - narrow_at[k, 0]) ** 2 + (c[1] - narrow_at[k, 1]) ** 2 + (c[2] - narrow_at[k, 2]) ** 2
         narrow = turned <= turn2[k]  # False where no verdict was kept (NaN)
         if not narrow:
@@ -89,7 +93,22 @@ def ground_hulls(
                 world[i, j] = R[j, 0] * X[0, i] + R[j, 1] * X[1, i] + R[j, 2] * X[2, i] + p[j]
             heights[i] = gap
         else:
-            _outline(c, R, p, X, rounding[k], directions[k], margin, patch, gap, heights, world, chosen)
+            _outline(
+                c,
+                R,
+                p,
+                X,
+                rounding[k],
+                directions[k],
+                margin,
+                (tolerance, extent),
+                gap,
+                heights,
+                world,
+                chosen,
+            )
+            # a widened patch reaches vertices so high that its outline need not hold the deepest
+            chosen[i] |= widening[k] > base
         for v in range(size):
             if chosen[v]:
                 pairs_out[out], gaps_out[out] = pair[k], heights[v]
@@ -103,8 +122,8 @@ def ground_hulls(
 @njit(cache=True)
 def _outline(c, R, p, X, rounding, directions, margin, patch, gap, heights, world, chosen):  # type: ignore[no-untyped-def]
     """A hull touching widely (ground ``c`` seen from its joint at (R, p), vertices X, the least
-    ``gap``): marks in ``chosen`` its vertices within PATCH_TOLERANCE of the deepest (or penetrating)
-    that are extreme along ``directions``, or the deepest alone when they span at most
+    ``gap``): marks in ``chosen`` its vertices within the patch tolerance of the deepest (or
+    penetrating) that are extreme along ``directions``, or the deepest alone when they span at most
     PATCH_MIN_EXTENT, with their gaps in ``heights`` and world points in ``world``."""
     size, (tolerance, extent) = X.shape[1], patch
     bound = max(0.0, min(margin, gap + tolerance))
@@ -152,14 +171,16 @@ def _extent(low, high):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def travel(starts, coordinates, levers, v, x, dt, x_scale):  # type: ignore[no-untyped-def]
+def travel(starts, coordinates, levers, v, x, dt, x_scale, each):  # type: ignore[no-untyped-def]
     """The farthest a pair can close in a step: max_k dt sum_i levers[k, i] (|v_i| + x_scale |x_i|),
-    the levers in CSR form (row starts, coordinates, values; see MarginSchedule.levers)."""
+    the levers in CSR form (row starts, coordinates, values; see MarginSchedule.levers); each pair's
+    sum, times dt, is written into ``each``."""
     farthest = 0.0
     for k in range(len(starts) - 1):
         total = 0.0
         for j in range(starts[k], starts[k + 1]):
             i = coordinates[j]
             total += levers[j] * (abs(v[i]) + x_scale * abs(x[i]))
+        each[k] = dt * total
         farthest = max(farthest, total)
     return dt * farthest
