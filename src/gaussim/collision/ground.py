@@ -80,9 +80,11 @@ class GroundHulls:
         self.pairs = [pairs[k] for k in index]
         self.placements = JointPlacements([pair.joint for pair in self.pairs])
         self.hulls = _hulls(self.pairs)
-        vertices = self.hulls.columns[:, :3, :]  # the largest distance of two vertices of each hull
-        spread = vertices[:, :, :, None] - vertices[:, :, None, :]
-        self.diameters = np.sqrt((spread**2).sum(axis=1)).max(axis=(1, 2), initial=0.0)
+        # twice the farthest vertex from the mean, at least each hull's diameter (all pairs of a mesh's
+        # thousands of vertices, padded to the largest hull, took gigabytes: b1_z1, centauro)
+        vertices = self.hulls.columns[:, :3, :]
+        offsets = vertices - vertices.mean(axis=2, keepdims=True)
+        self.diameters = 2.0 * np.sqrt((offsets**2).sum(axis=1)).max(axis=1, initial=0.0)
         self._still = np.zeros(len(index))
 
     def detect(
