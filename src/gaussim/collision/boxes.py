@@ -115,28 +115,31 @@ def _box_box(R, p, half, margin, normal, points):  # type: ignore[no-untyped-def
     for s in range(2):
         for a in range(3):
             axis = T[s, a]
-            separation = abs(d @ axis) - _reach(T, half, axis)
+            separation = abs(_dot(d, axis)) - _reach(T, half, axis)
             if separation > best:
                 best, axis_box, axis_index = separation, s, a
+    if best > margin:  # a face axis separates them: the edge axes need not be tried
+        return FAR, best, 0
     edge_best = -np.inf
+    axis = np.empty(3)
     for a in range(3):
         for b in range(3):
-            axis = np.cross(T[0, a], T[1, b])
-            length = np.sqrt(axis @ axis)
+            _cross(T[0, a], T[1, b], axis)
+            length = np.sqrt(_dot(axis, axis))
             if length < 1e-6:  # parallel edges: their axis is a face's
                 continue
-            axis = axis / length
-            edge_best = max(edge_best, abs(d @ axis) - _reach(T, half, axis))
+            axis /= length
+            edge_best = max(edge_best, abs(_dot(d, axis)) - _reach(T, half, axis))
     lower = max(best, edge_best)
     if lower > margin:
         return FAR, lower, 0
     if edge_best > best + EDGE_PREFERENCE:
         return ASK_COAL, lower, 0
     n = T[axis_box, axis_index].copy()
-    if d @ n < 0:
+    if _dot(d, n) < 0:
         n = -n  # from box 1 towards box 0
-    robot_support = n @ p[0] - _extent(T[0], half[0], n)
-    other_support = n @ p[1] + _extent(T[1], half[1], n)
+    robot_support = _dot(n, p[0]) - _extent(T[0], half[0], n)
+    other_support = _dot(n, p[1]) + _extent(T[1], half[1], n)
     gap = robot_support - other_support
     # the reference face (of the axis' box, facing the other) and the other box's support set
     ref = axis_box
@@ -155,12 +158,12 @@ def _box_box(R, p, half, margin, normal, points):  # type: ignore[no-untyped-def
     # the boxes' distance when it reaches the separation
     reached = np.inf
     for j in range(clipped.shape[0]):
-        reached = min(reached, (clipped[j] - centre) @ towards)
+        reached = min(reached, _dot(clipped[j] - centre, towards))
     if gap > 0 and reached - gap > REACHED:
         return ASK_COAL, lower, 0
     count = 0
     for j in range(clipped.shape[0]):  # onto the robot's support plane, without repeats
-        x = clipped[j] + n * (robot_support - n @ clipped[j])
+        x = clipped[j] + n * (robot_support - _dot(n, clipped[j]))
         repeated = False
         for m in range(count):
             if np.sqrt(np.sum((points[m] - x) ** 2)) <= SAME_POINT:
@@ -187,7 +190,21 @@ def _reach(T, half, axis):  # type: ignore[no-untyped-def]
 @njit(cache=True)
 def _extent(T, half, axis):  # type: ignore[no-untyped-def]
     """A box's half extent along unit ``axis`` (its axes as rows of ``T``)."""
-    return half[0] * abs(T[0] @ axis) + half[1] * abs(T[1] @ axis) + half[2] * abs(T[2] @ axis)
+    return half[0] * abs(_dot(T[0], axis)) + half[1] * abs(_dot(T[1], axis)) + half[2] * abs(_dot(T[2], axis))
+
+
+@njit(cache=True)
+def _dot(a, b):  # type: ignore[no-untyped-def]
+    """a . b of two 3-vectors (numba's ``@`` on vectors is a BLAS call, dearer than its arithmetic)."""
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+@njit(cache=True)
+def _cross(a, b, out):  # type: ignore[no-untyped-def]
+    """a x b of two 3-vectors into ``out`` (no new array)."""
+    out[0] = a[1] * b[2] - a[2] * b[1]
+    out[1] = a[2] * b[0] - a[0] * b[2]
+    out[2] = a[0] * b[1] - a[1] * b[0]
 
 
 @njit(cache=True)
@@ -201,8 +218,14 @@ def _support_polygon(R, p, half, direction):  # type: ignore[no-untyped-def]
     for v in range(8):
         for a in range(3):
             signs[v, a] = 1.0 if (v >> (2 - a)) & 1 else -1.0
-        corners[v] = p + R @ (signs[v] * half)
-        heights[v] = corners[v] @ direction
+        for a in range(3):
+            corners[v, a] = (
+                p[a]
+                + R[a, 0] * signs[v, 0] * half[0]
+                + R[a, 1] * signs[v, 1] * half[1]
+                + R[a, 2] * signs[v, 2] * half[2]
+            )
+        heights[v] = _dot(corners[v], direction)
     top = heights.max()
     chosen = np.flatnonzero(heights >= top - PATCH_TOLERANCE)
     k = chosen.shape[0]
@@ -246,7 +269,7 @@ def _cut(polygon, centre, axis, bound):  # type: ignore[no-untyped-def]
     k = polygon.shape[0]
     inside = np.empty(k)
     for j in range(k):
-        inside[j] = bound - (polygon[j] - centre) @ axis
+        inside[j] = bound - _dot(polygon[j] - centre, axis)
     out = np.empty((2 * k, 3))
     count = 0
     if k <= 2:
