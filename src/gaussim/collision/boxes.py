@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from ..linalg import cross, dot
 from .compiled import ASK_COAL, FAR, FOUND, CompiledPairs, place, stacked
 from .contacts import PATCH_MIN_EXTENT, PATCH_TOLERANCE
 from .pairs import Pair
@@ -115,7 +116,7 @@ def _box_box(R, p, half, margin, normal, points):  # type: ignore[no-untyped-def
     for s in range(2):
         for a in range(3):
             axis = T[s, a]
-            separation = abs(_dot(d, axis)) - _reach(T, half, axis)
+            separation = abs(dot(d, axis)) - _reach(T, half, axis)
             if separation > best:
                 best, axis_box, axis_index = separation, s, a
     if best > margin:  # a face axis separates them: the edge axes need not be tried
@@ -124,22 +125,23 @@ def _box_box(R, p, half, margin, normal, points):  # type: ignore[no-untyped-def
     axis = np.empty(3)
     for a in range(3):
         for b in range(3):
-            _cross(T[0, a], T[1, b], axis)
-            length = np.sqrt(_dot(axis, axis))
+            e, f = T[0, a], T[1, b]
+            axis[0], axis[1], axis[2] = cross(e[0], e[1], e[2], f[0], f[1], f[2])
+            length = np.sqrt(dot(axis, axis))
             if length < 1e-6:  # parallel edges: their axis is a face's
                 continue
             axis /= length
-            edge_best = max(edge_best, abs(_dot(d, axis)) - _reach(T, half, axis))
+            edge_best = max(edge_best, abs(dot(d, axis)) - _reach(T, half, axis))
     lower = max(best, edge_best)
     if lower > margin:
         return FAR, lower, 0
     if edge_best > best + EDGE_PREFERENCE:
         return ASK_COAL, lower, 0
     n = T[axis_box, axis_index].copy()
-    if _dot(d, n) < 0:
+    if dot(d, n) < 0:
         n = -n  # from box 1 towards box 0
-    robot_support = _dot(n, p[0]) - _extent(T[0], half[0], n)
-    other_support = _dot(n, p[1]) + _extent(T[1], half[1], n)
+    robot_support = dot(n, p[0]) - _extent(T[0], half[0], n)
+    other_support = dot(n, p[1]) + _extent(T[1], half[1], n)
     gap = robot_support - other_support
     # the reference face (of the axis' box, facing the other) and the other box's support set
     ref = axis_box
@@ -158,12 +160,12 @@ def _box_box(R, p, half, margin, normal, points):  # type: ignore[no-untyped-def
     # the boxes' distance when it reaches the separation
     reached = np.inf
     for j in range(clipped.shape[0]):
-        reached = min(reached, _dot(clipped[j] - centre, towards))
+        reached = min(reached, dot(clipped[j] - centre, towards))
     if gap > 0 and reached - gap > REACHED:
         return ASK_COAL, lower, 0
     count = 0
     for j in range(clipped.shape[0]):  # onto the robot's support plane, without repeats
-        x = clipped[j] + n * (robot_support - _dot(n, clipped[j]))
+        x = clipped[j] + n * (robot_support - dot(n, clipped[j]))
         repeated = False
         for m in range(count):
             if np.sqrt(np.sum((points[m] - x) ** 2)) <= SAME_POINT:
@@ -190,21 +192,7 @@ def _reach(T, half, axis):  # type: ignore[no-untyped-def]
 @njit(cache=True)
 def _extent(T, half, axis):  # type: ignore[no-untyped-def]
     """A box's half extent along unit ``axis`` (its axes as rows of ``T``)."""
-    return half[0] * abs(_dot(T[0], axis)) + half[1] * abs(_dot(T[1], axis)) + half[2] * abs(_dot(T[2], axis))
-
-
-@njit(cache=True)
-def _dot(a, b):  # type: ignore[no-untyped-def]
-    """a . b of two 3-vectors (numba's ``@`` on vectors is a BLAS call, dearer than its arithmetic)."""
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-
-
-@njit(cache=True)
-def _cross(a, b, out):  # type: ignore[no-untyped-def]
-    """a x b of two 3-vectors into ``out`` (no new array)."""
-    out[0] = a[1] * b[2] - a[2] * b[1]
-    out[1] = a[2] * b[0] - a[0] * b[2]
-    out[2] = a[0] * b[1] - a[1] * b[0]
+    return half[0] * abs(dot(T[0], axis)) + half[1] * abs(dot(T[1], axis)) + half[2] * abs(dot(T[2], axis))
 
 
 @njit(cache=True)
@@ -225,7 +213,7 @@ def _support_polygon(R, p, half, direction):  # type: ignore[no-untyped-def]
                 + R[a, 1] * signs[v, 1] * half[1]
                 + R[a, 2] * signs[v, 2] * half[2]
             )
-        heights[v] = _dot(corners[v], direction)
+        heights[v] = dot(corners[v], direction)
     top = heights.max()
     chosen = np.flatnonzero(heights >= top - PATCH_TOLERANCE)
     k = chosen.shape[0]
@@ -269,7 +257,7 @@ def _cut(polygon, centre, axis, bound):  # type: ignore[no-untyped-def]
     k = polygon.shape[0]
     inside = np.empty(k)
     for j in range(k):
-        inside[j] = bound - _dot(polygon[j] - centre, axis)
+        inside[j] = bound - dot(polygon[j] - centre, axis)
     out = np.empty((2 * k, 3))
     count = 0
     if k <= 2:
