@@ -5,9 +5,12 @@ import pinocchio as pin
 import pytest
 
 import gaussim
+from gaussim.bench.scenes import boxes
 from gaussim.dynamics import (
     DynamicsStage,
+    MassStructure,
     compute_dynamics,
+    gauss_problem,
     point_drifts,
     point_jacobians,
     point_placements,
@@ -118,6 +121,33 @@ def test_the_stage_takes_the_order_the_last_step_needed(solo12):
         problem = stage.problem()
         np.testing.assert_allclose(problem.g, expected.g, atol=1e-9)
         np.testing.assert_allclose(problem.M, expected.M, atol=1e-12)
+
+
+@pytest.mark.parametrize("which", ["talos", "boxes"])
+def test_the_structured_problem_is_pinocchios_dense_one(which, monkeypatch):
+    """On M's joint structure (a branched robot with armature, a world of free boxes): the same M,
+    free motion and linear term as Pinocchio's CRBA, RNEA and dense Cholesky, at both levels."""
+    if which == "talos":
+        model = gaussim.load_robot("talos").model
+    else:
+        model = gaussim.Simulator(boxes(6).scene).model
+    rng = np.random.default_rng(8)
+    model.armature[:] = rng.uniform(0.0, 0.1, model.nv)
+    monkeypatch.setattr("gaussim.dynamics.STRUCTURED_NV", 0)
+    data, reference = model.createData(), model.createData()
+    structure = MassStructure.of(model, data)
+    assert structure is not None
+    q = pin.randomConfiguration(model, -np.ones(model.nq), np.ones(model.nq))
+    v, tau = rng.normal(size=model.nv), rng.normal(size=model.nv)
+    for acceleration in (False, True):
+        expected = compute_dynamics(model, reference, q, v, tau, 1e-3, acceleration)
+        got = compute_dynamics(model, data, q, v, tau, 1e-3, acceleration, None, structure)
+        np.testing.assert_allclose(got.M, expected.M, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(got.x_free, expected.x_free, rtol=1e-10, atol=1e-10)
+        np.testing.assert_allclose(got.g, expected.g, rtol=1e-10, atol=1e-10)
+        np.testing.assert_allclose(data.J, reference.J, atol=1e-12)
+    posed = gauss_problem(model, data, q, v, structure)
+    np.testing.assert_allclose(posed.g, gauss_problem(model, reference, q, v).g, rtol=1e-10, atol=1e-10)
 
 
 def test_a_torque_of_another_size_is_refused(solo12):

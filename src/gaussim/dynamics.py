@@ -13,14 +13,21 @@ from .kernels.dynamics import (
     floating_terms,
     free_velocity,
     linear_term,
+    mirrored,
     negated_product,
     point_jacobians_into,
+    structured_product,
+    structured_solve,
+    structured_terms,
     unloaded,
 )
 
 LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 _WORLD = pin.Convention.WORLD
 _IDENTITY = np.eye(3)
+# From this many velocity coordinates the step works on M's joint structure (MassStructure): Pinocchio's
+# Python crba mirrors and copies all of M and its Cholesky copies it again, O(nv^2).
+STRUCTURED_NV = 48
 
 
 @dataclass
@@ -111,6 +118,39 @@ class FloatingBases:
         return c
 
 
+@dataclass(frozen=True)
+class MassStructure:
+    """M's joint structure: M[i, j] != 0 only when coordinates i and j move on one branch of the joint
+    tree. A model of many trees (a pile of free bodies) or a long one has mostly zeros in M, and its
+    products and LDL^T factor (:func:`structured_solve`) cost O(its nonzeros).
+
+    Attributes:
+        parents: the coordinate before each on its branch, -1 at a root, shape (nv,) (Pinocchio's
+            data.parents_fromRow).
+        subtree: how many coordinates from each on move with it, itself included, shape (nv,)
+            (data.nvSubtree_fromRow).
+        M, U, D: M mirrored on its structure, its unit upper factor and its diagonal: buffers
+            overwritten by each step's dynamics (zero off the structure).
+    """
+
+    parents: np.ndarray
+    subtree: np.ndarray
+    M: np.ndarray
+    U: np.ndarray
+    D: np.ndarray
+
+    @classmethod
+    def of(cls, model: pin.Model, data: pin.Data) -> MassStructure | None:
+        """The structure of a model of STRUCTURED_NV coordinates or more, else None (dense is
+        cheaper)."""
+        nv = model.nv
+        if nv < STRUCTURED_NV:
+            return None
+        parents = np.array(data.parents_fromRow, dtype=np.int64)
+        subtree = np.array(data.nvSubtree_fromRow, dtype=np.int64)
+        return cls(parents, subtree, np.zeros((nv, nv)), np.zeros((nv, nv)), np.zeros(nv))
+
+
 class DynamicsStage:
     """Stage 1 for one Pinocchio model and data: each step's free motion and, when a constraint needs
     it, its Gauss problem.
@@ -124,6 +164,7 @@ class DynamicsStage:
     def __init__(self, model: pin.Model, data: pin.Data) -> None:
         self.model, self.data = model, data
         self.bases = FloatingBases.of(model)
+        self.structure = MassStructure.of(model, data)
         self._base_args = (self.bases.velocity, self.bases.inertias, self.bases.rigid)
         self._posed = True  # the last step posed a Gauss problem
         self._dynamics: Dynamics | None = None
@@ -146,7 +187,9 @@ class DynamicsStage:
             raise InvalidState(f"tau must have shape ({self._nv},), got {np.shape(tau)}")
         if acceleration or self._posed:
             self._posed, self.reach = False, None
-            self._dynamics = compute_dynamics(self.model, self.data, q, v, tau, dt, acceleration, self.bases)
+            self._dynamics = compute_dynamics(
+                self.model, self.data, q, v, tau, dt, acceleration, self.bases, self.structure
+            )
             return self._dynamics.x_free
         # the WORLD convention fills data.oMi, and costs less than LOCAL
         a_free = pin.aba(self.model, self.data, q, v, tau, _WORLD)
@@ -165,7 +208,7 @@ class DynamicsStage:
         self._posed = True
         if self._dynamics is None:
             assert self._pending is not None
-            self._dynamics = gauss_problem(self.model, self.data, *self._pending)
+            self._dynamics = gauss_problem(self.model, self.data, *self._pending, self.structure)
         return self._dynamics
 
 
@@ -178,6 +221,7 @@ def compute_dynamics(
     dt: float,
     acceleration: bool = False,
     bases: FloatingBases | None = None,
+    structure: MassStructure | None = None,
 ) -> Dynamics:
     """M, joint placements and Jacobians (one CRBA pass), b (RNEA), and the free Gauss problem of the
     velocity level or, with ``acceleration``, of the acceleration level, for a time step ``dt`` [s];
@@ -187,32 +231,64 @@ def compute_dynamics(
 
     ``tau`` (nv,) are the joint torques; raises :class:`InvalidState` when they are not finite
     (checked here, in the kernel that reads them). The ``bases`` (default: the model's) are posed as
-    :class:`FloatingBases` says.
+    :class:`FloatingBases` says. With a ``structure``, M is its buffer and every product and solve
+    runs on it.
     """
     if len(tau) != model.nv:  # the kernel reads nv entries
         raise InvalidState(f"tau must have shape ({model.nv},), got {np.shape(tau)}")
     bases = FloatingBases.of(model) if bases is None else bases
-    M = pin.crba(model, data, q, _WORLD)  # a copy of data.M; the WORLD convention also fills data.oMi, data.J
-    nle = pin.nonLinearEffects(model, data, q, v)
+    h = 0.0 if acceleration else dt
+    f, g, x_free = np.empty(len(v)), np.empty(len(v)), np.empty(len(v))  # filled by the kernels
+    if structure is None:
+        M = pin.crba(
+            model, data, q, _WORLD
+        )  # a copy of data.M; the WORLD convention also fills data.oMi, data.J
+        finite = linear_term(M, v, tau, pin.nonLinearEffects(model, data, q, v), h, f, g)
+    else:  # M's upper triangle, b, data.oMi and data.J (WORLD), O(nv)
+        pin.computeAllTerms(model, data, q, v)
+        M = structure.M
+        finite = structured_terms(data.M, structure.subtree, v, tau, data.nle, h, M, f)
+        np.negative(f, out=g)
+    if not finite:
+        raise InvalidState.non_finite("tau", tau)
     if acceleration:  # the drifts of the bases' velocity coordinates: the frame's turn is part of them
         pin.forwardKinematics(model, data, q, v, bases.frame_acceleration(v))
-    f, g = np.empty(len(v)), np.empty(len(v))  # filled by the kernel: cheaper than its new arrays
-    if not linear_term(M, v, tau, nle, 0.0 if acceleration else dt, f, g):
-        raise InvalidState.non_finite("tau", tau)
-    pin.cholesky.decompose(model, data)
-    x_free = pin.cholesky.solve(model, data, f)
+    if structure is None:
+        pin.cholesky.decompose(model, data)
+        x_free = pin.cholesky.solve(model, data, f)
+    else:
+        x_free = np.empty(len(v))
+        structured_solve(M, structure.parents, structure.subtree, f, structure.U, structure.D, x_free)
     if len(bases):
         floating_terms(v, x_free, dt, acceleration, bases.velocity, bases.inertias, bases.rigid)
-        g = negated_product(M, x_free)
+        g = _negated(M, x_free, structure)
     return Dynamics(M, g, x_free)
 
 
-def gauss_problem(model: pin.Model, data: pin.Data, q: np.ndarray, x_free: np.ndarray) -> Dynamics:
+def gauss_problem(
+    model: pin.Model,
+    data: pin.Data,
+    q: np.ndarray,
+    x_free: np.ndarray,
+    structure: MassStructure | None = None,
+) -> Dynamics:
     """The free Gauss problem of the velocity level from its free motion x_free (ABA's, see
     :meth:`DynamicsStage.free_motion`): M and the joint Jacobians data.J (one CRBA pass, WORLD
-    convention) and g = -M x_free."""
-    M = pin.crba(model, data, q, _WORLD)  # a copy of data.M
-    return Dynamics(M, negated_product(M, x_free), x_free)
+    convention) and g = -M x_free; with a ``structure``, M is its buffer."""
+    if structure is None:
+        M = pin.crba(model, data, q, _WORLD)  # a copy of data.M
+    else:
+        pin.computeAllTerms(model, data, q, np.zeros(model.nv))  # its CRBA without the O(nv^2) mirror
+        M = structure.M
+        mirrored(data.M, structure.subtree, M)
+    return Dynamics(M, _negated(M, x_free, structure), x_free)
+
+
+def _negated(M: np.ndarray, x: np.ndarray, structure: MassStructure | None) -> np.ndarray:
+    """-M x, on M's structure when there is one."""
+    if structure is None:
+        return negated_product(M, x)
+    return -structured_product(M, structure.subtree, x)
 
 
 def point_placements(

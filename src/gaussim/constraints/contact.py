@@ -390,11 +390,10 @@ class ContactModule(ConstraintModule[ContactBatch]):
             changed = not rows.settled
         if b.shifts and not b.relaxed:
             mu = b.contacts.friction
-            slip = slips(b.packed, b.starts, x, normals, mu, SLIP_TOLERANCE[self.mode])
-            if slip is not None:
+            slip, residual = slips(b.packed, b.starts, x, normals, mu)
+            if residual > SLIP_TOLERANCE[self.mode]:
                 lagged = self._iterate(ctx)
                 lagged.passes += 1
-                residual = float((np.abs(slip - b.slip).max(axis=1) * np.maximum(mu, 1.0)).max())
                 lagged.residuals.append(residual)
                 last = lagged.passes >= ctx.options.friction_iterations - 1  # one QP left in the step
                 if last and residual > RELAX_TOLERANCE:

@@ -181,27 +181,21 @@ def pyramids(  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def slips(packed, starts, x, normal, mu, tolerance):  # type: ignore[no-untyped-def]
-    """When the slip of a contact that refines its shift (one with a full pyramid) and is moving (a
-    sticking contact has no shift to refine) moved by more than ``tolerance`` / max(1, mu) (the
-    normal velocity error it causes is mu times that): the slips (m, 3) of solution x for those
-    contacts, the others' unchanged; else None. ``packed`` and ``starts`` are :func:`pyramids`'.
-    (In scalars, no array per contact: this runs after every QP with friction.)"""
+def slips(packed, starts, x, normal, mu):  # type: ignore[no-untyped-def]
+    """(the slips (m, 3) of solution x for the contacts that refine their shift (one with a full
+    pyramid) and are moving (a sticking contact has no shift to refine), the others' unchanged; the
+    largest change of a slip times max(1, mu), the normal velocity error it causes). ``packed`` and
+    ``starts`` are :func:`pyramids`'. (In scalars, no array per contact: this runs after every QP
+    with friction.)"""
     J, _, slip, _ = unpacked(packed, len(normal), len(x))
-    moved = False
+    result, residual = slip.copy(), 0.0
     for i in range(len(slip)):
         moving, u0, u1, u2 = _moving_slip(J, slip, starts, x, normal, i)
         if moving:
             change = max(abs(u0 - slip[i, 0]), abs(u1 - slip[i, 1]), abs(u2 - slip[i, 2]))
-            moved |= max(1.0, mu[i]) * change > tolerance
-    if not moved:
-        return None
-    result = slip.copy()
-    for i in range(len(slip)):
-        moving, u0, u1, u2 = _moving_slip(J, slip, starts, x, normal, i)
-        if moving:
+            residual = max(residual, max(1.0, mu[i]) * change)
             result[i, 0], result[i, 1], result[i, 2] = u0, u1, u2
-    return result
+    return result, residual
 
 
 @njit(cache=True, inline="always")

@@ -111,6 +111,77 @@ def _times(I, x0, x1, x2):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
+def mirrored(upper, subtree, M):  # type: ignore[no-untyped-def]
+    """M (nv, nv) mirrored from the upper triangle of ``upper`` (Pinocchio's data.M after its C++
+    CRBA) on M's joint structure, the only entries read and written: ``subtree[i]`` is how many
+    coordinates from i on move with coordinate i (Pinocchio's nvSubtree_fromRow)."""
+    for i in range(len(subtree)):
+        for j in range(i, i + subtree[i]):
+            M[i, j] = M[j, i] = upper[i, j]
+
+
+@njit(cache=True)
+def structured_terms(upper, subtree, v, tau, nle, dt, M, f):  # type: ignore[no-untyped-def]
+    """:func:`linear_term` on M's joint structure: M :func:`mirrored` from ``upper`` and
+    f = M v + dt F (F at dt = 0); False when tau is not finite."""
+    for i in range(len(nle)):
+        if not np.isfinite(tau[i]):
+            return False
+        f[i] = tau[i] - nle[i]
+    mirrored(upper, subtree, M)
+    if dt > 0:
+        Mv = structured_product(M, subtree, v)
+        for i in range(len(f)):
+            f[i] = Mv[i] + dt * f[i]
+    return True
+
+
+@njit(cache=True)
+def structured_product(M, subtree, x):  # type: ignore[no-untyped-def]
+    """M x for M on its joint structure (see :func:`structured_terms`): O(its nonzeros)."""
+    y = np.zeros(len(x))
+    for i in range(len(x)):
+        y[i] += M[i, i] * x[i]
+        for j in range(i + 1, i + subtree[i]):
+            y[i] += M[i, j] * x[j]
+            y[j] += M[i, j] * x[i]
+    return y
+
+
+@njit(cache=True)
+def structured_solve(M, parents, subtree, f, U, D, x):  # type: ignore[no-untyped-def]
+    """x = M^-1 f by M = U D U^T, U unit upper triangular with M's sparsity (Featherstone's LTDL, in
+    Pinocchio's cholesky::decompose order; ``parents[i]``: the coordinate moving coordinate i's joint
+    before it, -1 at a root, Pinocchio's parents_fromRow); ``U`` (nv, nv) and ``D`` (nv,) are
+    overwritten on the structure only."""
+    nv = len(f)
+    for j in range(nv - 1, -1, -1):
+        end = j + subtree[j]
+        D[j] = M[j, j]
+        for k in range(j + 1, end):
+            D[j] -= U[j, k] * D[k] * U[j, k]
+        i = parents[j]
+        while i >= 0:
+            total = M[i, j]
+            for k in range(j + 1, end):
+                total -= U[i, k] * D[k] * U[j, k]
+            U[i, j] = total / D[j]
+            i = parents[i]
+    for j in range(nv):
+        x[j] = f[j]
+    for j in range(nv - 1, -1, -1):  # U y = f
+        for k in range(j + 1, j + subtree[j]):
+            x[j] -= U[j, k] * x[k]
+    for j in range(nv):
+        x[j] /= D[j]
+    for j in range(nv):  # U^T x = y
+        i = parents[j]
+        while i >= 0:
+            x[j] -= U[i, j] * x[i]
+            i = parents[i]
+
+
+@njit(cache=True)
 def negated_product(M, x):  # type: ignore[no-untyped-def]
     """-M x."""
     result = np.empty(M.shape[0])

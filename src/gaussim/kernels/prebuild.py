@@ -38,6 +38,13 @@ SIGNATURES = {
     "dynamics.negated_product": ["f2 f1"],
     "dynamics.point_jacobians_into": ["f3 f2F f2 i1r i1r f2", "f3 f2F f2 i1 i1 f2"],
     "dynamics.unloaded": ["f2 f1 i1 b1"],
+    # M's joint structure: the scenes of many bodies (STRUCTURED_NV coordinates or more)
+    "dynamics.mirrored": ["f2F i1 f2"],
+    "dynamics.structured_terms": [
+        f"f2F i1 {v} {tau} f1 f f2 f1" for v in ("f1", "f1r") for tau in ("f1", "f1r")
+    ],
+    "dynamics.structured_product": ["f2 i1 f1", "f2 i1 f1r"],
+    "dynamics.structured_solve": ["f2 i1 i1 f1 f2 f1 f1"],
     "integrator.displacement": ["f1 f f1"],
     "integrator.midpoint_turns": ["f1r f1 f i1 b1 f1"],
     "integrator.move_bases": ["f1r f1 f1 f i1 i1"],
@@ -52,7 +59,7 @@ SIGNATURES = {
         for joints, mu in (("i1", "f1"), ("i1r", "f1r"))  # all the contacts, or those a level keeps
         for v, x in (("f1", "f1"), ("f1r", "f1"), ("f1r", "f1r"))
     ],
-    "contact.slips": ["f1 i1 f1 f2 f1 f", "f1 i1 f1 f2 f1r f"],
+    "contact.slips": ["f1 i1 f1 f2 f1", "f1 i1 f1 f2 f1r"],
     # the equalities (A, b) or the inequalities (C, l) of a problem are read-only when empty
     "solver.kkt_residuals": [f"f2 f1 {sides} f1 f1 f1" for sides in _SIDES],
     "solver.active_set_candidate": [
