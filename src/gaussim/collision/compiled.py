@@ -44,9 +44,7 @@ class CompiledPairs:
             [[p.local.translation, _other_placement(p).translation] for p in self.pairs]
         ).reshape(-1, 2, 3)
 
-    def detect(
-        self, data: pin.Data, margin: float, turns: np.ndarray | None = None
-    ) -> tuple[list[Piece], float]:
+    def detect(self, data: pin.Data, margin: float, turns: np.ndarray) -> tuple[list[Piece], float]:
         """The contacts of the pairs within ``margin`` [m] at the placements held in ``data``, and a
         lower bound on every pair's gap [m] (``turns`` unused: these patches keep PATCH_TOLERANCE)."""
         apart = self.spheres.gaps(data)

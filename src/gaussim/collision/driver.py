@@ -78,10 +78,10 @@ class ContactDetector:
 
     def __init__(self, scene: Scene, margin: float) -> None:
         self.pairs = [Pair(scene, p) for p in scene.pairs]
-        self.schedule = MarginSchedule(scene.robot.model, self.pairs, margin)
         groups: dict[Callable[[list[Pair], list[int]], Routine], list[int]] = {}
         for k, pair in enumerate(self.pairs):
             groups.setdefault(routine_of(pair), []).append(k)
+        self.schedule = MarginSchedule(scene.robot.model, self.pairs, margin, groups.get(GroundHulls, []))
         order = [*dict.fromkeys(ROUTINES.values()), NarrowPhase]
         self.routines = [routine(self.pairs, groups[routine]) for routine in order if routine in groups]
         self.friction = np.array([pair.friction for pair in self.pairs])

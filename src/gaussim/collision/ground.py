@@ -85,16 +85,13 @@ class GroundHulls:
         vertices = self.hulls.columns[:, :3, :]
         offsets = vertices - vertices.mean(axis=2, keepdims=True)
         self.diameters = 2.0 * np.sqrt((offsets**2).sum(axis=1)).max(axis=1, initial=0.0)
-        self._still = np.zeros(len(index))
 
-    def detect(
-        self, data: pin.Data, margin: float, turns: np.ndarray | None = None
-    ) -> tuple[list[Piece], float]:
+    def detect(self, data: pin.Data, margin: float, turns: np.ndarray) -> tuple[list[Piece], float]:
         """The contacts of the hulls within ``margin`` [m] of the ground at the placements held in
         ``data`` (each patch as deep as its pair's turn in ``turns`` [rad] times the hull's diameter,
         where that exceeds PATCH_TOLERANCE: see :class:`~.driver.Routine`), and the least gap of all
         the hulls [m]."""
-        widening = self._still if turns is None else turns[self.index] * self.diameters
+        widening = turns[self.index] * self.diameters
         found, least = touching(*self.placements(data), self.hulls, margin, self.index, widening)
         return ([found] if len(found[0]) else []), least
 

@@ -21,6 +21,7 @@ class MarginSchedule:
         model: the world's Pinocchio model.
         pairs: the declared pairs.
         margin: the base margin [m] (``Options.contact_margin``).
+        turning: the pairs whose routine reads their turn (:class:`~.ground.GroundHulls`').
 
     Attributes:
         base_margin, margin: the base margin and the margin the next detection uses [m].
@@ -33,16 +34,21 @@ class MarginSchedule:
             turns per unit of |v_k| [rad/s per unit], in the same CSR form (its joint chain's angular
             parts; for two robot geometries, their sum: how fast they turn relative to each other).
         turns: per pair, the most it may turn within the step [rad], as of the last :meth:`cover`
-            that looked (0 before).
+            that looked (0 before, and for the pairs no routine reads it of).
         clearance: the least gap of the last detection less what the pairs may have closed since
             [m] (-inf: unknown, so the next detection runs).
     """
 
-    def __init__(self, model: pin.Model, pairs: list[Pair], margin: float) -> None:
+    def __init__(self, model: pin.Model, pairs: list[Pair], margin: float, turning: list[int]) -> None:
         self.base_margin = self.margin = margin
         self.levers = _csr([_pair_levers(model, p) for p in pairs])
         self.longest = float(self.levers[2].max(initial=0.0))
-        self.turn_levers = _csr([_turn_levers(model, p) for p in pairs])
+        read = set(turning)
+        self.turn_levers = _csr(
+            [_turn_levers(model, p) if k in read else np.zeros(model.nv) for k, p in enumerate(pairs)]
+        )
+        self._turning = bool(read)
+        # travel's per-pair closing, which only its maximum is read from
         self.turns, self._closing = np.zeros(len(pairs)), np.zeros(len(pairs))
         self.clearance = -np.inf
 
@@ -72,7 +78,8 @@ class MarginSchedule:
                 self.clearance -= coarse
                 return False
         distance = travel(*self.levers, v, x, dt, x_scale, self._closing)
-        travel(*self.turn_levers, v, x, dt, x_scale, self.turns)
+        if self._turning:
+            travel(*self.turn_levers, v, x, dt, x_scale, self.turns)
         self.clearance -= distance
         needed = self.base_margin + distance
         if needed > self.margin or (self.margin > self.base_margin and 3 * needed < self.margin):

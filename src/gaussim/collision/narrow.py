@@ -38,9 +38,7 @@ class NarrowPhase:
         self.patch_result = coal.ContactPatchResult(self.patch_request)
         self.spheres = BoundingSpheres(self.pairs)
 
-    def detect(
-        self, data: pin.Data, margin: float, turns: np.ndarray | None = None
-    ) -> tuple[list[Piece], float]:
+    def detect(self, data: pin.Data, margin: float, turns: np.ndarray) -> tuple[list[Piece], float]:
         """The contacts of the pairs within ``margin`` [m] at the placements held in ``data``, and a
         lower bound on every pair's gap [m] (``turns`` unused: these patches keep PATCH_TOLERANCE)."""
         self.use_margin(margin)
