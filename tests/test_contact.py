@@ -345,7 +345,9 @@ def test_slip_update_matches_its_plain_statement():
     packed = np.concatenate([J.ravel(), rng.normal(size=3 * rows), slip.ravel(), rng.normal(size=3 * m)])
     assert facets * m - 3 == rows
     expected, expected_residual = _slips_reference(J, slip, starts, x, normal, mu)
-    got, residual = slips(packed, starts, x, normal, mu)
+    # every row reads all nv coordinates: joint 1's support is all of them, the world's (0) none
+    joints, world, support = np.ones(m, np.int64), np.zeros(m, np.int64), np.array([0, 0, nv])
+    got, residual = slips(packed, starts, x, normal, mu, joints, world, support, np.arange(nv))
     np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-15)
     np.testing.assert_array_equal(got[[1, 3]], slip[[1, 3]])  # the sticking and the resting
     assert residual == pytest.approx(expected_residual, rel=1e-12)

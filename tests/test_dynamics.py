@@ -9,12 +9,12 @@ from gaussim.bench.scenes import boxes
 from gaussim.dynamics import (
     DynamicsStage,
     MassStructure,
+    Supports,
     compute_dynamics,
     gauss_problem,
     point_drifts,
     point_jacobians,
     point_placements,
-    support_masks,
 )
 
 FD_STEP = 1e-7
@@ -28,7 +28,7 @@ def test_point_jacobians_and_drifts_match_finite_differences(solo12):
     q = solo12.configuration("standing")
     v = rng.normal(size=model.nv)
     joints = [model.getJointId("FL_KFE"), model.getJointId("HR_HAA"), 1]
-    masks, world = support_masks(model), np.zeros(3, int)
+    masks, world = Supports.of(model), np.zeros(3, int)
     local = rng.normal(scale=0.1, size=(3, 3))
 
     def points(q_):
@@ -62,7 +62,7 @@ def test_relative_point_jacobians_are_differences_of_the_two_bodies(solo12):
     rng = np.random.default_rng(5)
     q = pin.randomConfiguration(model, -np.ones(model.nq), np.ones(model.nq))
     compute_dynamics(model, data, q, rng.normal(size=model.nv), np.zeros(model.nv), dt=1e-3)
-    masks = support_masks(model)
+    masks = Supports.of(model)
     joints = np.array([model.getJointId("FL_KFE"), model.getJointId("FL_KFE")])
     others = np.array([model.getJointId("FR_KFE"), model.getJointId("FL_HAA")])
     p = rng.normal(size=(2, 3))

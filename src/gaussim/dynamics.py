@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 import pinocchio as pin
@@ -298,31 +299,55 @@ def point_placements(
     return [pin.SE3(_IDENTITY, data.oMi[j].actInv(p)) for j, p in zip(joints, points)]
 
 
-def support_masks(model: pin.Model) -> np.ndarray:
-    """Which velocity entries move each joint's body: mask[j, k] = 1 when v[k] belongs to joint j or
-    to one of its ancestors, shape (njoints, nv) (row 0, the world, is all zero)."""
-    masks = np.zeros((model.njoints, model.nv))
-    for j in range(1, model.njoints):
-        for ancestor in model.supports[j][1:]:
-            joint = model.joints[ancestor]
-            masks[j, joint.idx_v : joint.idx_v + joint.nv] = 1.0
-    return masks
+class Supports(NamedTuple):
+    """Which velocity coordinates move each joint's body (a tuple: the kernels take its arrays).
+
+    Attributes:
+        masks: masks[j, k] = 1 when v[k] belongs to joint j or to one of its ancestors, shape
+            (njoints, nv) (row 0, the world, is all zero).
+        starts, columns: the same as CSR rows (row starts (njoints + 1,), coordinates), which the
+            kernels loop over: a contact of two free bodies reads 12 of a pile's hundreds of
+            coordinates.
+    """
+
+    masks: np.ndarray
+    starts: np.ndarray
+    columns: np.ndarray
+
+    @classmethod
+    def of(cls, model: pin.Model) -> Supports:
+        masks = np.zeros((model.njoints, model.nv))
+        for j in range(1, model.njoints):
+            for ancestor in model.supports[j][1:]:
+                joint = model.joints[ancestor]
+                masks[j, joint.idx_v : joint.idx_v + joint.nv] = 1.0
+        starts, columns, _ = sparse_rows(list(masks))
+        return cls(masks, starts, columns)
+
+
+def sparse_rows(dense: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Rows in CSR form: (row starts, the columns of their nonzero entries, those entries)."""
+    nonzero = [np.flatnonzero(row) for row in dense]
+    starts = np.cumsum([0] + [len(k) for k in nonzero])
+    columns = np.concatenate([np.zeros(0, np.int64), *nonzero]).astype(np.int64)
+    values = np.concatenate([np.zeros(0), *(row[k] for row, k in zip(dense, nonzero))])
+    return starts, columns, values
 
 
 def point_jacobians(
-    data: pin.Data, masks: np.ndarray, joints: np.ndarray, other_joints: np.ndarray, points: np.ndarray
+    data: pin.Data, supports: Supports, joints: np.ndarray, other_joints: np.ndarray, points: np.ndarray
 ) -> np.ndarray:
     """Jacobians of the relative world velocities of body points, shape (m, 3, nv).
 
     Row i maps v to the velocity of the point ``points[i]`` (world frame, (m, 3)) of the body of
     ``joints[i]`` minus that of the same point moving with ``other_joints[i]`` (0, the world, for a
     fixed obstacle). Read from the joint Jacobians in data.J (WORLD frame, from computeAllTerms):
-    the point moves at v_O + w x p over the columns of the joint's ancestors, and the ancestors the
-    two bodies share cancel.
+    the point moves at v_O + w x p over the columns of the joint's ancestors (``supports``), and the
+    ancestors the two bodies share cancel.
     """
     J = joint_jacobians(data)
     result = np.empty((len(joints), 3, J.shape[1]))
-    point_jacobians_into(result, J, masks, joints, other_joints, points)
+    point_jacobians_into(result, J, *supports, joints, other_joints, points)
     return result
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
+from ..dynamics import sparse_rows
 from ..kernels.collision import travel
 from .pairs import Pair
 
@@ -41,10 +42,10 @@ class MarginSchedule:
 
     def __init__(self, model: pin.Model, pairs: list[Pair], margin: float, turning: list[int]) -> None:
         self.base_margin = self.margin = margin
-        self.levers = _csr([_pair_levers(model, p) for p in pairs])
+        self.levers = sparse_rows([_pair_levers(model, p) for p in pairs])
         self.longest = float(self.levers[2].max(initial=0.0))
         read = set(turning)
-        self.turn_levers = _csr(
+        self.turn_levers = sparse_rows(
             [_turn_levers(model, p) if k in read else np.zeros(model.nv) for k, p in enumerate(pairs)]
         )
         self._turning = bool(read)
@@ -85,15 +86,6 @@ class MarginSchedule:
         if needed > self.margin or (self.margin > self.base_margin and 3 * needed < self.margin):
             self.margin = max(self.base_margin, 1.5 * needed)
         return not self.clearance > self.margin
-
-
-def _csr(dense: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Rows of per-coordinate levers in CSR form: (row starts, coordinates, values)."""
-    nonzero = [np.flatnonzero(row) for row in dense]
-    starts = np.cumsum([0] + [len(k) for k in nonzero])
-    coordinates = np.concatenate([np.zeros(0, np.int64), *nonzero]).astype(np.int64)
-    values = np.concatenate([np.zeros(0), *(row[k] for row, k in zip(dense, nonzero))])
-    return starts, coordinates, values
 
 
 def _turn_levers(model: pin.Model, pair: Pair) -> np.ndarray:

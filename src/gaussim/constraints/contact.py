@@ -50,11 +50,11 @@ import pinocchio as pin
 
 from ..collision import Contacts
 from ..dynamics import (
+    Supports,
     joint_jacobians,
     point_drifts,
     point_jacobians,
     point_placements,
-    support_masks,
 )
 from ..kernels.contact import pyramids, slips, unpacked
 from .base import LEVELS, ConstraintModule, Context, Rows, is_active
@@ -214,7 +214,7 @@ def _tangential(u: np.ndarray, n: np.ndarray) -> np.ndarray:
 
 def pyramid_rows(
     joint_jacobians: np.ndarray,
-    masks: np.ndarray,
+    supports: Supports,
     contacts: Contacts,
     ctx: Context,
     drift: np.ndarray,
@@ -226,7 +226,7 @@ def pyramid_rows(
     contacts or None, their friction's generalized force or None).
 
     Args:
-        joint_jacobians, masks: what :func:`point_jacobians` reads.
+        joint_jacobians, supports: what :func:`point_jacobians` reads.
         drift: Jdot v of the contacts at the acceleration level, else zeros, (m, 3).
         iterate: the lagged (slip (m, 3), stops (m,), normal forces (m,)) of the friction iteration.
         cone: (cos, sin) of the pyramid's facet directions, and whether the basis is fixed (the plain
@@ -240,7 +240,7 @@ def pyramid_rows(
     drift, iterate = _read_only(drift), tuple(_read_only(a) for a in iterate)  # type: ignore[assignment]
     total, sliding, force = pyramids(
         joint_jacobians,
-        masks,
+        *supports,
         contacts.joint,
         contacts.other_joint,
         contacts.point,
@@ -294,7 +294,7 @@ class ContactModule(ConstraintModule[ContactBatch]):
         self.facets = facets
         angles = 2.0 * np.pi * np.arange(facets) / facets
         self.cos, self.sin = np.cos(angles), np.sin(angles)
-        self.masks = support_masks(model)
+        self.supports = Supports.of(model)
         self._blanks: dict[int, tuple[np.ndarray, ...]] = {}
         self._data: pin.Data | None = None
         self._joint_jacobians = np.zeros((6, 0))
@@ -306,7 +306,7 @@ class ContactModule(ConstraintModule[ContactBatch]):
         level = ctx.level
         lagged: FrictionIterate = ctx.lagged.get(id(self), _FIRST_PASS)
         if level != "velocity":
-            J = point_jacobians(ctx.data, self.masks, contacts.joint, contacts.other_joint, contacts.point)
+            J = point_jacobians(ctx.data, self.supports, contacts.joint, contacts.other_joint, contacts.point)
             keep = is_active(ctx, contacts.gap, _dot(J @ ctx.v, contacts.normal), 0.0)
             if not keep.any():
                 return None
@@ -322,7 +322,7 @@ class ContactModule(ConstraintModule[ContactBatch]):
             no_force if lagged.normal is None else lagged.normal,
         )
         rows, bound, packed, starts, sliding, force = pyramid_rows(
-            self._jacobians(ctx.data), self.masks, contacts, ctx, drift, iterate, cone
+            self._jacobians(ctx.data), self.supports, contacts, ctx, drift, iterate, cone
         )
         # contacts with a full pyramid refine their De Saxce shift at the velocity and impulse levels
         shifts = level != "acceleration" and self.mode != "pyramid"
@@ -390,7 +390,8 @@ class ContactModule(ConstraintModule[ContactBatch]):
             changed = not rows.settled
         if b.shifts and not b.relaxed:
             mu = b.contacts.friction
-            slip, residual = slips(b.packed, b.starts, x, normals, mu)
+            joints = (b.contacts.joint, b.contacts.other_joint)
+            slip, residual = slips(b.packed, b.starts, x, normals, mu, *joints, *self.supports[1:])
             if residual > SLIP_TOLERANCE[self.mode]:
                 lagged = self._iterate(ctx)
                 lagged.passes += 1

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, vectorize
 
-from ..linalg import cross, dot
-from .dynamics import point_jacobians_into
+from ..linalg import cross
+from .dynamics import point_jacobians_into, support_dot
 
 
 @vectorize(["float64(int64, float64, float64, float64, float64, float64, boolean)"], cache=True)
@@ -46,6 +46,8 @@ def unpacked(packed, m, nv):  # type: ignore[no-untyped-def]
 def pyramids(  # type: ignore[no-untyped-def]
     joint_jacobians,
     masks,
+    support_starts,
+    support_columns,
     joints,
     other_joints,
     points,
@@ -72,8 +74,9 @@ def pyramids(  # type: ignore[no-untyped-def]
     """Every contact's rows, as :mod:`gaussim.constraints.contact` poses them, in one pass.
 
     Args:
-        joint_jacobians, masks, joints, other_joints, points: what
-            :func:`gaussim.dynamics.point_jacobians` reads.
+        joint_jacobians, masks, support_starts, support_columns, joints, other_joints, points: what
+            :func:`gaussim.dynamics.point_jacobians` reads (a contact's rows are zero off its
+            joints' supports, and only those columns are computed).
         v: the velocity (nv,); x_free: the unconstrained solution (nv,);
         drift: Jdot v of the contacts at the acceleration level, else zeros, (m, 3).
         slips: the lagged slip of each contact (m, 3), NaN where there is none (use the current one).
@@ -94,14 +97,22 @@ def pyramids(  # type: ignore[no-untyped-def]
     m, nv, facets = len(joints), len(v), len(cos)
     acceleration = level == 2
     J = packed[: 3 * m * nv].reshape((m, 3, nv))  # the buffer's first part, whatever R is
-    point_jacobians_into(J, joint_jacobians, masks, joints, other_joints, points)
+    point_jacobians_into(
+        J, joint_jacobians, masks, support_starts, support_columns, joints, other_joints, points
+    )
     starts[0], sliding, any_sliding = 0, np.zeros(m, np.bool_), False
     contact_bound, slip_used, u, free = np.empty(m), np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 3))
     for i in range(m):
         n0, n1, n2 = normal[i, 0], normal[i, 1], normal[i, 2]
-        u0, u1, u2 = dot(J[i, 0], v), dot(J[i, 1], v), dot(J[i, 2], v)
+        a, b = joints[i], other_joints[i]
+        u0, u1, u2 = (
+            support_dot(J[i, 0], v, support_starts, support_columns, a, b),
+            support_dot(J[i, 1], v, support_starts, support_columns, a, b),
+            support_dot(J[i, 2], v, support_starts, support_columns, a, b),
+        )
         u[i, 0], u[i, 1], u[i, 2] = u0, u1, u2
-        free[i, 0], free[i, 1], free[i, 2] = dot(J[i, 0], x_free), dot(J[i, 1], x_free), dot(J[i, 2], x_free)
+        for j in range(3):
+            free[i, j] = support_dot(J[i, j], x_free, support_starts, support_columns, a, b)
         u_n = u0 * n0 + u1 * n1 + u2 * n2
         if acceleration or np.isnan(slips[i, 0]):  # the current slip
             slip_used[i, 0], slip_used[i, 1], slip_used[i, 2] = u0 - u_n * n0, u1 - u_n * n1, u2 - u_n * n2
@@ -136,8 +147,10 @@ def pyramids(  # type: ignore[no-untyped-def]
             speed = np.sqrt(slip[i, 0] ** 2 + slip[i, 1] ** 2 + slip[i, 2] ** 2)
             for j in range(3):
                 friction[i, j] = -mu[i] * normal_forces[i] / speed * slip[i, j]
-                for k in range(nv):
-                    force[k] += friction[i, j] * J[i, j, k]
+                for side in (joints[i], other_joints[i]):  # twice on a shared column, where J is 0
+                    for c in range(support_starts[side], support_starts[side + 1]):
+                        k = support_columns[c]
+                        force[k] += friction[i, j] * J[i, j, k]
         if count == 1:  # the normal row alone
             generators[r, 0], generators[r, 1], generators[r, 2] = n0, n1, n2
         else:  # friction opposes the tangential velocity the contact would have without it
@@ -165,8 +178,11 @@ def pyramids(  # type: ignore[no-untyped-def]
                 generators[r + k, 2] = n2 + mu[i] * (cos[k] * t2 + sin[k] * s2)
         for k in range(count):
             g = generators[r + k]
-            for c in range(nv):
-                rows[r + k, c] = g[0] * J[i, 0, c] + g[1] * J[i, 1, c] + g[2] * J[i, 2, c]
+            rows[r + k] = 0.0
+            for side in (joints[i], other_joints[i]):
+                for c in range(support_starts[side], support_starts[side + 1]):
+                    col = support_columns[c]
+                    rows[r + k, col] = g[0] * J[i, 0, col] + g[1] * J[i, 1, col] + g[2] * J[i, 2, col]
             if acceleration:  # the row's drift; Baumgarte on the normal rate, the slip stopped in the step
                 u_n = n0 * u[i, 0] + n1 * u[i, 1] + n2 * u[i, 2]
                 slip_rate = g[0] * u[i, 0] + g[1] * u[i, 1] + g[2] * u[i, 2] - u_n
@@ -181,16 +197,18 @@ def pyramids(  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def slips(packed, starts, x, normal, mu):  # type: ignore[no-untyped-def]
+def slips(packed, starts, x, normal, mu, joints, other_joints, support_starts, support_columns):  # type: ignore[no-untyped-def]
     """(the slips (m, 3) of solution x for the contacts that refine their shift (one with a full
     pyramid) and are moving (a sticking contact has no shift to refine), the others' unchanged; the
     largest change of a slip times max(1, mu), the normal velocity error it causes). ``packed`` and
-    ``starts`` are :func:`pyramids`'. (In scalars, no array per contact: this runs after every QP
-    with friction.)"""
+    ``starts`` are :func:`pyramids`', the rest what it reads. (In scalars, no array per contact: this
+    runs after every QP with friction.)"""
     J, _, slip, _ = unpacked(packed, len(normal), len(x))
     result, residual = slip.copy(), 0.0
     for i in range(len(slip)):
-        moving, u0, u1, u2 = _moving_slip(J, slip, starts, x, normal, i)
+        moving, u0, u1, u2 = _moving_slip(
+            J, slip, starts, x, normal, i, support_starts, support_columns, joints[i], other_joints[i]
+        )
         if moving:
             change = max(abs(u0 - slip[i, 0]), abs(u1 - slip[i, 1]), abs(u2 - slip[i, 2]))
             residual = max(residual, max(1.0, mu[i]) * change)
@@ -199,12 +217,16 @@ def slips(packed, starts, x, normal, mu):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True, inline="always")
-def _moving_slip(J, slip, starts, x, normal, i):  # type: ignore[no-untyped-def]
+def _moving_slip(J, slip, starts, x, normal, i, support_starts, support_columns, a, b):  # type: ignore[no-untyped-def]
     """(whether contact i refines its shift and its tangential velocity in solution x or its last
     slip is moving, that velocity's 3 components)."""
     if starts[i + 1] - starts[i] == 1:
         return False, 0.0, 0.0, 0.0
-    u0, u1, u2 = dot(J[i, 0], x), dot(J[i, 1], x), dot(J[i, 2], x)
+    u0, u1, u2 = (
+        support_dot(J[i, 0], x, support_starts, support_columns, a, b),
+        support_dot(J[i, 1], x, support_starts, support_columns, a, b),
+        support_dot(J[i, 2], x, support_starts, support_columns, a, b),
+    )
     along = u0 * normal[i, 0] + u1 * normal[i, 1] + u2 * normal[i, 2]
     u0, u1, u2 = u0 - along * normal[i, 0], u1 - along * normal[i, 1], u2 - along * normal[i, 2]
     speed = np.sqrt(slip[i, 0] ** 2 + slip[i, 1] ** 2 + slip[i, 2] ** 2)

@@ -191,19 +191,33 @@ def negated_product(M, x):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def point_jacobians_into(out, J, masks, joints, other_joints, points):  # type: ignore[no-untyped-def]
+def point_jacobians_into(out, J, masks, starts, columns, joints, other_joints, points):  # type: ignore[no-untyped-def]
     """:func:`gaussim.dynamics.point_jacobians` from the joint Jacobians J (6, nv), written into
-    ``out`` (m, 3, nv)."""
+    ``out`` (m, 3, nv): zero but on the columns of the two joints' supports (``masks``, ``starts``,
+    ``columns``: :class:`gaussim.dynamics.Supports`)."""
     for i in range(len(joints)):
         px, py, pz = points[i, 0], points[i, 1], points[i, 2]
-        for k in range(J.shape[1]):
-            moving = masks[joints[i], k] - masks[other_joints[i], k]
-            if moving != 0.0:  # v_O + w x p, with v_O at the world origin
+        a, b = joints[i], other_joints[i]
+        out[i] = 0.0
+        for joint in (a, b):
+            for c in range(starts[joint], starts[joint + 1]):
+                k = columns[c]
+                moving = masks[a, k] - masks[b, k]  # 0 on the chain the two share
                 out[i, 0, k] = moving * (J[0, k] + J[4, k] * pz - J[5, k] * py)
                 out[i, 1, k] = moving * (J[1, k] + J[5, k] * px - J[3, k] * pz)
                 out[i, 2, k] = moving * (J[2, k] + J[3, k] * py - J[4, k] * px)
-            else:
-                out[i, 0, k] = out[i, 1, k] = out[i, 2, k] = 0.0
+
+
+@njit(cache=True, inline="always")
+def support_dot(row, x, starts, columns, a, b):  # type: ignore[no-untyped-def]
+    """row . x for a row that is zero off the supports of joints a and b (a point Jacobian's row: a
+    column both hold is zero in it, so counting it twice adds nothing)."""
+    total = 0.0
+    for c in range(starts[a], starts[a + 1]):
+        total += row[columns[c]] * x[columns[c]]
+    for c in range(starts[b], starts[b + 1]):
+        total += row[columns[c]] * x[columns[c]]
+    return total
 
 
 @njit(cache=True)

@@ -36,7 +36,7 @@ SIGNATURES = {
     "dynamics.free_velocity": ["f1r f1 f f1 i1 f3 b1"],
     "dynamics.floating_terms": ["f1r f1 f b i1 f3 b1", "f1 f1 f b i1 f3 b1"],
     "dynamics.negated_product": ["f2 f1"],
-    "dynamics.point_jacobians_into": ["f3 f2F f2 i1r i1r f2", "f3 f2F f2 i1 i1 f2"],
+    "dynamics.point_jacobians_into": ["f3 f2F f2 i1 i1 i1r i1r f2", "f3 f2F f2 i1 i1 i1 i1 f2"],
     "dynamics.unloaded": ["f2 f1 i1 b1"],
     # M's joint structure: the scenes of many bodies (STRUCTURED_NV coordinates or more)
     "dynamics.mirrored": ["f2F i1 f2"],
@@ -55,11 +55,13 @@ SIGNATURES = {
     "collision.travel": ["i1 i1 f1 f1r f1 f f f1"],
     "contact.unpacked": ["f1 i i"],
     "contact.pyramids": [
-        f"f2F f2 {joints} {joints} f2 {v} {x} f2r f2 f1 {mu} {mu} f2r b1r f1r i f1 f1 b f*3 f2 f1 f1 i1"
+        f"f2F f2 i1 i1 {joints} {joints} f2 {v} {x} f2r f2 f1 {mu} {mu} f2r b1r f1r i f1 f1 b f*3 f2 f1 f1 i1"
         for joints, mu in (("i1", "f1"), ("i1r", "f1r"))  # all the contacts, or those a level keeps
         for v, x in (("f1", "f1"), ("f1r", "f1"), ("f1r", "f1r"))
     ],
-    "contact.slips": ["f1 i1 f1 f2 f1", "f1 i1 f1 f2 f1r"],
+    "contact.slips": [
+        f"f1 i1 f1 f2 {mu} {joints} {joints} i1 i1" for joints, mu in (("i1", "f1"), ("i1r", "f1r"))
+    ],
     # the equalities (A, b) or the inequalities (C, l) of a problem are read-only when empty
     "solver.kkt_residuals": [f"f2 f1 {sides} f1 f1 f1" for sides in _SIDES],
     "solver.active_set_candidate": [
