@@ -23,7 +23,7 @@ OPTIONS = gaussim.Options(friction_mode="pyramid")
 @pytest.mark.parametrize("seed", range(20))
 def test_islands_are_the_connected_components_of_trees_and_rows(seed):
     """The islands of random row patterns are scipy's connected components of the graph whose nodes
-    are the trees and whose edges join the trees one row reads."""
+    are the trees and whose edges join the trees one row reads (scanned, or told by its joints)."""
     rng = np.random.default_rng(seed)
     n_trees = int(rng.integers(1, 12))
     tree = np.sort(rng.integers(0, n_trees, size=int(rng.integers(n_trees, 40))))
@@ -36,7 +36,15 @@ def test_islands_are_the_connected_components_of_trees_and_rows(seed):
     A, C = rows[:n_eq], rows[n_eq:]
     applied = np.zeros(nv)
     applied[rng.integers(0, nv)] = 1.0
-    island_of_tree, island_of_row, n = islands(A, C, applied, tree, n_trees)
+    # half the rows say which joints they read (one joint per coordinate, joint 0 the world): the
+    # same partition as scanning them
+    joint_tree = np.concatenate([[-1], tree])
+    read = np.full((len(rows), 2), -1)
+    for r, row in enumerate(rows):
+        if rng.random() < 0.5:
+            columns = np.flatnonzero(row)
+            read[r] = columns[0] + 1, (columns[-1] + 1 if len(columns) > 1 else 0)
+    island_of_tree, island_of_row, n = islands(A, C, read, joint_tree, applied, tree, n_trees)
 
     edges = [(tree[k], tree[j]) for row in rows for k in np.flatnonzero(row) for j in np.flatnonzero(row)]
     i, j = np.array(edges).T

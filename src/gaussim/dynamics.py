@@ -14,6 +14,7 @@ from .kernels.dynamics import (
     floating_terms,
     free_velocity,
     linear_term,
+    loaded,
     mirrored,
     negated_product,
     point_jacobians_into,
@@ -68,12 +69,14 @@ class FloatingBases:
         inertias: rotational inertia about the joint of each rigid base, zeros for the others, (k, 3, 3)
             [kg m^2].
         rigid: which bases are one rigid body with its centre of mass at the joint, shape (k,).
+        of_joint: which base each joint is, -1 for the others, shape (njoints,).
     """
 
     velocity: np.ndarray
     configuration: np.ndarray
     inertias: np.ndarray
     rigid: np.ndarray
+    of_joint: np.ndarray
 
     @classmethod
     def of(cls, model: pin.Model) -> FloatingBases:
@@ -89,11 +92,14 @@ class FloatingBases:
             # a lever below a nanometre: the centre of mass is at the joint
             if len(model.subtrees[j]) == 1 and float(np.linalg.norm(body.lever)) < 1e-9:
                 inertias[k], rigid[k] = body.inertia, True
+        of_joint = np.full(model.njoints, -1, dtype=np.int64)
+        of_joint[joints] = np.arange(len(joints))
         return cls(
             np.array([model.joints[j].idx_v for j in joints], dtype=np.int64),
             np.array([model.joints[j].idx_q for j in joints], dtype=np.int64),
             inertias,
             rigid,
+            of_joint,
         )
 
     def __len__(self) -> int:
@@ -107,7 +113,10 @@ class FloatingBases:
         free = self.rigid.copy()
         for report in reports:
             for _, rows, multipliers in getattr(report, "blocks", ()):
-                unloaded(rows.J, multipliers, self.velocity, free)
+                if rows.joints is None:
+                    unloaded(rows.J, multipliers, self.velocity, free)
+                else:  # a rigid base is its tree's one joint: a row loads it when it reads that joint
+                    loaded(rows.joints, multipliers, self.of_joint, free)
         return free
 
     def frame_acceleration(self, v: np.ndarray) -> np.ndarray:

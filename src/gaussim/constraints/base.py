@@ -42,6 +42,9 @@ class Rows(Generic[T]):
             (sliding friction at the acceleration level).
         settled: False when the module's fixed-point iteration (:meth:`ConstraintModule.refine`) had
             not reached its fixed point at the QP of these rows: the step is then not converged.
+        joints: the two joints whose motion each row reads, shape (m, 2) (0: the world): the row is
+            zero off their supports, so the solver need not scan J for the bodies it couples; None
+            (the default): J is scanned.
     """
 
     J: np.ndarray
@@ -51,6 +54,7 @@ class Rows(Generic[T]):
     data: T = None  # type: ignore[assignment]  # a module without bookkeeping: Rows[None]
     force: np.ndarray | None = None
     settled: bool = True
+    joints: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.bound)

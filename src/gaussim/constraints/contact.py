@@ -335,7 +335,8 @@ class ContactModule(ConstraintModule[ContactBatch]):
             ]
 
         batch = ContactBatch(contacts, packed, starts, sliding, shifts, lagged.relaxed)
-        return Rows(rows, bound, False, labels, batch, force)
+        joints = np.repeat(np.stack([contacts.joint, contacts.other_joint], axis=1), np.diff(starts), axis=0)
+        return Rows(rows, bound, False, labels, batch, force, joints=joints)
 
     def _jacobians(self, data: pin.Data) -> np.ndarray:
         """The joint Jacobians data.J (6, nv): a view of Pinocchio's array that follows every pass on

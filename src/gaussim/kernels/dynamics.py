@@ -233,3 +233,14 @@ def unloaded(J, multipliers, velocity, free):  # type: ignore[no-untyped-def]
                     if J[r, i] != 0.0:
                         free[k] = False
                         break
+
+
+@njit(cache=True)
+def loaded(joints, multipliers, of_joint, free):  # type: ignore[no-untyped-def]
+    """Clear ``free[k]`` for each base k (``of_joint``: each joint's base, -1 for none) that one of the
+    two joints ``joints[r]`` of a row with a nonzero multiplier is."""
+    for r in range(len(multipliers)):
+        if multipliers[r] != 0.0:
+            for j in (joints[r, 0], joints[r, 1]):
+                if of_joint[j] >= 0:
+                    free[of_joint[j]] = False

@@ -38,6 +38,7 @@ SIGNATURES = {
     "dynamics.negated_product": ["f2 f1"],
     "dynamics.point_jacobians_into": ["f3 f2F f2 i1 i1 i1r i1r f2", "f3 f2F f2 i1 i1 i1 i1 f2"],
     "dynamics.unloaded": ["f2 f1 i1 b1"],
+    "dynamics.loaded": ["i2 f1 i1 b1"],
     # M's joint structure: the scenes of many bodies (STRUCTURED_NV coordinates or more)
     "dynamics.mirrored": ["f2F i1 f2"],
     "dynamics.structured_terms": [

@@ -25,10 +25,10 @@ from .proxqp import GaussSolver
 KEPT_SOLVERS = 256
 
 
-def trees(model: pin.Model) -> np.ndarray:
-    """The tree of each velocity coordinate, shape (nv,): the index of its joint's ancestor among the
-    universe's children (0, 1, ... in joint order)."""
-    root = np.zeros(model.njoints, dtype=np.int64)
+def joint_trees(model: pin.Model) -> np.ndarray:
+    """The tree of each joint, shape (njoints,): the index of its ancestor among the universe's
+    children (0, 1, ... in joint order), -1 for the universe."""
+    root = np.full(model.njoints, -1, dtype=np.int64)
     count = 0
     for j in range(1, model.njoints):
         parent = model.parents[j]
@@ -36,6 +36,12 @@ def trees(model: pin.Model) -> np.ndarray:
             root[j], count = count, count + 1
         else:
             root[j] = root[parent]
+    return root
+
+
+def trees(model: pin.Model) -> np.ndarray:
+    """The tree of each velocity coordinate, shape (nv,) (its joint's, see :func:`joint_trees`)."""
+    root = joint_trees(model)
     tree = np.zeros(model.nv, dtype=np.int64)
     for j in range(1, model.njoints):
         joint = model.joints[j]
@@ -48,7 +54,7 @@ class IslandSolver:
 
     def __init__(self, model: pin.Model, options: Options) -> None:
         self.options = options
-        self.tree = trees(model)
+        self.tree, self.joint_tree = trees(model), joint_trees(model)
         self.n_trees = int(self.tree.max(initial=-1)) + 1
         self._none = np.zeros(model.nv)  # no force applied outside the QP
         self._solvers: OrderedDict[tuple[int, ...] | None, GaussSolver] = OrderedDict()
@@ -61,7 +67,10 @@ class IslandSolver:
         p = problem
         if self.n_trees > 1:
             applied = self._none if p.applied is None else p.applied
-            island_of_tree, island_of_row, n = islands(p.A, p.C, applied, self.tree, self.n_trees)
+            read = _row_joints(p)
+            island_of_tree, island_of_row, n = islands(
+                p.A, p.C, read, self.joint_tree, applied, self.tree, self.n_trees
+            )
             # several islands, or one that leaves a tree out; and no row that reads no coordinate
             if (n > 1 or island_of_tree.min() < 0) and n and island_of_row.min(initial=0) >= 0:
                 return self._split(p, x_free, island_of_tree, island_of_row, n)
@@ -101,6 +110,16 @@ class IslandSolver:
         return solver
 
 
+def _row_joints(p: GaussProblem) -> np.ndarray:
+    """The two joints each row of [A; C] reads, shape (rows, 2), where its module says (-1: scan the
+    row)."""
+    read = np.full((len(p.b) + len(p.l), 2), -1, dtype=np.int64)
+    for _, rows, part in p.blocks:
+        if rows.joints is not None:
+            read[part] = rows.joints
+    return read
+
+
 @njit(cache=True)
 def _root(parent, t):  # type: ignore[no-untyped-def]
     while parent[t] != t:
@@ -110,15 +129,36 @@ def _root(parent, t):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def islands(A, C, applied, tree, n_trees):  # type: ignore[no-untyped-def]
+def _join(parent, s, t):  # type: ignore[no-untyped-def]
+    """Union of the sets of s and t (the smaller root stays)."""
+    a, b = _root(parent, s), _root(parent, t)
+    if a != b:
+        parent[max(a, b)] = min(a, b)
+
+
+@njit(cache=True)
+def islands(A, C, read, joint_tree, applied, tree, n_trees):  # type: ignore[no-untyped-def]
     """(the island of each tree, -1 for a tree no row reads; the island of each row of [A; C], -1
-    for a row that reads no coordinate; the number of islands). The trees of ``applied`` (nv,), the
-    force the modules apply outside the QP, are islands too."""
+    for a row that reads no coordinate; the number of islands). A row reads the trees of its two
+    joints ``read[r]`` (``joint_tree``: each joint's tree, -1 for the world), or the trees of its
+    nonzero entries where ``read[r, 0]`` is -1. The trees of ``applied`` (nv,), the force the
+    modules apply outside the QP, are islands too."""
     parent = np.arange(n_trees)
     touched = np.zeros(n_trees, dtype=np.bool_)
     n_eq, nv = A.shape[0], len(tree)
     first = np.full(n_eq + C.shape[0], -1)
     for r in range(len(first)):
+        if read[r, 0] >= 0:
+            for joint in (read[r, 0], read[r, 1]):
+                t = joint_tree[joint]
+                if t < 0:
+                    continue
+                touched[t] = True
+                if first[r] < 0:
+                    first[r] = t
+                else:
+                    _join(parent, first[r], t)
+            continue
         last = -1
         for k in range(nv):
             value = A[r, k] if r < n_eq else C[r - n_eq, k]
@@ -129,9 +169,7 @@ def islands(A, C, applied, tree, n_trees):  # type: ignore[no-untyped-def]
             if first[r] < 0:
                 first[r] = last
             else:
-                a, b = _root(parent, first[r]), _root(parent, last)
-                if a != b:
-                    parent[max(a, b)] = min(a, b)
+                _join(parent, first[r], last)
     for k in range(nv):
         if applied[k] != 0.0:
             touched[tree[k]] = True
