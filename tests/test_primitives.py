@@ -28,6 +28,7 @@ AGREEMENT = 1e-9
 EPA_AGREEMENT = 1e-8
 NORMAL_AGREEMENT = 1e-6
 MARGIN = 1e-3
+STILL = np.zeros(1)  # no pair turns within the step (the routines read one pair's entry)
 HALF_A, HALF_B = np.array([0.05, 0.04, 0.03]), np.array([0.1, 0.06, 0.05])
 
 
@@ -101,9 +102,9 @@ def test_boxes_on_boxes_match_coal(fixed):
         assert [type(r) for r in detector.routines] == [BoxPairs]
         data = scene.robot.model.createData()
         pin.forwardKinematics(scene.robot.model, data, q)
-        mine, least = detector.routines[0].detect(data, MARGIN)
-        current, _ = NarrowPhase(detector.pairs, [0]).detect(data, MARGIN)
-        reference, _ = _tight(detector.pairs, [0]).detect(data, MARGIN)
+        mine, least = detector.routines[0].detect(data, MARGIN, STILL)
+        current, _ = NarrowPhase(detector.pairs, [0]).detect(data, MARGIN, STILL)
+        reference, _ = _tight(detector.pairs, [0]).detect(data, MARGIN, STILL)
         assert len(mine) == len(current) == len(reference), k
         if not mine or all(np.array_equal(x, y) for x, y in zip(mine[0], current[0])):
             continue  # no contact, or coal's own answer
@@ -155,7 +156,7 @@ def test_a_capsule_on_ground_matches_coal(normal):
         R = pin.rpy.rpyToMatrix(*rng.uniform(-np.pi, np.pi, 3))
         pin.forwardKinematics(scene.robot.model, data, pin.SE3ToXYZQUAT(pin.SE3(R, rng.uniform(-1, 1, 3))))
         contacts = detector.detect(data)
-        ((_, point, _, gap),) = reference.detect(data, 10.0)[0]
+        ((_, point, _, gap),) = reference.detect(data, 10.0, STILL)[0]
         deepest = int(np.argmin(contacts.gap))
         assert contacts.gap[deepest] == pytest.approx(gap.min(), abs=AGREEMENT)
         np.testing.assert_allclose(contacts.normal, np.tile(n, (len(contacts), 1)), atol=1e-15)
@@ -291,8 +292,8 @@ def test_primitive_pairs_match_coal(a, b, fixed):
         pose_a = pin.SE3(R, pose_b.translation + (low + rng.uniform(-MARGIN, MARGIN)) * towards)
         _place(scene, data, pose_a, pose_b)
         asked.clear()
-        mine, least = routine.detect(data, MARGIN)
-        expected, _ = reference.detect(data, MARGIN)
+        mine, least = routine.detect(data, MARGIN, STILL)
+        expected, _ = reference.detect(data, MARGIN, STILL)
         assert len(mine) == len(expected), k
         if asked or not mine:
             continue
@@ -322,7 +323,7 @@ def _contacts(scene: gaussim.Scene, pose_a: pin.SE3, pose_b: pin.SE3 = ORIGIN):
     data = scene.robot.model.createData()
     _place(scene, data, pose_a, pose_b)
     contacts = detector.detect(data)
-    ((_, points, normals, gaps),) = _tight(detector.pairs, [0]).detect(data, MARGIN)[0]
+    ((_, points, normals, gaps),) = _tight(detector.pairs, [0]).detect(data, MARGIN, STILL)[0]
     np.testing.assert_allclose(contacts.point, points, atol=SAME)
     np.testing.assert_allclose(contacts.normal, normals, atol=SAME)
     np.testing.assert_allclose(contacts.gap, gaps, atol=SAME)
