@@ -222,8 +222,9 @@ def pyramid_rows(
     cone: tuple[np.ndarray, np.ndarray, bool],
 ) -> tuple[np.ndarray, ...]:
     """Every contact's rows at ``ctx``'s level (:func:`~gaussim.kernels.contact.pyramids`): (rows
-    (R, nv), bound (R,), the packed buffer :class:`ContactBatch` reads, starts (m + 1,), sliding
-    contacts or None, their friction's generalized force or None).
+    (R, nv), bound (R,), the packed buffer :class:`ContactBatch` reads, starts (m + 1,), the two
+    joints each row reads (R, 2), sliding contacts or None, their friction's generalized force or
+    None).
 
     Args:
         joint_jacobians, supports: what :func:`point_jacobians` reads.
@@ -236,6 +237,7 @@ def pyramid_rows(
     most = m * len(cone[0])  # at most m facets rows
     rows, bound = np.empty((most, nv)), np.empty(most)
     packed, starts = np.empty(3 * m * nv + 3 * most + 6 * m), np.empty(m + 1, np.int64)
+    read = np.empty((most, 2), np.int64)
     # read-only views whoever made them: one compiled signature (numba types writability)
     drift, iterate = _read_only(drift), tuple(_read_only(a) for a in iterate)  # type: ignore[assignment]
     total, sliding, force = pyramids(
@@ -259,10 +261,12 @@ def pyramid_rows(
         bound,
         packed,
         starts,
+        read,
     )
     if total < most:  # frictionless or sliding contacts: fewer rows
-        rows, bound, packed = rows[:total], bound[:total], packed[: 3 * m * nv + 3 * total + 6 * m]
-    return rows, bound, packed, starts, sliding, force
+        rows, bound, read = rows[:total], bound[:total], read[:total]
+        packed = packed[: 3 * m * nv + 3 * total + 6 * m]
+    return rows, bound, packed, starts, read, sliding, force
 
 
 def _read_only(array: np.ndarray) -> np.ndarray:
@@ -321,7 +325,7 @@ class ContactModule(ConstraintModule[ContactBatch]):
             no_stops if lagged.stops is None else lagged.stops,
             no_force if lagged.normal is None else lagged.normal,
         )
-        rows, bound, packed, starts, sliding, force = pyramid_rows(
+        rows, bound, packed, starts, read, sliding, force = pyramid_rows(
             self._jacobians(ctx.data), self.supports, contacts, ctx, drift, iterate, cone
         )
         # contacts with a full pyramid refine their De Saxce shift at the velocity and impulse levels
@@ -335,8 +339,7 @@ class ContactModule(ConstraintModule[ContactBatch]):
             ]
 
         batch = ContactBatch(contacts, packed, starts, sliding, shifts, lagged.relaxed)
-        joints = np.repeat(np.stack([contacts.joint, contacts.other_joint], axis=1), np.diff(starts), axis=0)
-        return Rows(rows, bound, False, labels, batch, force, joints=joints)
+        return Rows(rows, bound, False, labels, batch, force, joints=read)
 
     def _jacobians(self, data: pin.Data) -> np.ndarray:
         """The joint Jacobians data.J (6, nv): a view of Pinocchio's array that follows every pass on

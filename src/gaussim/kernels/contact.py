@@ -70,6 +70,7 @@ def pyramids(  # type: ignore[no-untyped-def]
     bound,
     packed,
     starts,
+    read,
 ):
     """Every contact's rows, as :mod:`gaussim.constraints.contact` poses them, in one pass.
 
@@ -86,7 +87,8 @@ def pyramids(  # type: ignore[no-untyped-def]
 
     Fills the first R rows of ``rows`` (m facets, nv) and ``bound`` (m facets,), the first entries of
     ``packed`` (the buffer :func:`unpacked` reads: point Jacobians, generators, slip used, friction
-    force; room for m facets rows) and ``starts`` (m + 1,) (the first row of each contact, then R);
+    force; room for m facets rows), ``starts`` (m + 1,) (the first row of each contact, then R) and
+    ``read`` (m facets, 2) (the two joints each row reads);
     the caller allocates them, which costs less than a kernel's new arrays.
 
     Returns:
@@ -177,6 +179,7 @@ def pyramids(  # type: ignore[no-untyped-def]
                 generators[r + k, 1] = n1 + mu[i] * (cos[k] * t1 + sin[k] * s1)
                 generators[r + k, 2] = n2 + mu[i] * (cos[k] * t2 + sin[k] * s2)
         for k in range(count):
+            read[r + k, 0], read[r + k, 1] = joints[i], other_joints[i]
             g = generators[r + k]
             rows[r + k] = 0.0
             for side in (joints[i], other_joints[i]):

@@ -56,7 +56,8 @@ SIGNATURES = {
     "collision.travel": ["i1 i1 f1 f1r f1 f f f1"],
     "contact.unpacked": ["f1 i i"],
     "contact.pyramids": [
-        f"f2F f2 i1 i1 {joints} {joints} f2 {v} {x} f2r f2 f1 {mu} {mu} f2r b1r f1r i f1 f1 b f*3 f2 f1 f1 i1"
+        f"f2F f2 i1 i1 {joints} {joints} f2 {v} {x} f2r f2 f1 {mu} {mu} f2r b1r f1r i f1 f1 b f*3 "
+        "f2 f1 f1 i1 i2"
         for joints, mu in (("i1", "f1"), ("i1r", "f1r"))  # all the contacts, or those a level keeps
         for v, x in (("f1", "f1"), ("f1r", "f1"), ("f1r", "f1r"))
     ],
