@@ -110,7 +110,7 @@ def touching(
     (P,)) deep; ``index``: the declared pair of each hull, shape (P,).
     Returns: the contacts of the hulls (a :data:`Piece`, hull by hull) and the least gap of all the
     hulls [m]."""
-    count = len(index) * (hulls.directions.shape[1] + 1)  # at most: the outline and the deepest
+    count = len(index) * (2 * hulls.directions.shape[1] + 1)  # at most: two outlines and the deepest
     pairs, points, normals, gaps = (
         np.empty(count, np.int64),
         np.empty((count, 3)),

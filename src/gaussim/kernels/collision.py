@@ -37,8 +37,9 @@ def ground_hulls(
     ``deepest`` and ``narrow_at``): fills the first k entries of the ``*_out`` arrays with the contacts, hull
     by hull; returns (k, the least gap of all the hulls). ``patch``: (PATCH_TOLERANCE, PATCH_MIN_EXTENT) of
     :mod:`gaussim.collision.contacts`; ``widening``: per hull, what its turn within the step can bring its
-    other vertices down by [m]: its patch reaches that deep where it exceeds PATCH_TOLERANCE (a resting
-    body's patch stays as it was, which bounds jitter of the bound would make flicker).
+    other vertices down by [m]: its patch reaches that deep where it exceeds PATCH_TOLERANCE, and keeps
+    the outline of the resting patch and the deepest vertex (a resting body's patch stays as it was,
+    which bounds jitter of the bound would make flicker).
 
     The deepest vertex is found by descent along the hull's edges from the last one: a vertex no
     neighbour of which is deeper is the deepest of a convex polyhedron (a linear function has no
@@ -47,7 +48,7 @@ def ground_hulls(
     base, extent = patch
     c = np.empty(4)  # the ground seen from the joint: (n^T R, n^T p - height)
     heights, world = np.empty(size), np.empty((size, 3))
-    chosen = np.zeros(size, np.bool_)
+    chosen, kept = np.zeros(size, np.bool_), np.zeros(size, np.bool_)
     out = 0
     least = np.inf
     for k in range(count):
@@ -93,22 +94,14 @@ def ground_hulls(
                 world[i, j] = R[j, 0] * X[0, i] + R[j, 1] * X[1, i] + R[j, 2] * X[2, i] + p[j]
             heights[i] = gap
         else:
-            _outline(
-                c,
-                R,
-                p,
-                X,
-                rounding[k],
-                directions[k],
-                margin,
-                (tolerance, extent),
-                gap,
-                heights,
-                world,
-                chosen,
-            )
-            # a widened patch reaches vertices so high that its outline need not hold the deepest
-            chosen[i] |= widening[k] > base
+            outline = (c, R, p, X, rounding[k], directions[k], margin)
+            if tolerance > base:  # the resting patch too: the widened outline's extremes may be high
+                _outline(*outline, (base, extent), gap, heights, world, kept)
+            _outline(*outline, (tolerance, extent), gap, heights, world, chosen)
+            if tolerance > base:  # and the deepest, which neither need hold
+                for v in range(size):
+                    chosen[v] |= kept[v]
+                chosen[i] = True
         for v in range(size):
             if chosen[v]:
                 pairs_out[out], gaps_out[out] = pair[k], heights[v]
