@@ -248,11 +248,10 @@ def compute_dynamics(
         raise InvalidState(f"tau must have shape ({model.nv},), got {np.shape(tau)}")
     bases = FloatingBases.of(model) if bases is None else bases
     h = 0.0 if acceleration else dt
-    f, g, x_free = np.empty(len(v)), np.empty(len(v)), np.empty(len(v))  # filled by the kernels
+    f, g = np.empty(len(v)), np.empty(len(v))  # filled by the kernels
     if structure is None:
-        M = pin.crba(
-            model, data, q, _WORLD
-        )  # a copy of data.M; the WORLD convention also fills data.oMi, data.J
+        # a copy of data.M; the WORLD convention also fills data.oMi, data.J
+        M = pin.crba(model, data, q, _WORLD)
         finite = linear_term(M, v, tau, pin.nonLinearEffects(model, data, q, v), h, f, g)
     else:  # M's upper triangle, b, data.oMi and data.J (WORLD), O(nv)
         pin.computeAllTerms(model, data, q, v)

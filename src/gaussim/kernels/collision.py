@@ -95,13 +95,12 @@ def ground_hulls(
             heights[i] = gap
         else:
             outline = (c, R, p, X, rounding[k], directions[k], margin)
-            if tolerance > base:  # the resting patch too: the widened outline's extremes may be high
-                _outline(*outline, (base, extent), gap, heights, world, kept)
             _outline(*outline, (tolerance, extent), gap, heights, world, chosen)
-            if tolerance > base:  # and the deepest, which neither need hold
+            if tolerance > base:  # a widened outline's extremes may all be high: the resting
+                _outline(*outline, (base, extent), gap, heights, world, kept)  # patch's outline too,
                 for v in range(size):
                     chosen[v] |= kept[v]
-                chosen[i] = True
+                chosen[i] = True  # and the deepest, which neither need hold
         for v in range(size):
             if chosen[v]:
                 pairs_out[out], gaps_out[out] = pair[k], heights[v]

@@ -107,14 +107,10 @@ def pyramids(  # type: ignore[no-untyped-def]
     for i in range(m):
         n0, n1, n2 = normal[i, 0], normal[i, 1], normal[i, 2]
         a, b = joints[i], other_joints[i]
-        u0, u1, u2 = (
-            support_dot(J[i, 0], v, support_starts, support_columns, a, b),
-            support_dot(J[i, 1], v, support_starts, support_columns, a, b),
-            support_dot(J[i, 2], v, support_starts, support_columns, a, b),
-        )
-        u[i, 0], u[i, 1], u[i, 2] = u0, u1, u2
         for j in range(3):
+            u[i, j] = support_dot(J[i, j], v, support_starts, support_columns, a, b)
             free[i, j] = support_dot(J[i, j], x_free, support_starts, support_columns, a, b)
+        u0, u1, u2 = u[i, 0], u[i, 1], u[i, 2]
         u_n = u0 * n0 + u1 * n1 + u2 * n2
         if acceleration or np.isnan(slips[i, 0]):  # the current slip
             slip_used[i, 0], slip_used[i, 1], slip_used[i, 2] = u0 - u_n * n0, u1 - u_n * n1, u2 - u_n * n2
