@@ -1,4 +1,4 @@
-"""The ProxQP wrapper: warm starts that cannot go stale, certificates that are checked."""
+"""The solve: DAQP first, then ProxQP's warm starts that cannot go stale; certificates that are checked."""
 
 import subprocess
 import sys
@@ -15,6 +15,8 @@ from gaussim.solver.certificate import kkt_residuals
 from gaussim.solver.proxqp import _initialise, _sides
 
 DATA = Path(__file__).parent / "data"
+# The ProxQP path's tests solve without DAQP, which answers their problems before ProxQP is asked.
+PROXQP = gaussim.Options(solver="proxqp")
 
 
 def _problem(lower: float) -> GaussProblem:
@@ -31,7 +33,7 @@ def test_warm_start_is_not_stale_when_only_bounds_change(monkeypatch):
     from gaussim.solver import proxqp
 
     monkeypatch.setattr(proxqp, "active_set_candidate", lambda *args: (0, (np.nan,) * 5))
-    solver = GaussSolver(gaussim.Options())
+    solver = GaussSolver(PROXQP)
     resting = solver.solve(_problem(0.0))
     assert resting.lambda_in[0] == pytest.approx(9.81e-3, abs=1e-7)
     freed = solver.solve(_problem(-0.5))  # same H, g, C: only the bound moved
@@ -46,7 +48,7 @@ def test_the_previous_solution_is_kept_only_when_it_still_solves_the_problem():
     a ProxQP call; one it does not solve (the load moved by 1e-6) is solved on its active set, also
     without ProxQP; one whose active set changed (the row left, then joined again) by the active-set
     steps, exactly."""
-    solver = GaussSolver(gaussim.Options())
+    solver = GaussSolver(PROXQP)
     first = solver.solve(_problem(0.0))
     again = solver.solve(_problem(0.0))
     assert again.certificate.status == Status.PREVIOUS_SOLUTION_CERTIFIED and again.certificate.converged
@@ -82,12 +84,12 @@ def test_the_active_set_solve_handles_dependent_rows_and_matches_proxqp():
     """A sticking contact's pyramid rows are dependent; with the push changed, the solve on the last
     active set is certified and gives ProxQP's x and contact force, without a ProxQP call; pushed
     beyond the cone, the active-set steps find the sliding contact's rows and ProxQP's answer."""
-    solver = GaussSolver(gaussim.Options())
+    solver = GaussSolver(PROXQP)
     solver.solve(_sticking_point(1e-3))
     warm = solver.solve(_sticking_point(2e-3))
     assert warm.certificate.status == Status.ACTIVE_SET_CERTIFIED
     assert np.all(warm.lambda_in >= 0.0)
-    cold = GaussSolver(gaussim.Options()).solve(_sticking_point(2e-3))
+    cold = GaussSolver(PROXQP).solve(_sticking_point(2e-3))
     assert cold.certificate.status == Status.SOLVED
     C = _sticking_point(2e-3).C
     # the exact answer: the point sticks, the ground pushing back with (-push, 0, weight); ProxQP's is within
@@ -99,7 +101,7 @@ def test_the_active_set_solve_handles_dependent_rows_and_matches_proxqp():
     sliding = solver.solve(_sticking_point(1.0))  # beyond mu m g: the contact slides, rows drop out
     assert sliding.certificate.status == Status.ACTIVE_SET_CERTIFIED
     assert sliding.x[0] > 0.5
-    fresh = GaussSolver(gaussim.Options()).solve(_sticking_point(1.0))
+    fresh = GaussSolver(PROXQP).solve(_sticking_point(1.0))
     np.testing.assert_allclose(sliding.x, fresh.x, atol=1e-7)
 
 
@@ -171,7 +173,7 @@ def test_a_stalling_warm_start_is_cut_short():
     def problem(g: np.ndarray, l: np.ndarray) -> GaussProblem:
         return GaussProblem(data["H"], g, no_rows, np.zeros(0), data["C"], l, [])
 
-    solver = GaussSolver(gaussim.Options())
+    solver = GaussSolver(PROXQP)
     assert solver.solve(problem(data["g_previous"], data["l_previous"])).certificate.converged
     solution = solver.solve(problem(data["g"], data["l"]))  # warm-started from the previous solution
     c = solution.certificate
@@ -203,7 +205,7 @@ def test_an_uncertified_proxqp_answer_is_solved_on_its_active_set():
     or 0, below ACTIVE_SET_FLOOR of the largest); solved on them the problem is exact, before any
     cold restart."""
     problem = _saved_problem("talos_dt002_unconverged.npz")
-    options = gaussim.Options(dt=0.02)
+    options = PROXQP.replace(dt=0.02)
     solver = GaussSolver(options)
     p, (x, z) = problem, _proxqp_alone(solver, problem)
     relative = kkt_residuals(p.H, p.g, p.A, p.b, p.C, p.l, x, np.zeros(0), z)[1]
@@ -267,7 +269,7 @@ def test_a_refused_answer_is_solved_again_to_a_tighter_tolerance():
     9e-6, above the 1e-7 the check accepts, and the rows it holds active are too dependent for the
     active-set solve. Solved again at eps_abs / KKT_RTOL, it is certified."""
     problem = _saved_problem("anymal_collapse_refused.npz")
-    options = gaussim.Options()
+    options = PROXQP
     solver = GaussSolver(options)
     p, (x, z) = problem, _proxqp_alone(solver, problem)
     assert kkt_residuals(p.H, p.g, p.A, p.b, p.C, p.l, x, np.zeros(0), z)[1] > KKT_RTOL * options.eps_abs
@@ -293,7 +295,7 @@ def test_an_answer_with_a_wrong_sign_multiplier_is_certified_by_nonnegative_ones
     optimal all the same: nonnegative multipliers of the rows at their bound certify it, and it is
     ProxQP's certified solution at eps_abs = 1e-12 (to 5e-10 in the norm of M)."""
     problem = _saved_problem(saved)
-    options = gaussim.Options()
+    options = PROXQP
     solver = GaussSolver(options)
     p, (x, z) = problem, _proxqp_alone(solver, problem)
     assert z.min() < -KKT_RTOL * options.eps_abs, "ProxQP's answer is now certified: nothing to rescue"
@@ -319,3 +321,62 @@ def test_an_answer_with_a_wrong_sign_multiplier_is_certified_by_nonnegative_ones
     assert kkt_residuals(p.H, p.g, p.A, p.b, p.C, p.l, x_tight, np.zeros(0), z_tight)[1] < 1e-11
     difference = solution.x - x_tight  # in the norm of M [sqrt(kg) m/s]: its rotations are light
     assert np.sqrt(difference @ p.H @ difference) < 1e-9
+
+
+def _tight_proxqp(problem: GaussProblem) -> np.ndarray:
+    """ProxQP's x at eps_abs = 1e-12 from a cold start (the reference of the DAQP tests)."""
+    solver = GaussSolver(PROXQP)
+    dims, equalities, inequalities = _sides(problem)
+    qp = solver._new(*dims)
+    qp.settings.eps_abs = qp.settings.eps_duality_gap_abs = 1e-12
+    _initialise(qp, problem, equalities, inequalities)
+    qp.solve()
+    p, x, y, z = problem, qp.results.x.copy(), -qp.results.y, -qp.results.z
+    assert kkt_residuals(p.H, p.g, p.A, p.b, p.C, p.l, x, y, z)[1] < 1e-9  # rows conflict by ~1e-9
+    return x
+
+
+@pytest.mark.parametrize(
+    "saved",
+    [
+        "pile_wrong_sign_multiplier.npz",
+        "pile_wrong_sign_multiplier_full_rank.npz",
+        "anymal_collapse_refused.npz",
+        "talos_dt002_unconverged.npz",
+        "stalled_warm_start.npz",
+    ],
+)
+def test_daqp_certifies_the_dependent_rows_proxqp_struggles_with(saved):
+    """The saved QPs whose dependent contact rows cost ProxQP a refused answer, a cold restart or its
+    iteration cap: DAQP, tried first, answers each with nonnegative multipliers that the KKT check
+    certifies, and x is ProxQP's at eps_abs = 1e-12 (to 1e-8 in the norm of M)."""
+    problem = _saved_problem(saved)
+    solution = GaussSolver(gaussim.Options()).solve(problem)
+    c, p = solution.certificate, problem
+    assert c.status is Status.DUAL_ACTIVE_SET_SOLVED and c.converged and not c.restarted, c
+    assert c.relative_kkt_residual <= KKT_RTOL * gaussim.Options().eps_abs
+    assert solution.lambda_in.min() >= 0.0
+    difference = solution.x - _tight_proxqp(problem)
+    assert np.sqrt(difference @ p.H @ difference) < 1e-8
+
+
+def test_daqp_solves_equality_rows_as_proxqp_does():
+    """Bilateral rows (a loop closure's) with contact rows: DAQP holds the equalities and gives
+    ProxQP's x (at eps_abs = 1e-12) and multipliers that certify it; a problem DAQP finds infeasible
+    (two rows that conflict by 1e-6) goes on to ProxQP, which reports it."""
+    rng = np.random.default_rng(7)
+    n = 12
+    B = rng.normal(size=(n, n))
+    A, C, x = rng.normal(size=(3, n)), rng.normal(size=(20, n)), rng.normal(size=n)  # x admissible
+    H, g, b, l = B @ B.T + np.eye(n), rng.normal(size=n) * 10, A @ x, C @ x - rng.uniform(0, 1, 20)
+    problem = GaussProblem(H, g, A, b, C, l, [])
+    solution = GaussSolver(gaussim.Options()).solve(problem)
+    assert solution.certificate.status is Status.DUAL_ACTIVE_SET_SOLVED, solution.certificate
+    np.testing.assert_allclose(A @ solution.x, b, atol=1e-9)
+    assert solution.lambda_in.min() >= 0.0 and np.count_nonzero(solution.lambda_in) > 0
+    np.testing.assert_allclose(solution.x, _tight_proxqp(problem), atol=1e-8)
+    C = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]])
+    no_rows, l = np.zeros((0, 3)), np.array([0.0, 1e-6])
+    conflict = GaussProblem(np.eye(3), np.array([0, 0, 9.81e-3]), no_rows, np.zeros(0), C, l, [])
+    refused = GaussSolver(gaussim.Options(on_failure="report")).solve(conflict)
+    assert refused.certificate.status is Status.MAX_ITER_REACHED

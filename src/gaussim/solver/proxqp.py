@@ -20,6 +20,7 @@ from ..portable import portable_proxsuite
 from .active_set import ACTIVE_SET_FLOOR, active_set_candidate
 from .certificate import INFEASIBLE, KKT_RTOL, PRIMAL_INFEASIBLE, Certificate, Solution, Status, kkt_residuals
 from .diagnosis import failure, infeasibility
+from .dual import dual_active_set
 
 proxqp = portable_proxsuite().proxqp
 
@@ -73,6 +74,11 @@ class GaussSolver:
         free = None if x_free is None else _free_motion(problem, x_free, self.options.eps_abs)
         if free is not None:
             return free
+        if self.options.solver == "daqp":
+            eps = self.options.eps_abs
+            dual = dual_active_set(problem, eps, KKT_RTOL * eps)
+            if dual is not None:
+                return dual
         if dims != self._dims:
             self._fresh(p, dims, equalities, inequalities)
             solution = self._run(problem)
