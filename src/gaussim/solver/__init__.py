@@ -4,7 +4,8 @@
 
 Modules: :mod:`.certificate` (the status of a solve and gaussim's own KKT check of its answer),
 :mod:`.active_set` (the answer built from the last solution's active rows, one linear solve),
-:mod:`.proxqp` (the dense ProxQP wrapper that tries that first, then ProxQP, then recovers),
+:mod:`.dual` (DAQP's dual active-set solve, from a cold start),
+:mod:`.proxqp` (the dense ProxQP wrapper that tries those first, then ProxQP, then recovers),
 :mod:`.islands` (the problem split into the independent problems of the bodies that touch, each
 solved by its own ProxQP wrapper),
 :mod:`.diagnosis` (the errors of a failed solve: the rows behind an infeasibility); proxsuite is

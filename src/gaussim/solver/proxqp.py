@@ -50,7 +50,8 @@ class GaussSolver:
     def __init__(self, options: Options) -> None:
         self.options = options
         self._qp: Any = None  # proxsuite.proxqp.dense.QP
-        self._dims: tuple[int, int, int] | None = None
+        self._dims: tuple[int, int, int] | None = None  # the QP object's sizes
+        self._solved: tuple[int, int, int] | None = None  # the last problem's sizes
         self._results: tuple[Any, ...] = ()  # the QP object's x, y, z and info
         self._cap = 0  # the QP object's iteration cap
         self._last: tuple[np.ndarray, np.ndarray] = (np.zeros(0), np.zeros(0))  # x, multipliers
@@ -62,12 +63,13 @@ class GaussSolver:
         :class:`SolverError` as ``Options.on_failure`` says."""
         solution = self._solve(problem, x_free)
         self._last = solution.x, solution.multipliers  # where the next solve starts (see _warm)
+        self._solved = _sides(problem)[0]
         return solution
 
     def _solve(self, problem: GaussProblem, x_free: np.ndarray | None) -> Solution:
         p = problem
         dims, equalities, inequalities = _sides(p)
-        if dims == self._dims:
+        if dims == self._solved:
             warm = self._warm(problem, *self._last, 0.0)
             if warm is not None:
                 return warm
@@ -148,7 +150,6 @@ class GaussSolver:
         _initialise(self._qp, p, equalities, inequalities)
         self._dims = dims
         results = self._qp.results  # views that every solve of this QP object writes into
-        self._candidate = np.empty(dims[0]), np.empty(dims[1] + dims[2])  # what _warm writes into
         self._results = results.x, results.y, results.z, results.info
 
     def _warm(
@@ -162,6 +163,8 @@ class GaussSolver:
         ProxQP's warm-started update and solve."""
         p = problem
         candidate = self._candidate
+        if len(candidate[0]) != len(x) or len(candidate[1]) != len(multipliers):
+            candidate = self._candidate = np.empty_like(x), np.empty_like(multipliers)
         how, (residual, relative, primal, dual, gap) = active_set_candidate(
             p.H, p.g, p.A, p.b, p.C, p.l, x, multipliers, self.options.eps_abs, floor, *candidate
         )
