@@ -223,6 +223,7 @@ def test_unknown_frame_and_geometry_list_choices(ball, solo12):
         ("eps_abs", -1.0),
         ("max_iter", 0),
         ("on_failure", "ignore"),
+        ("solver", "osqp"),
         ("contact_margin", -1.0),
     ],
 )
@@ -255,7 +256,7 @@ def test_non_convergence_is_reported_or_raised(box, monkeypatch):
     With three, the active-set steps from ProxQP's iterate solve it; refused here, as on a problem
     they cannot solve, the step reports ProxQP's iterate."""
     scene = gaussim.Scene(box, ground=gaussim.Ground(friction=0.8))
-    strict = gaussim.Simulator(scene, gaussim.Options(max_iter=1))
+    strict = gaussim.Simulator(scene, gaussim.Options(max_iter=1, solver="proxqp"))
     q, v = at_height(box, 0.05), np.array([1.0, 0.0, -1.0, 2.0, 0.0, 0.0])
     # the count the advice is about: max_iter caps ProxQP's outer iterations, not all of them
     stopped = "did not converge: PROXQP_MAX_ITER_REACHED after 1 outer iterations, 1 in all"
@@ -265,7 +266,7 @@ def test_non_convergence_is_reported_or_raised(box, monkeypatch):
     from gaussim.solver import proxqp
 
     monkeypatch.setattr(proxqp, "active_set_candidate", lambda *args: (0, (np.nan,) * 5))
-    lenient = gaussim.Simulator(scene, gaussim.Options(max_iter=3, on_failure="report"))
+    lenient = gaussim.Simulator(scene, gaussim.Options(max_iter=3, on_failure="report", solver="proxqp"))
     with pytest.warns(gaussim.GaussimWarning, match="on_failure='report' kept its iterate"):
         state = lenient.step(lenient.reset(q, v))
     assert not lenient.last_step.converged
@@ -454,6 +455,7 @@ def test_kept_unconverged_iterates_warn_once_and_flag_the_summary(tmp_path, box)
     path.write_text(
         '[robot]\nname = "box"\nfloating_base = true\n[initial]\nq = [0, 0, 0.05, 0, 0, 0, 1]\n'
         "v = [1.0, 0.0, -1.0, 2.0, 0.0, 0.0]\n[ground]\n[options]\nmax_iter = 1\non_failure = 'report'\n"
+        "solver = 'proxqp'\n"
         "[simulation]\nduration = 0.005\n"
     )
     with pytest.warns(gaussim.GaussimWarning, match="on_failure='report' kept its iterate") as caught:

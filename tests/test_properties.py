@@ -26,7 +26,9 @@ ANY_NUMBER = st.one_of(
     st.text(max_size=3),
 )
 SCALAR_FIELDS = [
-    f.name for f in dataclasses.fields(Options) if f.name not in ("scheme", "friction_mode", "on_failure")
+    f.name
+    for f in dataclasses.fields(Options)
+    if f.name not in ("scheme", "friction_mode", "on_failure", "solver")
 ]
 
 

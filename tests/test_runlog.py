@@ -95,7 +95,9 @@ def test_a_ctrl_c_inside_compiled_code_is_an_interruption(tmp_path):
 def test_failed_run_keeps_the_steps_made_and_says_why(tmp_path):
     out = tmp_path / "run.npz"
     spec = _short("box_incline", 300)
-    spec.options = spec.options.replace(max_iter=1)  # ProxQP cannot converge in one iteration
+    spec.options = spec.options.replace(
+        max_iter=1, solver="proxqp"
+    )  # ProxQP cannot converge in one iteration
     with pytest.raises(gaussim.SolverError):
         gaussim.run(spec, out)
     log = gaussim.RunLog.load(out)
@@ -184,7 +186,9 @@ def test_cli_bad_input_exits_2_without_traceback(tmp_path, args, code, message):
 
 def test_cli_simulation_failure_exits_1_and_keeps_the_log(tmp_path):
     scene = tmp_path / "scene.toml"
-    scene.write_text((SCENES / "box_incline.toml").read_text() + "\n[options]\nmax_iter = 1\n")
+    scene.write_text(
+        (SCENES / "box_incline.toml").read_text() + "\n[options]\nmax_iter = 1\nsolver = 'proxqp'\n"
+    )
     result = _cli("run", str(scene), "--out", str(tmp_path / "r.npz"), "--quiet")
     assert (
         result.returncode == 1 and "simulation failed" in result.stderr and "Traceback" not in result.stderr

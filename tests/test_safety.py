@@ -304,7 +304,9 @@ def test_a_failed_run_keeps_the_previous_log_and_says_so(tmp_path, capsys):
     out = tmp_path / "r"
     assert main(["run", str(SCENES / "box_incline.toml"), "--out", str(out), "--duration", "0.2"]) == 0
     failing = tmp_path / "failing.toml"
-    failing.write_text((SCENES / "box_incline.toml").read_text() + "\n[options]\nmax_iter = 1\n")
+    failing.write_text(
+        (SCENES / "box_incline.toml").read_text() + "\n[options]\nmax_iter = 1\nsolver = 'proxqp'\n"
+    )
     capsys.readouterr()
     assert main(["run", str(failing), "--out", str(out), "--quiet"]) == 1
     assert f"it will be kept as {out}.prev" in capsys.readouterr().err
