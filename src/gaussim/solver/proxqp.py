@@ -17,7 +17,7 @@ from ..exceptions import GaussimWarning
 from ..kernels.solver import read_results
 from ..options import Options
 from ..portable import portable_proxsuite
-from .active_set import ACTIVE_SET_FLOOR, active_set_candidate
+from .active_set import ACTIVE_SET_FLOOR, ACTIVE_SET_UP_TO, active_set_candidate
 from .certificate import INFEASIBLE, KKT_RTOL, PRIMAL_INFEASIBLE, Certificate, Solution, Status, kkt_residuals
 from .diagnosis import failure, infeasibility
 from .dual import dual_active_set
@@ -56,6 +56,8 @@ class GaussSolver:
         self._cap = 0  # the QP object's iteration cap
         self._last: tuple[np.ndarray, np.ndarray] = (np.zeros(0), np.zeros(0))  # x, multipliers
         self._candidate = self._last  # the buffers of the active-set candidate (see _warm)
+        self._daqp = options.solver == "daqp"
+        self._dual: np.ndarray | None = None  # the multipliers of DAQP's last solution: its working set
         self._warned = False  # about an iterate kept by on_failure='report'
 
     def solve(self, problem: GaussProblem, x_free: np.ndarray | None = None) -> Solution:
@@ -70,16 +72,17 @@ class GaussSolver:
         p = problem
         dims, equalities, inequalities = _sides(p)
         if dims == self._solved:
-            warm = self._warm(problem, *self._last, 0.0)
+            warm = self._warm(problem, *self._last, 0.0, dims[0] <= ACTIVE_SET_UP_TO or not self._daqp)
             if warm is not None:
                 return warm
         free = None if x_free is None else _free_motion(problem, x_free, self.options.eps_abs)
         if free is not None:
             return free
-        if self.options.solver == "daqp":
+        if self._daqp:
             eps = self.options.eps_abs
-            dual = dual_active_set(problem, eps, KKT_RTOL * eps)
+            dual = dual_active_set(problem, eps, KKT_RTOL * eps, self._dual)
             if dual is not None:
+                self._dual = dual.multipliers
                 return dual
         if dims != self._dims:
             self._fresh(p, dims, equalities, inequalities)
@@ -153,15 +156,17 @@ class GaussSolver:
         self._results = results.x, results.y, results.z, results.info
 
     def _warm(
-        self, problem: GaussProblem, x: np.ndarray, multipliers: np.ndarray, floor: float
+        self, problem: GaussProblem, x: np.ndarray, multipliers: np.ndarray, floor: float, solve: bool = True
     ) -> Solution | None:
         """A solution built from (x, multipliers), the last solution or ProxQP's answer that failed
         the check, with its rows active whose multipliers exceed ``floor`` times the largest (see
-        :mod:`.active_set`), when gaussim's relative KKT residual certifies it to eps_abs (stricter
-        than the KKT_RTOL eps_abs at which ProxQP's answers are accepted), else None. On a robot
-        standing, the last solution or its active set solves most steps' problems, at a fraction of
-        ProxQP's warm-started update and solve."""
+        :mod:`.active_set`; with ``solve`` False, only (x, multipliers) itself), when gaussim's
+        relative KKT residual certifies it to eps_abs (stricter than the KKT_RTOL eps_abs at which
+        ProxQP's answers are accepted), else None. On a robot standing, the last solution or its active
+        set solves most steps' problems, at a fraction of a solver's call."""
         p = problem
+        if not solve:
+            return _checked(p, x, multipliers, Status.PREVIOUS_SOLUTION_CERTIFIED, self.options.eps_abs)
         candidate = self._candidate
         if len(candidate[0]) != len(x) or len(candidate[1]) != len(multipliers):
             candidate = self._candidate = np.empty_like(x), np.empty_like(multipliers)
