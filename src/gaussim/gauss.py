@@ -25,8 +25,14 @@ class GaussStage:
         self, model: pin.Model, data: pin.Data, modules: list[ConstraintModule], options: Options
     ) -> None:
         self.model, self.data, self.modules, self.options = model, data, modules, options
+        # The acceleration scheme's sliding friction is a fixed point on each contact's normal force,
+        # which redundant contacts (a box's four corners) leave non-unique: DAQP answers with a vertex
+        # of that set (a corner or three carry the load, a lopsided friction turns the box), ProxQP's
+        # proximal iterations with an even spread; its levels keep ProxQP.
+        accelerations = options.replace(solver="proxqp")
         self.solvers: dict[Level, IslandSolver] = {
-            level: IslandSolver(model, options) for level in ("velocity", "impulse", "acceleration")
+            level: IslandSolver(model, options if level == "velocity" else accelerations)
+            for level in ("velocity", "impulse", "acceleration")
         }
 
     def context(
