@@ -380,3 +380,23 @@ def test_daqp_solves_equality_rows_as_proxqp_does():
     conflict = GaussProblem(np.eye(3), np.array([0, 0, 9.81e-3]), no_rows, np.zeros(0), C, l, [])
     refused = GaussSolver(gaussim.Options(on_failure="report")).solve(conflict)
     assert refused.certificate.status is Status.MAX_ITER_REACHED
+
+
+def test_daqp_solves_a_problem_whose_bounds_moved_on_the_factors_it_holds(monkeypatch):
+    """A friction pass shifts the normal rows' bounds of a problem whose H, g and rows stay: DAQP
+    updates the bounds of the workspace it holds (one setup for both solves) and gives ProxQP's x of
+    the shifted problem (at eps_abs = 1e-12), not the first problem's."""
+    from gaussim.solver.dual import DualActiveSet
+
+    setups = []
+    setup = DualActiveSet._setup
+    monkeypatch.setattr(DualActiveSet, "_setup", lambda self, *args: setups.append(1) or setup(self, *args))
+    problem = _saved_problem("pile_wrong_sign_multiplier_full_rank.npz")
+    solver = GaussSolver(gaussim.Options())
+    first = solver.solve(problem)
+    shifted = GaussProblem(problem.H, problem.g, problem.A, problem.b, problem.C, problem.l + 1e-3, [])
+    second = solver.solve(shifted)
+    assert second.certificate.status is Status.DUAL_ACTIVE_SET_SOLVED and len(setups) == 1
+    difference = second.x - _tight_proxqp(shifted)
+    assert np.sqrt(difference @ problem.H @ difference) < 1e-8
+    assert np.abs(second.x - first.x).max() > 1e-4  # the shift moved the answer

@@ -2,15 +2,20 @@
 
 The Gauss problem's H = M is positive definite, which is the setting of a dual active-set method:
 DAQP (Arnström, Bemporad, Axehill 2022) starts from the unconstrained minimum and adds the violated
-rows one at a time, keeping a linearly independent working set. A contact's pyramid rows are
-dependent (four facets span three directions, a pile's stacked contacts more), which an interior or
-proximal method such as ProxQP pays for in iterations and refactorizations; an active-set method
-leaves them out: a settled pile's island (120 coordinates, 336 rows) takes 140 iterations, 2 to 3.5
-ms, from a cold start, and 15 from the last solve's working set, where ProxQP took 20 to 40 ms. Its
-answer, like ProxQP's, is accepted only when gaussim's KKT check certifies it.
+rows one at a time, keeping a linearly independent working set and its LDL^T factors. A contact's
+pyramid rows are dependent (four facets span three directions, a pile's stacked contacts more),
+which an interior or proximal method such as ProxQP pays for in iterations and refactorizations; an
+active-set method leaves them out: a settled pile's island (120 coordinates, 336 rows) takes 140
+iterations, 2 to 3.5 ms, from a cold start, where ProxQP took 20 to 40 ms. Each island keeps its DAQP
+workspace: a problem that differs from the last one only in its bounds (the friction passes of one
+step, which shift the normal rows' bounds) is solved on the factors it left, about 0.1 ms there; a
+new one starts from the last working set (0.5 to 1 ms). The answer, like ProxQP's, is accepted only
+when gaussim's KKT check certifies it.
 """
 
 from __future__ import annotations
+
+from typing import Any
 
 import daqp
 import numpy as np
@@ -24,34 +29,67 @@ _EQUALITY = 5  # DAQP's sense of an equality row
 _UNBOUNDED = 1e30  # DAQP's infinite bound
 
 
-def dual_active_set(
-    problem: GaussProblem, eps_abs: float, tolerance: float, start: np.ndarray | None = None
-) -> Solution | None:
-    """DAQP's solution of ``problem`` (rows met to ``eps_abs``) when it is optimal and the relative KKT
-    residual certifies it to ``tolerance``, else None (ProxQP then solves). ``start``: the multipliers
-    of an earlier DAQP solution of a problem with as many rows, whose working set (its nonzero
-    multipliers, independent rows) DAQP starts from; a start it cannot use is followed by a cold one."""
-    p = problem
-    n_eq, n_in = len(p.b), len(p.l)
-    rows = np.vstack((p.A, p.C)) if n_eq else p.C
-    upper = np.concatenate((p.b, np.full(n_in, _UNBOUNDED)))
-    lower = np.concatenate((p.b, p.l))
-    sense = np.zeros(n_eq + n_in, dtype=np.int32)
-    sense[:n_eq] = _EQUALITY
-    warm = start is not None and len(start) == n_eq + n_in
-    x, _, flag, info = daqp.solve(
-        p.H, p.g, rows, upper, lower, sense, primal_tol=eps_abs, dual_start=-start if warm else None
-    )
-    if flag != _OPTIMAL and warm:
-        x, _, flag, info = daqp.solve(p.H, p.g, rows, upper, lower, sense, primal_tol=eps_abs)
-    if flag != _OPTIMAL:
-        return None
-    multipliers = -np.asarray(info["lam"])  # DAQP's multiplier of a lower bound is <= 0
-    residual, relative, primal, dual, gap = kkt_residuals(
-        p.H, p.g, p.A, p.b, p.C, p.l, x, multipliers[:n_eq], multipliers[n_eq:]
-    )
-    if not relative <= tolerance:  # NaN fails too
-        return None
-    iterations, status = info["iterations"], Status.DUAL_ACTIVE_SET_SOLVED
-    certificate = Certificate(status, iterations, primal, dual, gap, residual, relative)
-    return Solution(np.asarray(x), multipliers, n_eq, certificate)
+class DualActiveSet:
+    """DAQP's workspace for the problems of one island, and the problem it holds."""
+
+    def __init__(self, eps_abs: float, tolerance: float) -> None:
+        self.eps_abs, self.tolerance = eps_abs, tolerance
+        self._model: Any = None  # daqp.Model
+        self._held: tuple[np.ndarray, ...] = ()  # copies of the model's H, g and rows
+        self._multipliers: np.ndarray | None = None  # the last solution's: DAQP's working set
+
+    def solve(self, problem: GaussProblem) -> Solution | None:
+        """DAQP's solution of ``problem`` (rows met to eps_abs) when it is optimal and the relative
+        KKT residual certifies it to ``tolerance``, else None (ProxQP then solves): on the held
+        factors when only the bounds changed, else from the last working set, else from a cold
+        start."""
+        p = problem
+        n_eq, n_in = len(p.b), len(p.l)
+        rows = np.vstack((p.A, p.C)) if n_eq else p.C
+        upper = np.concatenate((p.b, np.full(n_in, _UNBOUNDED)))
+        lower = np.concatenate((p.b, p.l))
+        flag, x, info = 0, None, dict[str, Any]()  # DAQP's exitflag, x and info
+        if self._model is not None and _same(self._held, (p.H, p.g, rows)):
+            self._model.update(bupper=upper, blower=lower)
+            x, _, flag, info = self._model.solve()
+        if flag != _OPTIMAL:
+            start = self._multipliers
+            if start is not None and len(start) == n_eq + n_in:
+                flag, x, info = self._setup(p, rows, upper, lower, -start)
+            if flag != _OPTIMAL:
+                flag, x, info = self._setup(p, rows, upper, lower, None)
+        if flag != _OPTIMAL:
+            self._model = None
+            return None
+        multipliers = -np.asarray(info["lam"])  # DAQP's multiplier of a lower bound is <= 0
+        self._multipliers = multipliers
+        residual, relative, primal, dual, gap = kkt_residuals(
+            p.H, p.g, p.A, p.b, p.C, p.l, x, multipliers[:n_eq], multipliers[n_eq:]
+        )
+        if not relative <= self.tolerance:  # NaN fails too
+            return None
+        iterations, status = info["iterations"], Status.DUAL_ACTIVE_SET_SOLVED
+        certificate = Certificate(status, iterations, primal, dual, gap, residual, relative)
+        return Solution(np.array(x), multipliers.copy(), n_eq, certificate)
+
+    def _setup(
+        self, p: GaussProblem, rows: np.ndarray, upper: np.ndarray, lower: np.ndarray, start: Any
+    ) -> tuple[int, Any, Any]:
+        """(exitflag, x, info) of a new workspace for ``p`` (its working set from the multipliers
+        ``start``, or none), which is kept."""
+        held = (p.H.copy(), p.g.copy(), rows.copy())
+        sense = np.zeros(len(lower), dtype=np.int32)
+        sense[: len(p.b)] = _EQUALITY
+        model = daqp.Model()
+        settings = model.settings
+        settings["primal_tol"] = self.eps_abs
+        model.settings = settings
+        model.setup(*held, upper, lower, sense, dual_start=start)
+        x, _, flag, info = model.solve()
+        self._model, self._held = model, held
+        return flag, x, info
+
+
+def _same(held: tuple[np.ndarray, ...], arrays: tuple[np.ndarray, ...]) -> bool:
+    """Whether ``arrays`` equal the ``held`` ones, entry for entry."""
+    return all(a.shape == b.shape and np.array_equal(a, b) for a, b in zip(held, arrays))

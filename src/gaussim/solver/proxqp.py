@@ -20,7 +20,7 @@ from ..portable import portable_proxsuite
 from .active_set import ACTIVE_SET_FLOOR, ACTIVE_SET_UP_TO, active_set_candidate
 from .certificate import INFEASIBLE, KKT_RTOL, PRIMAL_INFEASIBLE, Certificate, Solution, Status, kkt_residuals
 from .diagnosis import failure, infeasibility
-from .dual import dual_active_set
+from .dual import DualActiveSet
 
 proxqp = portable_proxsuite().proxqp
 
@@ -56,8 +56,8 @@ class GaussSolver:
         self._cap = 0  # the QP object's iteration cap
         self._last: tuple[np.ndarray, np.ndarray] = (np.zeros(0), np.zeros(0))  # x, multipliers
         self._candidate = self._last  # the buffers of the active-set candidate (see _warm)
-        self._daqp = options.solver == "daqp"
-        self._dual: np.ndarray | None = None  # the multipliers of DAQP's last solution: its working set
+        eps = options.eps_abs
+        self._dual = DualActiveSet(eps, KKT_RTOL * eps) if options.solver == "daqp" else None
         self._warned = False  # about an iterate kept by on_failure='report'
 
     def solve(self, problem: GaussProblem, x_free: np.ndarray | None = None) -> Solution:
@@ -72,17 +72,15 @@ class GaussSolver:
         p = problem
         dims, equalities, inequalities = _sides(p)
         if dims == self._solved:
-            warm = self._warm(problem, *self._last, 0.0, dims[0] <= ACTIVE_SET_UP_TO or not self._daqp)
+            warm = self._warm(problem, *self._last, 0.0, dims[0] <= ACTIVE_SET_UP_TO or self._dual is None)
             if warm is not None:
                 return warm
         free = None if x_free is None else _free_motion(problem, x_free, self.options.eps_abs)
         if free is not None:
             return free
-        if self._daqp:
-            eps = self.options.eps_abs
-            dual = dual_active_set(problem, eps, KKT_RTOL * eps, self._dual)
+        if self._dual is not None:
+            dual = self._dual.solve(problem)
             if dual is not None:
-                self._dual = dual.multipliers
                 return dual
         if dims != self._dims:
             self._fresh(p, dims, equalities, inequalities)
