@@ -400,3 +400,37 @@ def test_daqp_solves_a_problem_whose_bounds_moved_on_the_factors_it_holds(monkey
     difference = second.x - _tight_proxqp(shifted)
     assert np.sqrt(difference @ problem.H @ difference) < 1e-8
     assert np.abs(second.x - first.x).max() > 1e-4  # the shift moved the answer
+
+
+def test_daqp_starts_a_new_problem_from_its_last_working_set():
+    """A problem with a new g (the next step's) starts from the rows DAQP held active in the last
+    one: a few iterations where a cold start takes its 100-odd, to the same answer."""
+    problem = _saved_problem("pile_wrong_sign_multiplier_full_rank.npz")
+    nudged = GaussProblem(problem.H, problem.g * (1 + 1e-6), problem.A, problem.b, problem.C, problem.l, [])
+    solver = GaussSolver(gaussim.Options())
+    cold = solver.solve(problem).certificate.iterations
+    warm = solver.solve(nudged)
+    again = GaussSolver(gaussim.Options()).solve(nudged)
+    assert warm.certificate.status is again.certificate.status is Status.DUAL_ACTIVE_SET_SOLVED
+    assert warm.certificate.iterations < 10 < again.certificate.iterations and cold > 10
+    difference = warm.x - again.x
+    assert np.sqrt(difference @ problem.H @ difference) < 1e-8
+
+
+def test_daqp_answers_the_check_refuses_or_inputs_it_refuses_go_to_proxqp(monkeypatch):
+    """Rows of integers in a read-only array (a module of the user's) are DAQP's as floats; an
+    answer the KKT check refuses goes on to ProxQP."""
+    C = np.array([[0, 0, 1], [1, 0, 1]])
+    C.flags.writeable = False
+    problem = GaussProblem(
+        np.eye(3), np.array([0, 0, 9.81e-3]), np.zeros((0, 3)), np.zeros(0), C, np.zeros(2), []
+    )
+    solution = GaussSolver(gaussim.Options()).solve(problem)
+    assert solution.certificate.status is Status.DUAL_ACTIVE_SET_SOLVED
+    assert solution.lambda_in == pytest.approx([9.81e-3, 0.0], abs=1e-12)
+    from gaussim.solver import dual
+
+    monkeypatch.setattr(dual, "kkt_residuals", lambda *args: (np.nan,) * 5)
+    refused = GaussSolver(gaussim.Options()).solve(problem)
+    assert refused.certificate.status is Status.SOLVED
+    assert refused.lambda_in == pytest.approx([9.81e-3, 0.0], abs=1e-7)

@@ -50,7 +50,9 @@ class Options:
         solver: ``"daqp"`` (default): each QP that the previous solution's active set does not answer
             is solved by DAQP, a dual active-set method that drops the dependent rows of contact
             pyramids (a pile's island: a tenth of ProxQP's time), and by ProxQP when DAQP's answer
-            fails the KKT check; ``"proxqp"``: by ProxQP alone.
+            fails the KKT check; ``"proxqp"``: by ProxQP alone. The acceleration scheme solves with
+            ProxQP either way (its sliding friction is a fixed point on the normal forces, which
+            DAQP's answers split unevenly over redundant contacts).
         eps_abs: the solvers' absolute tolerance on primal/dual residuals and duality gap (the KKT
             check accepts a relative residual of 100 eps_abs).
         max_iter: ProxQP's cap on its outer iterations for a solve from a cold start; a warm-started

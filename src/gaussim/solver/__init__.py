@@ -4,7 +4,7 @@
 
 Modules: :mod:`.certificate` (the status of a solve and gaussim's own KKT check of its answer),
 :mod:`.active_set` (the answer built from the last solution's active rows, one linear solve),
-:mod:`.dual` (DAQP's dual active-set solve, from a cold start),
+:mod:`.dual` (DAQP's dual active-set solve, each island keeping its workspace),
 :mod:`.proxqp` (the dense ProxQP wrapper that tries those first, then ProxQP, then recovers),
 :mod:`.islands` (the problem split into the independent problems of the bodies that touch, each
 solved by its own ProxQP wrapper),

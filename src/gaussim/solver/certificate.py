@@ -1,4 +1,4 @@
-"""The certificate of a solve: its status, ProxQP's residuals and gaussim's own KKT check.
+"""The certificate of a solve: its status, the solver's residuals and gaussim's own KKT check.
 
 The check is independent of the solver: at a point (x, lambda_eq, lambda_in) of the Gauss problem
 
@@ -24,7 +24,7 @@ KKT_RTOL = 100.0
 
 
 class Status(enum.Enum):
-    """How one solve ended: ProxQP's status, or gaussim's word on it.
+    """How one solve ended: ProxQP's or DAQP's status, or gaussim's word on it.
 
     Each value is the name a run log stores (its ``solver_status`` column), which ``str`` gives too.
     """
@@ -90,15 +90,16 @@ INFEASIBLE = PRIMAL_INFEASIBLE
 
 @dataclass
 class Certificate:
-    """What ProxQP says about one solve, and gaussim's check of it.
+    """What the solver says about one solve, and gaussim's check of it.
 
     Attributes:
         status: how the solve ended (:class:`Status`).
-        iterations: ProxQP's iterations in all: the inner ones of each of its outer iterations.
+        iterations: the solver's iterations in all: ProxQP's inner ones of each of its outer
+            iterations, or DAQP's active-set changes.
         outer_iterations: ProxQP's outer iterations, the ones ``Options.max_iter`` caps.
         primal_residual: max constraint violation of the returned x.
         dual_residual: norm of the stationarity residual H x + g + A^T y + C^T z.
-        duality_gap: ProxQP's duality gap.
+        duality_gap: the duality gap (ProxQP's, or gaussim's sum_i z_i s_i).
         kkt_residual: gaussim's own check of the returned point on the problem as posed: the largest
             of the primal violation, the stationarity residual |H x + g - A^T y - C^T z|, the sign
             violation of z and the complementarity |z_i (C x - l)_i|.

@@ -37,32 +37,25 @@ class DualActiveSet:
         self._model: Any = None  # daqp.Model
         self._held: tuple[np.ndarray, ...] = ()  # copies of the model's H, g and rows
         self._multipliers: np.ndarray | None = None  # the last solution's: DAQP's working set
+        self._split = (0, 0)  # its equality and inequality rows
 
     def solve(self, problem: GaussProblem) -> Solution | None:
         """DAQP's solution of ``problem`` (rows met to eps_abs) when it is optimal and the relative
-        KKT residual certifies it to ``tolerance``, else None (ProxQP then solves): on the held
-        factors when only the bounds changed, else from the last working set, else from a cold
-        start."""
+        KKT residual certifies it to ``tolerance``, else None (ProxQP then solves)."""
         p = problem
         n_eq, n_in = len(p.b), len(p.l)
         rows = np.vstack((p.A, p.C)) if n_eq else p.C
-        upper = np.concatenate((p.b, np.full(n_in, _UNBOUNDED)))
-        lower = np.concatenate((p.b, p.l))
-        flag, x, info = 0, None, dict[str, Any]()  # DAQP's exitflag, x and info
-        if self._model is not None and _same(self._held, (p.H, p.g, rows)):
-            self._model.update(bupper=upper, blower=lower)
-            x, _, flag, info = self._model.solve()
-        if flag != _OPTIMAL:
-            start = self._multipliers
-            if start is not None and len(start) == n_eq + n_in:
-                flag, x, info = self._setup(p, rows, upper, lower, -start)
-            if flag != _OPTIMAL:
-                flag, x, info = self._setup(p, rows, upper, lower, None)
+        upper = np.concatenate((p.b, np.full(n_in, _UNBOUNDED)), dtype=float)
+        lower = np.concatenate((p.b, p.l), dtype=float)
+        try:  # DAQP refuses some inputs (a module's rows of integers): ProxQP then solves
+            flag, x, info = self._solve(p, rows, upper, lower)
+        except (TypeError, ValueError, RuntimeError):
+            flag, x, info = 0, None, None
         if flag != _OPTIMAL:
             self._model = None
             return None
-        multipliers = -np.asarray(info["lam"])  # DAQP's multiplier of a lower bound is <= 0
-        self._multipliers = multipliers
+        multipliers = np.zeros(n_eq + n_in) - np.asarray(info["lam"])  # DAQP's of a lower bound are <= 0
+        self._multipliers, self._split = multipliers, (n_eq, n_in)
         residual, relative, primal, dual, gap = kkt_residuals(
             p.H, p.g, p.A, p.b, p.C, p.l, x, multipliers[:n_eq], multipliers[n_eq:]
         )
@@ -72,19 +65,37 @@ class DualActiveSet:
         certificate = Certificate(status, iterations, primal, dual, gap, residual, relative)
         return Solution(np.array(x), multipliers.copy(), n_eq, certificate)
 
+    def _solve(
+        self, p: GaussProblem, rows: np.ndarray, upper: np.ndarray, lower: np.ndarray
+    ) -> tuple[int, Any, Any]:
+        """(exitflag, x, info) of DAQP on ``p``: on the held factors when only the bounds changed,
+        else from the last working set, else from a cold start."""
+        if self._model is not None and _same(self._held, (p.H, p.g, rows)):
+            self._model.update(bupper=upper, blower=lower)
+            x, _, flag, info = self._model.solve()
+            if flag == _OPTIMAL:
+                return flag, x, info
+        if self._multipliers is not None and self._split == (len(p.b), len(p.l)):
+            flag, x, info = self._setup(p, rows, upper, lower, -self._multipliers)
+            if flag == _OPTIMAL:
+                return flag, x, info
+        return self._setup(p, rows, upper, lower, None)
+
     def _setup(
         self, p: GaussProblem, rows: np.ndarray, upper: np.ndarray, lower: np.ndarray, start: Any
     ) -> tuple[int, Any, Any]:
         """(exitflag, x, info) of a new workspace for ``p`` (its working set from the multipliers
         ``start``, or none), which is kept."""
-        held = (p.H.copy(), p.g.copy(), rows.copy())
+        held = tuple(np.array(a, dtype=float, order="C") for a in (p.H, p.g, rows))  # DAQP reads buffers
         sense = np.zeros(len(lower), dtype=np.int32)
         sense[: len(p.b)] = _EQUALITY
         model = daqp.Model()
         settings = model.settings
         settings["primal_tol"] = self.eps_abs
         model.settings = settings
-        model.setup(*held, upper, lower, sense, dual_start=start)
+        flag, _ = model.setup(*held, upper, lower, sense, dual_start=start)
+        if flag < 0:  # rows DAQP finds inconsistent as they stand (dependent equalities that conflict)
+            return flag, None, None
         x, _, flag, info = model.solve()
         self._model, self._held = model, held
         return flag, x, info
