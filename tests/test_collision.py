@@ -145,16 +145,18 @@ def _sphere(shape: coal.CollisionGeometry, placement: pin.SE3) -> tuple[np.ndarr
 
 def test_the_broad_phase_bounds_every_gap_and_sends_only_near_pairs_to_coal(monkeypatch):
     """Free objects of every shape, a pendulum's bob (off its joint) and a table at random poses: the
-    broad phase's gaps are the bounding spheres' at Pinocchio's geometry placements, never more than
-    coal's distance, and coal sees exactly the pairs within the margin (and every pair with the
-    ground)."""
+    broad phase's gaps are the bounding spheres' at Pinocchio's geometry placements, and within the
+    margin the larger of that and coal's distance from the robot geometry's sphere to the obstacle's
+    bounding box; never more than coal's distance of the shapes, and coal sees exactly the pairs
+    within the margin (and every pair with the ground)."""
     shapes = [
         gaussim.FreeBody.box("box", (0.2, 0.1, 0.05), mass=1.0),
         gaussim.FreeBody.sphere("ball", 0.06, mass=1.0),
         gaussim.FreeBody.capsule("capsule", 0.03, 0.15, mass=1.0),
         gaussim.FreeBody.cylinder("can", 0.05, 0.1, mass=1.0),
     ]
-    table = gaussim.Box("table", size=(0.3, 0.3, 0.1), position=(0.2, 0.0, 0.05))
+    turned = pin.rpy.rpyToMatrix(0.3, 0.2, 0.5)  # a table's box turned: its axes are not the world's
+    table = gaussim.Box("table", size=(0.3, 0.3, 0.1), position=(0.2, 0.0, 0.05), rotation=turned)
     bodies: dict[str, object] = {body.name: body for body in shapes}
     bodies["pendulum"] = gaussim.Body(gaussim.load_robot("pendulum"), placement=gaussim.pose(z=1.1))
     scene = gaussim.Scene(bodies=bodies, ground=gaussim.Ground(), obstacles=[table])
@@ -174,7 +176,7 @@ def test_the_broad_phase_bounds_every_gap_and_sends_only_near_pairs_to_coal(monk
         return collide(self, pair, data)
 
     monkeypatch.setattr(NarrowPhase, "collide", counted)
-    compared = near = 0
+    compared = near = boxed = 0
     for _ in range(200):
         q = robot.neutral()
         for layout in scene.bodies.values():
@@ -187,7 +189,7 @@ def test_the_broad_phase_bounds_every_gap_and_sends_only_near_pairs_to_coal(monk
         pin.updateGeometryPlacements(model, data, robot.collision_model, geometry_data, q)
         seen.clear()
         detector.detect(data)
-        apart = narrow.spheres.gaps(data)
+        apart = narrow.spheres.gaps(data, margin)
         for pair, gap in zip(narrow.pairs, apart):
             if pair.obstacle_radius == np.inf:  # the ground: coal's half-space test
                 assert gap == -np.inf and pair.name in seen
@@ -200,9 +202,13 @@ def test_the_broad_phase_bounds_every_gap_and_sends_only_near_pairs_to_coal(monk
                 b = robot.collision_model.getGeometryId(pair.obstacle_name)
                 placement, other_shape = geometry_data.oMg[b], pair.obstacle_shape
             other_center, other_radius = _sphere(other_shape, placement)
-            assert gap == pytest.approx(
-                np.linalg.norm(center - other_center) - radius - other_radius, abs=1e-12
-            )
+            spheres = np.linalg.norm(center - other_center) - radius - other_radius
+            to_box = _to_box(center, radius, other_shape, placement)
+            if spheres > margin or to_box <= 0.0:  # a sphere inside the box: the kernel's is -radius
+                assert gap == pytest.approx(spheres, abs=1e-12) or (spheres <= margin and gap <= 0.0)
+            else:
+                assert gap == pytest.approx(max(spheres, to_box), abs=1e-9)
+                boxed += to_box > spheres
             result = coal.DistanceResult()
             distance = coal.distance(
                 pair.shape,
@@ -217,7 +223,21 @@ def test_the_broad_phase_bounds_every_gap_and_sends_only_near_pairs_to_coal(monk
                 compared += 1
             assert (pair.name in seen) == (gap <= margin)
             near += gap <= margin
-    assert compared > 1000 and 100 < near < compared, (compared, near)
+    assert compared > 1000 and 100 < near < compared and boxed > 50, (compared, near, boxed)
+
+
+def _to_box(center: np.ndarray, radius: float, shape: coal.CollisionGeometry, placement: pin.SE3) -> float:
+    """coal's distance from the sphere (``center``, ``radius``) to the bounding box of ``shape`` (its
+    AABB in its own frame) at ``placement``."""
+    shape = shape.convex if isinstance(shape, coal.BVHModelBase) else shape
+    box = shape.aabb_local
+    size = np.asarray(box.max_) - np.asarray(box.min_)
+    where = pin.SE3(placement.rotation, placement.act(np.asarray(shape.aabb_center)))
+    result = coal.DistanceResult()
+    sphere = coal.Transform3s(np.eye(3), center)
+    return coal.distance(
+        coal.Sphere(radius), sphere, coal.Box(*size), coal.Transform3s(where), coal.DistanceRequest(), result
+    )
 
 
 def _checking_skips(detector: ContactDetector, data: pin.Data) -> list[bool]:
@@ -335,7 +355,7 @@ def test_the_travel_bound_holds_for_every_pair_of_a_world(solo12):
     """A world of a robot and three free boxes, each pair of them declared: the travel the margin
     schedule takes off the clearance (its levers kept per pair on that pair's coordinates only) is the
     dense bound max_k dt sum_i levers[k, i] |v_i| over all coordinates, and no pair's bounding spheres
-    close by more than it in a step of random motion."""
+    close by more than it in a step of random motion, nor their gaps to the obstacles' boxes."""
     from gaussim.collision.margin import _pair_levers
     from gaussim.collision.narrow import BoundingSpheres
 
@@ -357,8 +377,8 @@ def test_the_travel_bound_holds_for_every_pair_of_a_world(solo12):
         travel = 1.0 - schedule.clearance
         assert travel == pytest.approx(dt * (dense @ np.abs(v)).max(), rel=1e-12)
         pin.forwardKinematics(sim.model, data, q)
-        before = spheres.gaps(data)
+        before = spheres.gaps(data, np.inf)  # the box gaps too
         pin.forwardKinematics(sim.model, data, pin.integrate(sim.model, q, dt * v))
-        closed = before - spheres.gaps(data)
+        closed = before - spheres.gaps(data, np.inf)
         finite = np.isfinite(closed)
         assert finite.sum() > 10 and closed[finite].max() <= travel

@@ -47,7 +47,7 @@ class CompiledPairs:
     def detect(self, data: pin.Data, margin: float, turns: np.ndarray) -> tuple[list[Piece], float]:
         """The contacts of the pairs within ``margin`` [m] at the placements held in ``data``, and a
         lower bound on every pair's gap [m] (``turns`` unused: these patches keep PATCH_TOLERANCE)."""
-        apart = self.spheres.gaps(data)
+        apart = self.spheres.gaps(data, margin)
         far = apart > margin
         clearance = float(apart[far].min(initial=np.inf))
         near = np.flatnonzero(~far)

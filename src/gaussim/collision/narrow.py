@@ -42,7 +42,7 @@ class NarrowPhase:
         """The contacts of the pairs within ``margin`` [m] at the placements held in ``data``, and a
         lower bound on every pair's gap [m] (``turns`` unused: these patches keep PATCH_TOLERANCE)."""
         self.use_margin(margin)
-        apart = self.spheres.gaps(data)
+        apart = self.spheres.gaps(data, margin)
         far = apart > margin
         clearance = float(apart[far].min(initial=np.inf))
         pieces: list[Piece] = []
@@ -128,7 +128,9 @@ def _request(variant: coal.GJKVariant) -> coal.CollisionRequest:
 
 class BoundingSpheres:
     """The broad phase: the gaps of the P pairs' bounding spheres, lower bounds on their own, all at
-    once (a pile of objects has a pair for every two of them, most of them far apart).
+    once (a pile of objects has a pair for every two of them, most of them far apart); a pair whose
+    spheres are within the margin gets the gap of the robot geometry's sphere to the obstacle's
+    bounding box instead where that is larger (a table's or a wall's sphere holds much of the scene).
 
     Args:
         pairs: the P pairs; a ground's sphere is infinite (its pairs always reach coal, whose
@@ -143,27 +145,31 @@ class BoundingSpheres:
         self.centers = np.array([[p.center, p.obstacle_center] for p in pairs]).reshape(-1, 2, 3)
         self.radius = np.array([p.radius for p in pairs])
         self.obstacle_radius = np.array([p.obstacle_radius for p in pairs])
+        self.boxes = np.array([p.obstacle_box for p in pairs]).reshape(-1, 4, 3)
 
-    def gaps(self, data: pin.Data) -> np.ndarray:
-        """The spheres' gaps at the joint placements held in ``data``, shape (P,) [m] (-inf against a
-        ground)."""
+    def gaps(self, data: pin.Data, margin: float) -> np.ndarray:
+        """The pairs' gaps at the joint placements held in ``data``, shape (P,) [m] (-inf against a
+        ground): the spheres', or within ``margin`` [m] the larger of that and the sphere's to the
+        obstacle's box."""
         rotations, translations = self.placements(data)
         gaps = np.empty(len(self.radius))
         if len(gaps):
-            _sphere_gaps(
-                rotations, translations, self.side, self.centers, self.radius, self.obstacle_radius, gaps
-            )
+            spheres = (self.side, self.centers, self.radius, self.obstacle_radius)
+            _sphere_gaps(rotations, translations, *spheres, self.boxes, margin, gaps)
         return gaps
 
 
 @njit(cache=True)
-def _sphere_gaps(rotations, translations, side, centers, radius, obstacle_radius, gaps):  # type: ignore[no-untyped-def]
-    """The compiled pass of :meth:`BoundingSpheres.gaps`: each pair's centres in the world, and the
-    distance of the two spheres into ``gaps``."""
+def _sphere_gaps(rotations, translations, side, centers, radius, obstacle_radius, boxes, margin, gaps):  # type: ignore[no-untyped-def]
+    """The compiled pass of :meth:`BoundingSpheres.gaps`: each pair's centres in the world, the
+    distance of the two spheres into ``gaps``, and within ``margin`` the larger of that and the
+    distance of the robot geometry's sphere to the obstacle's box (``boxes``: its half sides and its
+    three axes, in the frame of the obstacle's joint, from the centre the spheres share)."""
+    d = np.empty(3)  # the robot sphere's centre less the obstacle's, in the world
     for i in range(gaps.shape[0]):
         squared = 0.0
         for a in range(3):
-            d = 0.0
+            d[a] = 0.0
             for s in range(2):
                 R, p = rotations[side[i, s]], translations[side[i, s]]
                 x = (
@@ -172,6 +178,20 @@ def _sphere_gaps(rotations, translations, side, centers, radius, obstacle_radius
                     + R[a, 1] * centers[i, s, 1]
                     + R[a, 2] * centers[i, s, 2]
                 )
-                d += x if s == 0 else -x
-            squared += d * d
+                d[a] += x if s == 0 else -x
+            squared += d[a] * d[a]
         gaps[i] = np.sqrt(squared) - radius[i] - obstacle_radius[i]
+        if gaps[i] <= margin and np.isfinite(obstacle_radius[i]):  # not a ground's
+            R, outside = rotations[side[i, 1]], 0.0
+            for b in range(3):  # along the box's axis b: R boxes[i, 1 + b]
+                along = 0.0
+                for a in range(3):
+                    axis = (
+                        R[a, 0] * boxes[i, 1 + b, 0]
+                        + R[a, 1] * boxes[i, 1 + b, 1]
+                        + R[a, 2] * boxes[i, 1 + b, 2]
+                    )
+                    along += d[a] * axis
+                beyond = max(abs(along) - boxes[i, 0, b], 0.0)
+                outside += beyond * beyond
+            gaps[i] = max(gaps[i], np.sqrt(outside) - radius[i])

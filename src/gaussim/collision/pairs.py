@@ -24,6 +24,9 @@ class Pair:
         center, radius: the geometry's bounding sphere, in the frame of ``joint``, (3,) [m], [m].
         obstacle_center, obstacle_radius: the obstacle's, in the frame of ``other_joint`` (the world
             for a fixed obstacle) (3,) [m]; a ground's radius is infinite.
+        obstacle_box: the obstacle shape's own bounding box around ``obstacle_center`` (coal's AABB
+            in the shape's frame: a box's is the box), shape (4, 3): its half sides [m], then its three
+            axes in the frame of ``other_joint``, one a row (zeros for a ground).
         friction, restitution: the pair's coefficients.
     """
 
@@ -54,6 +57,7 @@ class Pair:
             frame = obstacle.placement()
         self.center = self.local.act(np.asarray(self.shape.aabb_center))
         self.radius = self.shape.aabb_radius
+        self.obstacle_box = np.zeros((4, 3))
         if isinstance(self.obstacle, Ground):
             self.obstacle_radius = np.inf
             self.obstacle_center = np.zeros(3)
@@ -61,6 +65,9 @@ class Pair:
             self.obstacle_shape.computeLocalAABB()
             self.obstacle_radius = self.obstacle_shape.aabb_radius
             self.obstacle_center = frame.act(np.asarray(self.obstacle_shape.aabb_center))
+            box = self.obstacle_shape.aabb_local
+            self.obstacle_box[0] = (np.asarray(box.max_) - np.asarray(box.min_)) / 2
+            self.obstacle_box[1:] = frame.rotation.T
         self.names = [f"{self.name}#0"]  # contact names "name#k", grown on demand
 
     def contact_names(self, count: int) -> list[str]:
