@@ -27,6 +27,7 @@ KNOBS: dict[str, list[object]] = {
     "friction_mode": ["pyramid", "exact"],
     "eps_abs": [1e-3, 1e-5, 1e-7],
     "max_iter": [10, 100],
+    "solver": ["proxqp"],
     "stabilisation": [0.05, 0.5],
 }
 QUICK_KNOBS: dict[str, list[object]] = {"dt": [5e-3], "scheme": ["acceleration"]}
