@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import time
 
 import pytest
 
@@ -371,7 +372,7 @@ def test_a_recorder_absorbs_another_runs_steps():
     assert summary["iterations"] == iterations / steps and summary["penetration"] == deepest
 
 
-def test_the_scene_suite_runs_the_same_scene_in_every_engine(capsys):
+def test_the_scene_suite_runs_the_same_scene_in_every_engine(capsys, tmp_path):
     """``gaussim bench --scenes --quick``: a row per scene whose cells match the header; MuJoCo's model,
     generated from the gaussim scene, holds the same bodies and contact pairs and touches at as many
     points (a box face on the ground: 4 each); gaussim's penetration and KKT residual are reported."""
@@ -385,10 +386,16 @@ def test_the_scene_suite_runs_the_same_scene_in_every_engine(capsys):
         assert r["mujoco_pairs"] == r["pairs"], r
         assert round(gaussim["contacts"]) == round(mujoco["contacts"]) > 0, r
         assert 0 <= gaussim["penetration"] < 1e-4 and gaussim["kkt_residual"] < 1e-6, r
-    assert main(["bench", "--scenes", "--quick", "--no-peers", "stack_3"]) == 0
+    report = tmp_path / "benchmarks.md"
+    assert main(["bench", "--scenes", "--quick", "--no-peers", "stack_3", "--report", str(report)]) == 0
     table = [line for line in capsys.readouterr().out.splitlines() if line.startswith("|")]
     assert len(table) == 3 and table[2].startswith("| stack_3 | 3 | 18 | 6 |")
     assert len({line.count("|") for line in table}) == 1
+    # the report says how it was made: the command, the run's length and the day
+    made = (
+        f"Made by `gaussim bench --scenes --quick stack_3 --report {report}` ({QUICK_STEPS} steps per scene; "
+    )
+    assert made + time.strftime("%Y-%m-%d") in report.read_text()
 
 
 def test_matched_accuracy_on_motion_picks_the_cheapest_setting_that_meets_each_tolerance():

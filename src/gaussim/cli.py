@@ -286,14 +286,33 @@ def _bench_suite(args: argparse.Namespace) -> int:
     if args.report:
         from .bench.scenes import write_section
 
-        made = f"Made by `{command}`" + (
-            " (short runs of a subset: the structure of the full run, timings indicative only)."
-            if args.quick
-            else "."
-        )
+        steps = {r["steps"] for r in records if "steps" in r}
+        notes = [f"{steps.pop()} steps per scene"] if len(steps) == 1 else []
+        notes.append(time.strftime("%Y-%m-%d") + _commit())
+        if args.quick:
+            notes.append("short runs of a subset: the structure of the full run, timings indicative only")
+        made = f"Made by `{command} --report {args.report}` ({'; '.join(notes)})."
         write_section(args.report, suite.TITLE, f"{suite.INTRO}\n\n{made}\n\n{text}")
         print(f"table: section '{suite.TITLE}' of {args.report}")
     return 0
+
+
+def _commit() -> str:
+    """ ", at commit <short hash>" of the source checkout gaussim runs from, or "" (an installed
+    package, no git)."""
+    import subprocess
+
+    try:
+        found = subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"],
+            cwd=Path(__file__).parent,
+            capture_output=True,
+            text=True,
+            timeout=10,
+        )
+    except (OSError, subprocess.SubprocessError):
+        return ""
+    return f", at commit {found.stdout.strip()}" if found.returncode == 0 and found.stdout.strip() else ""
 
 
 def _sweep(args: argparse.Namespace) -> int:
