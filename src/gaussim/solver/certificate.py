@@ -149,3 +149,23 @@ def kkt_residual(problem: GaussProblem, x: np.ndarray, lambda_eq: np.ndarray, la
     (see the module's docstring); NaN when any of them is not finite."""
     p = problem
     return kkt_residuals(p.H, p.g, p.A, p.b, p.C, p.l, x, lambda_eq, lambda_in)[0]
+
+
+def checked(
+    problem: GaussProblem,
+    x: np.ndarray,
+    multipliers: np.ndarray,
+    status: Status,
+    tolerance: float,
+    iterations: int = 0,
+) -> Solution | None:
+    """(x, multipliers) as a solution of ``status`` (after ``iterations`` of its solver) when the KKT
+    check's relative residual certifies it to ``tolerance``, else None."""
+    p, n_eq = problem, len(problem.b)
+    residual, relative, primal, dual, gap = kkt_residuals(
+        p.H, p.g, p.A, p.b, p.C, p.l, x, multipliers[:n_eq], multipliers[n_eq:]
+    )
+    if not relative <= tolerance:  # NaN fails too
+        return None
+    certificate = Certificate(status, iterations, primal, dual, gap, residual, relative)
+    return Solution(x, multipliers, n_eq, certificate)

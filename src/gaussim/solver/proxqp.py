@@ -18,7 +18,15 @@ from ..kernels.solver import read_results
 from ..options import Options
 from ..portable import portable_proxsuite
 from .active_set import ACTIVE_SET_FLOOR, ACTIVE_SET_UP_TO, active_set_candidate
-from .certificate import INFEASIBLE, KKT_RTOL, PRIMAL_INFEASIBLE, Certificate, Solution, Status, kkt_residuals
+from .certificate import (
+    INFEASIBLE,
+    KKT_RTOL,
+    PRIMAL_INFEASIBLE,
+    Certificate,
+    Solution,
+    Status,
+    checked,
+)
 from .diagnosis import failure, infeasibility
 from .dual import DualActiveSet
 
@@ -164,7 +172,7 @@ class GaussSolver:
         set solves most steps' problems, at a fraction of a solver's call."""
         p = problem
         if not solve:
-            return _checked(p, x, multipliers, Status.PREVIOUS_SOLUTION_CERTIFIED, self.options.eps_abs)
+            return checked(p, x, multipliers, Status.PREVIOUS_SOLUTION_CERTIFIED, self.options.eps_abs)
         candidate = self._candidate
         if len(candidate[0]) != len(x) or len(candidate[1]) != len(multipliers):
             candidate = self._candidate = np.empty_like(x), np.empty_like(multipliers)
@@ -204,7 +212,7 @@ class GaussSolver:
             qp.solve()
             multipliers[:n_eq] = size * qp.results.x[:n_eq]
             multipliers[n_eq + near] = size * np.maximum(qp.results.x[n_eq:], 0.0)  # its bound, met to eps
-        return _checked(problem, x.copy(), multipliers, Status.MULTIPLIERS_CERTIFIED, tolerance)
+        return checked(problem, x.copy(), multipliers, Status.MULTIPLIERS_CERTIFIED, tolerance)
 
     def _run(self, problem: GaussProblem, cap: int | None = None) -> Solution:
         """Solve with at most ``cap`` outer iterations (default and largest: Options.max_iter)."""
@@ -309,21 +317,7 @@ def _free_motion(problem: GaussProblem, x_free: np.ndarray, tolerance: float) ->
     the step does not reach: exactly the motion of the body alone), when the KKT check certifies it to
     ``tolerance``; else None."""
     none = np.zeros(len(problem.b) + len(problem.l))
-    return _checked(problem, x_free.copy(), none, Status.FREE_MOTION_CERTIFIED, tolerance)
-
-
-def _checked(
-    problem: GaussProblem, x: np.ndarray, multipliers: np.ndarray, status: Status, tolerance: float
-) -> Solution | None:
-    """(x, multipliers) as a solution of ``status`` when the KKT check's relative residual certifies
-    it to ``tolerance``, else None."""
-    p, n_eq = problem, len(problem.b)
-    residual, relative, primal, dual, gap = kkt_residuals(
-        p.H, p.g, p.A, p.b, p.C, p.l, x, multipliers[:n_eq], multipliers[n_eq:]
-    )
-    if not relative <= tolerance:
-        return None
-    return Solution(x, multipliers, n_eq, Certificate(status, 0, primal, dual, gap, residual, relative))
+    return checked(problem, x_free.copy(), none, Status.FREE_MOTION_CERTIFIED, tolerance)
 
 
 def _sides(p: GaussProblem) -> tuple[tuple[int, int, int], tuple, tuple]:
