@@ -309,9 +309,12 @@ def test_velocity_scheme_closes_a_fast_approach_at_any_step(ball, dt):
     assert sim.detector.schedule.margin <= 3 * (sim.options.contact_margin + G * dt**2)
 
 
-def _slips_reference(J, slip, starts, x, normal, mu):
+def _slips_reference(J, slip, starts, x, normal, mu, rows, bound):
     """The slip update of gaussim.kernels.contact.slips, written plainly with numpy."""
     from gaussim.kernels.contact import SLIP_SPEED
+
+    def shifted(u):
+        return np.linalg.norm(u) if np.linalg.norm(u) > SLIP_SPEED else 0.0
 
     result, residual = slip.copy(), 0.0
     for i in range(len(slip)):
@@ -320,15 +323,17 @@ def _slips_reference(J, slip, starts, x, normal, mu):
         u = J[i] @ x
         u -= (u @ normal[i]) * normal[i]
         if np.linalg.norm(slip[i]) > SLIP_SPEED or np.linalg.norm(u) > SLIP_SPEED:
-            residual = max(residual, max(1.0, mu[i]) * np.abs(u - slip[i]).max())
+            mine = slice(starts[i], starts[i + 1])
+            slack = max((rows[mine] @ x - bound[mine]).min(), 0.0)
+            residual = max(residual, mu[i] * abs(shifted(u) - shifted(slip[i])) - slack)
             result[i] = u
     return result, residual
 
 
 def test_slip_update_matches_its_plain_statement():
     """The compiled slip update (scalars) gives the plain one's answer: every moving contact's new
-    slip and the largest change times max(1, mu); sticking contacts (one row) and resting ones (slow)
-    keep theirs."""
+    slip, and the largest error of the shifted bounds, mu times the change of a slip's norm less the
+    slack of its rows; sticking contacts (one row) and resting ones (slow) keep their slip."""
     from gaussim.kernels.contact import SLIP_SPEED, slips
 
     rng = np.random.default_rng(7)
@@ -340,18 +345,28 @@ def test_slip_update_matches_its_plain_statement():
     normal /= np.linalg.norm(normal, axis=1)[:, None]
     slip = rng.normal(size=(m, 3))
     slip[3] = 0.1 * SLIP_SPEED  # ... and has not moved: it keeps its slip
-    mu = np.array([0.5, 0.8, 1.0, 0.3, 2.0, 0.9])
-    rows = starts[-1]
-    packed = np.concatenate([J.ravel(), rng.normal(size=3 * rows), slip.ravel(), rng.normal(size=3 * m)])
-    assert facets * m - 3 == rows
-    expected, expected_residual = _slips_reference(J, slip, starts, x, normal, mu)
+    mu = np.array([0.5, 0.8, 0.7, 0.3, 0.6, 0.9])  # below 1: the error is mu times the change
+    R = starts[-1]
+    rows = rng.normal(size=(R, nv))
+    bound = rows @ x - rng.uniform(-0.05, 0.05, R)  # slacks of either sign
+    packed = np.concatenate([J.ravel(), rng.normal(size=3 * R), slip.ravel(), rng.normal(size=3 * m)])
+    assert facets * m - 3 == R
     # every row reads all nv coordinates: joint 1's support is all of them, the world's (0) none
     joints, world, support = np.ones(m, np.int64), np.zeros(m, np.int64), np.array([0, 0, nv])
-    got, residual = slips(packed, starts, x, normal, mu, joints, world, support, np.arange(nv))
+
+    def both(bound):
+        got = slips(packed, starts, x, normal, mu, rows, bound, joints, world, support, np.arange(nv))
+        return got, _slips_reference(J, slip, starts, x, normal, mu, rows, bound)
+
+    (got, residual), (expected, expected_residual) = both(bound)
     np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-15)
     np.testing.assert_array_equal(got[[1, 3]], slip[[1, 3]])  # the sticking and the resting
     assert residual == pytest.approx(expected_residual, rel=1e-12)
-    assert residual > 1.0  # the moving contacts' changes are of order one
+    assert residual > 0.1  # the moving contacts' changes are of order one
+    # a contact whose rows keep more slack than its shift's change counts for nothing: all of them
+    (got, residual), (_, expected_residual) = both(bound - 1e3)
+    assert residual == expected_residual == 0.0
+    np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-15)  # the slips move all the same
 
 
 @pytest.mark.parametrize("scheme", SCHEMES)

@@ -10,14 +10,15 @@ sum_i lambda_i (n + mu d_i), which lies in the friction pyramid inscribed in the
 b is the stabilised normal bound (with restitution), s the De Saxce shift mu |u_t+| that removes
 the relaxation's lift-off while sliding. The shift needs the slip u_t+ of the solution: it starts
 from the current slip and, while a contact slides, the QP is solved again with the slip of the last
-solution until max(1, mu) times its change is below SLIP_TOLERANCE[mode] (a lagged slip lets a
-decelerating contact sink at mu (|u_t| - |u_t+|), an accelerating one lift off at as much; each pass
-divides that error by about 1 + 1/mu^2). Each contact's step is scaled by the secant of its last two
-passes (:func:`_secant`: a contact switching between sticking and sliding no longer cycles), and
-passes that stall (:func:`_stalled`) within RELAX_TOLERANCE stop. When the passes of
-``Options.friction_iterations`` do not
-come within RELAX_TOLERANCE of that fixed point (measured: mu = 1000, where a block sank through the
-ground under a tiny normal force whose friction relaxed the shifted bound), the last QP drops the shift: the
+solution (a lagged slip lets a decelerating contact sink at mu (|u_t| - |u_t+|), an accelerating one
+lift off at as much; each pass divides that error by about 1 + 1/mu^2) until the bounds' error is
+below SLIP_TOLERANCE[mode]: mu times the change of |u_t+| (all the shift reads), less the slack the
+contact's rows leave (a bound that moves within its row's slack leaves the solution where it is).
+Each contact's step is scaled by the secant of its last two passes (:func:`_secant`: a contact
+switching between sticking and sliding no longer cycles), and passes that stall (:func:`_stalled`)
+within RELAX_TOLERANCE stop. When the passes of ``Options.friction_iterations`` do not come within
+RELAX_TOLERANCE of that fixed point (measured: mu = 1000, where a block sank through the ground under
+a tiny normal force whose friction relaxed the shifted bound), the last QP drops the shift: the
 plain relaxation, which may lift a sliding contact at mu |u_t+| but never lets it sink; the step's
 report says so (``StepReport.friction_relaxed``).
 d_1 is turned against the tangential velocity the contact would have without friction, so a
@@ -59,7 +60,7 @@ from ..dynamics import (
 from ..kernels.contact import pyramids, slips, unpacked
 from .base import LEVELS, ConstraintModule, Context, Rows, is_active
 
-# Fixed-point iterations on the slip stop when max(1, mu) times its change is below this [m/s].
+# Fixed-point iterations on the slip stop when the shifted bounds' error is below this [m/s].
 SLIP_TOLERANCE = {"accurate": 1e-4, "exact": 1e-9}
 # Still above this after the step's passes, the iteration is far from its fixed point: the last QP
 # drops the De Saxce shift [m/s] (below it, the last shifted solution is kept).
@@ -120,7 +121,8 @@ class FrictionIterate:
         history: the Anderson mixing's (inputs, outputs) of the last passes (:func:`_anderson`), or None.
         secant: the last pass's move of the lagged slips and its residual, each (m, 3) [m/s]
             (:func:`_secant`), or None.
-        residuals: the largest max(1, mu) |F(s) - s| of each De Saxce pass [m/s].
+        residuals: the largest error of the shifted bounds of each De Saxce pass
+            (:func:`~gaussim.kernels.contact.slips`) [m/s].
         passes: the De Saxce passes made.
         relaxed: True once the passes have not come within RELAX_TOLERANCE of the fixed point: the
             next QP drops the shift.
@@ -395,7 +397,9 @@ class ContactModule(ConstraintModule[ContactBatch]):
         if b.shifts and not b.relaxed:
             mu = b.contacts.friction
             joints = (b.contacts.joint, b.contacts.other_joint)
-            slip, residual = slips(b.packed, b.starts, x, normals, mu, *joints, *self.supports[1:])
+            slip, residual = slips(
+                b.packed, b.starts, x, normals, mu, rows.J, rows.bound, *joints, *self.supports[1:]
+            )
             if residual > SLIP_TOLERANCE[self.mode]:
                 lagged = self._iterate(ctx)
                 lagged.passes += 1

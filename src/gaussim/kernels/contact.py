@@ -196,23 +196,39 @@ def pyramids(  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def slips(packed, starts, x, normal, mu, joints, other_joints, support_starts, support_columns):  # type: ignore[no-untyped-def]
+def slips(packed, starts, x, normal, mu, rows, bound, joints, other_joints, support_starts, support_columns):  # type: ignore[no-untyped-def]
     """(the slips (m, 3) of solution x for the contacts that refine their shift (one with a full
     pyramid) and are moving (a sticking contact has no shift to refine), the others' unchanged; the
-    largest change of a slip times max(1, mu), the normal velocity error it causes). ``packed`` and
-    ``starts`` are :func:`pyramids`', the rest what it reads. (In scalars, no array per contact: this
-    runs after every QP with friction.)"""
+    largest error of the shifted bounds: mu times the change of a contact's shifted speed (its slip's
+    norm where above SLIP_SPEED, else 0: all the shift reads), less the slack its rows ``rows`` x >=
+    ``bound`` leave at x (a row that the shift's change leaves inactive leaves x the solution).
+    ``packed`` and ``starts`` are :func:`pyramids`', the rest what it reads. (In scalars, no array
+    per contact: this runs after every QP with friction.)"""
     J, _, slip, _ = unpacked(packed, len(normal), len(x))
     result, residual = slip.copy(), 0.0
     for i in range(len(slip)):
+        a, b = joints[i], other_joints[i]
         moving, u0, u1, u2 = _moving_slip(
-            J, slip, starts, x, normal, i, support_starts, support_columns, joints[i], other_joints[i]
+            J, slip, starts, x, normal, i, support_starts, support_columns, a, b
         )
         if moving:
-            change = max(abs(u0 - slip[i, 0]), abs(u1 - slip[i, 1]), abs(u2 - slip[i, 2]))
-            residual = max(residual, max(1.0, mu[i]) * change)
+            error = mu[i] * abs(_shifted(u0, u1, u2) - _shifted(slip[i, 0], slip[i, 1], slip[i, 2]))
+            if error > residual:
+                slack = np.inf
+                for r in range(starts[i], starts[i + 1]):
+                    slack = min(
+                        slack, support_dot(rows[r], x, support_starts, support_columns, a, b) - bound[r]
+                    )
+                residual = max(residual, error - max(slack, 0.0))
             result[i, 0], result[i, 1], result[i, 2] = u0, u1, u2
     return result, residual
+
+
+@njit(cache=True, inline="always")
+def _shifted(u0, u1, u2):  # type: ignore[no-untyped-def]
+    """The speed the De Saxce shift of a slip (u0, u1, u2) reads: its norm, 0 below SLIP_SPEED."""
+    speed = np.sqrt(u0**2 + u1**2 + u2**2)
+    return speed if speed > SLIP_SPEED else 0.0
 
 
 @njit(cache=True, inline="always")
