@@ -313,9 +313,6 @@ def _slips_reference(J, slip, starts, x, normal, mu, rows, bound):
     """The slip update of gaussim.kernels.contact.slips, written plainly with numpy."""
     from gaussim.kernels.contact import SLIP_SPEED
 
-    def shifted(u):
-        return np.linalg.norm(u) if np.linalg.norm(u) > SLIP_SPEED else 0.0
-
     result, residual = slip.copy(), 0.0
     for i in range(len(slip)):
         if starts[i + 1] - starts[i] == 1:
@@ -325,7 +322,7 @@ def _slips_reference(J, slip, starts, x, normal, mu, rows, bound):
         if np.linalg.norm(slip[i]) > SLIP_SPEED or np.linalg.norm(u) > SLIP_SPEED:
             mine = slice(starts[i], starts[i + 1])
             slack = max((rows[mine] @ x - bound[mine]).min(), 0.0)
-            residual = max(residual, mu[i] * abs(shifted(u) - shifted(slip[i])) - slack)
+            residual = max(residual, mu[i] * abs(np.linalg.norm(u) - np.linalg.norm(slip[i])) - slack)
             result[i] = u
     return result, residual
 

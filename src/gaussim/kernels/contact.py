@@ -199,9 +199,10 @@ def pyramids(  # type: ignore[no-untyped-def]
 def slips(packed, starts, x, normal, mu, rows, bound, joints, other_joints, support_starts, support_columns):  # type: ignore[no-untyped-def]
     """(the slips (m, 3) of solution x for the contacts that refine their shift (one with a full
     pyramid) and are moving (a sticking contact has no shift to refine), the others' unchanged; the
-    largest error of the shifted bounds: mu times the change of a contact's shifted speed (its slip's
-    norm where above SLIP_SPEED, else 0: all the shift reads), less the slack its rows ``rows`` x >=
-    ``bound`` leave at x (a row that the shift's change leaves inactive leaves x the solution).
+    largest error of the shifted bounds: mu times the change of a contact's slip's norm (all the
+    shift reads; it drops below SLIP_SPEED, an error of mu SLIP_SPEED at most that passes would not
+    remove), less the slack its rows ``rows`` x >= ``bound`` leave at x (a row that the shift's
+    change leaves inactive leaves x the solution).
     ``packed`` and ``starts`` are :func:`pyramids`', the rest what it reads. (In scalars, no array
     per contact: this runs after every QP with friction.)"""
     J, _, slip, _ = unpacked(packed, len(normal), len(x))
@@ -212,7 +213,8 @@ def slips(packed, starts, x, normal, mu, rows, bound, joints, other_joints, supp
             J, slip, starts, x, normal, i, support_starts, support_columns, a, b
         )
         if moving:
-            error = mu[i] * abs(_shifted(u0, u1, u2) - _shifted(slip[i, 0], slip[i, 1], slip[i, 2]))
+            speed = np.sqrt(slip[i, 0] ** 2 + slip[i, 1] ** 2 + slip[i, 2] ** 2)
+            error = mu[i] * abs(np.sqrt(u0**2 + u1**2 + u2**2) - speed)
             if error > residual:
                 slack = np.inf
                 for r in range(starts[i], starts[i + 1]):
@@ -222,13 +224,6 @@ def slips(packed, starts, x, normal, mu, rows, bound, joints, other_joints, supp
                 residual = max(residual, error - max(slack, 0.0))
             result[i, 0], result[i, 1], result[i, 2] = u0, u1, u2
     return result, residual
-
-
-@njit(cache=True, inline="always")
-def _shifted(u0, u1, u2):  # type: ignore[no-untyped-def]
-    """The speed the De Saxce shift of a slip (u0, u1, u2) reads: its norm, 0 below SLIP_SPEED."""
-    speed = np.sqrt(u0**2 + u1**2 + u2**2)
-    return speed if speed > SLIP_SPEED else 0.0
 
 
 @njit(cache=True, inline="always")

@@ -62,7 +62,7 @@ SIGNATURES = {
         for v, x in (("f1", "f1"), ("f1r", "f1"), ("f1r", "f1r"))
     ],
     "contact.slips": [
-        f"f1 i1 f1 f2 {mu} {joints} {joints} i1 i1" for joints, mu in (("i1", "f1"), ("i1r", "f1r"))
+        f"f1 i1 f1 f2 {mu} f2 f1 {joints} {joints} i1 i1" for joints, mu in (("i1", "f1"), ("i1r", "f1r"))
     ],
     # the equalities (A, b) or the inequalities (C, l) of a problem are read-only when empty
     "solver.kkt_residuals": [f"f2 f1 {sides} f1 f1 f1" for sides in _SIDES],

@@ -26,13 +26,15 @@ def kkt_residuals(H, g, A, b, C, l, x, y, z):  # type: ignore[no-untyped-def]
     for k in range(len(g)):
         stationarity[k] += g[k]
     for i in range(len(b)):
-        for k in range(len(g)):  # loops, not array expressions: those allocate a temporary each
-            stationarity[k] -= y[i] * A[i, k]
+        if y[i] != 0.0:  # most rows carry no force (a row's non-finite entry shows in its violation)
+            for k in range(len(g)):  # loops, not array expressions: those allocate a temporary each
+                stationarity[k] -= y[i] * A[i, k]
         violation = abs(dot(A[i], x) - b[i])
         primal, finite = max(primal, violation), finite and np.isfinite(violation) and np.isfinite(y[i])
     for i in range(len(l)):
-        for k in range(len(g)):
-            stationarity[k] -= z[i] * C[i, k]
+        if z[i] != 0.0:
+            for k in range(len(g)):
+                stationarity[k] -= z[i] * C[i, k]
         slack = dot(C[i], x) - l[i]
         gap += z[i] * slack
         primal = max(primal, -slack)
