@@ -12,7 +12,7 @@ import pytest
 import gaussim
 from gaussim.bench.cases import two_boxes
 from gaussim.collision import PATCH_MIN_EXTENT, PATCH_TOLERANCE, ContactDetector, driver
-from gaussim.collision.ground import GroundHulls
+from gaussim.collision.ground import GroundHulls, touching
 from gaussim.collision.narrow import NarrowPhase
 from gaussim.collision.primitives import PrimitivePairs
 
@@ -86,6 +86,54 @@ def test_a_sphere_on_ground_matches_coal(normal):
         assert contacts.gap[0] == pytest.approx(gap, abs=AGREEMENT)
         np.testing.assert_allclose(contacts.point[0], point, atol=AGREEMENT)
         np.testing.assert_allclose(contacts.normal[0], ground.normal, atol=1e-15)
+
+
+def _outline_reference(heights, world, bound, directions):
+    """The outline of the vertices at most ``bound`` above the ground (their ``heights`` and
+    ``world`` points), stated plainly: the deepest alone when they span at most PATCH_MIN_EXTENT,
+    else the first extreme one along each direction (vertex indices)."""
+    near = np.flatnonzero(heights <= bound)
+    if np.ptp(world[near], axis=0).max() <= PATCH_MIN_EXTENT:
+        return {int(near[np.argmin(heights[near])])}
+    return {int(near[np.argmax(world[near] @ d)]) for d in directions}
+
+
+def test_a_widened_patch_is_the_outline_of_each_hull_own_vertices(solo12):
+    """Every Solo-12 mesh hull (287 to 672 vertices, padded to the largest) at random poses above
+    the ground, its patch widened by 3 cm (a turning body): the compiled pass gives, hull by hull,
+    the vertices of the plain statement (the extremes along the support directions of the vertices
+    within the patch's depth, the resting patch's outline and the deepest), with their gaps."""
+    from gaussim.kernels.collision import NARROW_SLACK
+
+    scene = gaussim.Scene(solo12, ground=gaussim.Ground(height=-2.0))
+    (routine,) = [r for r in ContactDetector(scene, 10.0).routines if isinstance(r, GroundHulls)]
+    hulls = routine.hulls
+    assert len(set(hulls.sizes.tolist())) > 1 and hulls.sizes.max() == hulls.columns.shape[2]
+    widening, wide = 0.03, 0
+    for data in _random_poses(solo12, 20, seed=3):
+        hulls.narrow_at[:] = np.nan  # no kept verdict: each pose is judged afresh
+        (pairs, points, _, gaps), _ = touching(
+            *routine.placements(data), hulls, 10.0, routine.index, np.full(len(routine.index), widening)
+        )
+        rotations, translations = routine.placements(data)
+        for k, pair in enumerate(routine.index):
+            X = hulls.columns[k, :3, : hulls.sizes[k]]  # the hull's own vertices, joint frame
+            world = (rotations[k] @ X).T + translations[k]
+            heights = world[:, 2] + 2.0
+            lowest = heights.min()
+            near = X[:, heights <= lowest + widening + NARROW_SLACK]
+            if np.ptp(near, axis=1).max() <= PATCH_MIN_EXTENT:
+                expected = {int(np.argmin(heights))}
+            else:
+                wide += 1
+                expected = _outline_reference(heights, world, lowest + widening, hulls.directions[k])
+                expected |= _outline_reference(heights, world, lowest + PATCH_TOLERANCE, hulls.directions[k])
+                expected.add(int(np.argmin(heights)))
+            got = pairs == pair
+            order = sorted(expected)
+            np.testing.assert_allclose(points[got], world[order], atol=1e-12)
+            np.testing.assert_allclose(gaps[got], heights[order], atol=1e-12)
+    assert wide >= 100, wide  # most hulls touch widely at 3 cm
 
 
 def test_box_flat_on_ground_touches_at_its_corners(box):

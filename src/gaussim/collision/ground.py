@@ -32,6 +32,7 @@ class Hulls(NamedTuple):
             the signed distance of the joint frame's points to the ground, shape (P, 4).
         columns: the vertices in their joint's frame, homogeneous, as columns, shape (P, 4, V) [m]
             (padded with copies of the first).
+        sizes: each hull's own number of vertices (those columns come first), shape (P,).
         first, neighbours: the edges of each hull as adjacency lists: the neighbours of vertex i of
             hull k are ``neighbours[k, first[k, i] : first[k, i + 1]]``, shapes (P, V + 1), (P, E).
         rounding: the radius of a sphere (around its one vertex) or a capsule (around its two), else
@@ -46,6 +47,7 @@ class Hulls(NamedTuple):
 
     plane: np.ndarray
     columns: np.ndarray
+    sizes: np.ndarray
     first: np.ndarray
     neighbours: np.ndarray
     rounding: np.ndarray
@@ -124,6 +126,7 @@ def touching(
         hulls.columns,
         hulls.first,
         hulls.neighbours,
+        hulls.sizes,
         hulls.deepest,
         hulls.narrow_at,
         hulls.turn2,
@@ -161,6 +164,7 @@ def _hulls(pairs: list[Pair]) -> Hulls:
     return Hulls(
         plane=np.array([[*p.obstacle.normal, -p.obstacle.height] for p in pairs]).reshape(-1, 4),  # type: ignore[union-attr]
         columns=np.array(columns).reshape(len(pairs), 4, size),
+        sizes=np.array([len(vertices) for vertices, _ in polyhedra], dtype=np.int64),
         first=first,
         neighbours=neighbours,
         rounding=np.array(

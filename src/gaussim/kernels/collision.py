@@ -19,6 +19,7 @@ def ground_hulls(
     columns,
     first,
     neighbours,
+    sizes,
     deepest,
     narrow_at,
     turn2,
@@ -47,8 +48,8 @@ def ground_hulls(
     count, size = columns.shape[0], columns.shape[2]
     base, extent = patch
     c = np.empty(4)  # the ground seen from the joint: (n^T R, n^T p - height)
-    heights, world = np.empty(size), np.empty((size, 3))
-    chosen, kept = np.zeros(size, np.bool_), np.zeros(size, np.bool_)
+    order, world = np.empty(size, np.int64), np.empty((size, 3))
+    picked = np.empty(2 * directions.shape[1] + 1, np.int64)
     out = 0
     least = np.inf
     for k in range(count):
@@ -57,13 +58,13 @@ def ground_hulls(
             c[j] = plane[k, 0] * R[0, j] + plane[k, 1] * R[1, j] + plane[k, 2] * R[2, j]
         c[3] = plane[k, 0] * p[0] + plane[k, 1] * p[1] + plane[k, 2] * p[2] + plane[k, 3]
         i = deepest[k]
-        lowest = c[0] * X[0, i] + c[1] * X[1, i] + c[2] * X[2, i] + c[3]
+        lowest = _height(c, X, i)
         descending = True
         while descending:
             descending = False
             for e in range(first[k, i], first[k, i + 1]):
                 j = neighbours[k, e]
-                height = c[0] * X[0, j] + c[1] * X[1, j] + c[2] * X[2, j] + c[3]
+                height = _height(c, X, j)
                 if height < lowest:
                     i, lowest, descending = j, height, True
                     break
@@ -76,75 +77,98 @@ def ground_hulls(
         turned = (c[0] - narrow_at[k, 0]) ** 2 + (c[1] - narrow_at[k, 1]) ** 2 + (c[2] - narrow_at[k, 2]) ** 2
         narrow = turned <= turn2[k]  # False where no verdict was kept (NaN)
         if not narrow:
+            n = _sublevel(c, X, sizes[k], lowest + tolerance + NARROW_SLACK, order)
             low, high = _unbounded()
-            for v in range(size):
-                if (
-                    c[0] * X[0, v] + c[1] * X[1, v] + c[2] * X[2, v] + c[3]
-                    <= lowest + tolerance + NARROW_SLACK
-                ):
-                    for j in range(3):
-                        low[j], high[j] = min(low[j], X[j, v]), max(high[j], X[j, v])
+            for t in range(n):
+                for j in range(3):
+                    low[j], high[j] = min(low[j], X[j, order[t]]), max(high[j], X[j, order[t]])
             narrow = _extent(low, high) <= extent
             for j in range(3):
                 narrow_at[k, j] = c[j] if narrow else np.nan
         if narrow:
-            chosen[:] = False
-            chosen[i] = True
-            for j in range(3):
-                world[i, j] = R[j, 0] * X[0, i] + R[j, 1] * X[1, i] + R[j, 2] * X[2, i] + p[j]
-            heights[i] = gap
+            picked[0], picks = i, 1
         else:
-            outline = (c, R, p, X, rounding[k], directions[k], margin)
-            _outline(*outline, (tolerance, extent), gap, heights, world, chosen)
-            if tolerance > base:  # a widened outline's extremes may all be high: the resting
-                _outline(*outline, (base, extent), gap, heights, world, kept)  # patch's outline too,
-                for v in range(size):
-                    chosen[v] |= kept[v]
-                chosen[i] = True  # and the deepest, which neither need hold
-        for v in range(size):
-            if chosen[v]:
-                pairs_out[out], gaps_out[out] = pair[k], heights[v]
-                for j in range(3):
-                    points_out[out, j] = world[v, j] - rounding[k] * plane[k, j]
-                    normals_out[out, j] = plane[k, j]
-                out += 1
+            outline = (c, R, p, X, sizes[k], rounding[k], directions[k], margin)
+            scratch = (order, world)
+            picks = _outline(*outline, (tolerance, extent), gap, scratch, picked, 0)
+            if tolerance > base:  # a widened outline's extremes may all be high: the resting patch's
+                picks = _outline(*outline, (base, extent), gap, scratch, picked, picks)  # outline too,
+                picks = _pick(picked, picks, i)  # and the deepest, which neither need hold
+        picked[:picks].sort()
+        for t in range(picks):
+            v = picked[t]
+            pairs_out[out], gaps_out[out] = pair[k], _height(c, X, v) - rounding[k]
+            for j in range(3):
+                vertex = R[j, 0] * X[0, v] + R[j, 1] * X[1, v] + R[j, 2] * X[2, v] + p[j]
+                points_out[out, j] = vertex - rounding[k] * plane[k, j]
+                normals_out[out, j] = plane[k, j]
+            out += 1
     return out, least
 
 
+@njit(cache=True, inline="always")
+def _height(c, X, v):  # type: ignore[no-untyped-def]
+    """The height of vertex v (a column of X) above the ground ``c`` seen from its joint."""
+    return c[0] * X[0, v] + c[1] * X[1, v] + c[2] * X[2, v] + c[3]
+
+
 @njit(cache=True)
-def _outline(c, R, p, X, rounding, directions, margin, patch, gap, heights, world, chosen):  # type: ignore[no-untyped-def]
-    """A hull touching widely (ground ``c`` seen from its joint at (R, p), vertices X, the least
-    ``gap``): marks in ``chosen`` its vertices within the patch tolerance of the deepest (or
-    penetrating) that are extreme along ``directions``, or the deepest alone when they span at most
-    PATCH_MIN_EXTENT, with their gaps in ``heights`` and world points in ``world``."""
-    size, (tolerance, extent) = X.shape[1], patch
+def _sublevel(c, X, size, bound, order):  # type: ignore[no-untyped-def]
+    """The number n of the hull's ``size`` vertices at most ``bound`` above the ground ``c``, their
+    indices written into ``order[:n]`` in ascending order (the outline's passes then read them alone,
+    not the thousands of vertices of a mesh's hull)."""
+    n = 0
+    for v in range(size):
+        if _height(c, X, v) <= bound:
+            order[n] = v
+            n += 1
+    return n
+
+
+@njit(cache=True)
+def _pick(picked, picks, v):  # type: ignore[no-untyped-def]
+    """Add vertex v to ``picked[:picks]`` unless there; returns the new count."""
+    for t in range(picks):
+        if picked[t] == v:
+            return picks
+    picked[picks] = v
+    return picks + 1
+
+
+@njit(cache=True)
+def _outline(c, R, p, X, size, rounding, directions, margin, patch, gap, scratch, picked, picks):  # type: ignore[no-untyped-def]
+    """A hull touching widely (ground ``c`` seen from its joint at (R, p), its ``size`` vertices X,
+    the least ``gap``): adds to ``picked[:picks]`` its vertices within the
+    patch tolerance of the deepest (or penetrating) that are extreme along ``directions``, or the
+    deepest alone when they span at most PATCH_MIN_EXTENT; returns the new count. ``scratch``: the
+    (order, world) buffers."""
+    (tolerance, extent), (order, world) = patch, scratch
     bound = max(0.0, min(margin, gap + tolerance))
+    n = _sublevel(c, X, size, bound + rounding, order)
     low, high = _unbounded()
     deepest, lowest = -1, np.inf
-    for v in range(size):
-        heights[v] = c[0] * X[0, v] + c[1] * X[1, v] + c[2] * X[2, v] + c[3] - rounding
-        chosen[v] = False
-        if heights[v] <= bound:
-            for j in range(3):
-                world[v, j] = R[j, 0] * X[0, v] + R[j, 1] * X[1, v] + R[j, 2] * X[2, v] + p[j]
-                low[j], high[j] = min(low[j], world[v, j]), max(high[j], world[v, j])
-            if heights[v] < lowest:
-                deepest, lowest = v, heights[v]
+    for t in range(n):
+        v = order[t]
+        for j in range(3):
+            world[t, j] = R[j, 0] * X[0, v] + R[j, 1] * X[1, v] + R[j, 2] * X[2, v] + p[j]
+            low[j], high[j] = min(low[j], world[t, j]), max(high[j], world[t, j])
+        height = _height(c, X, v)
+        if height < lowest:
+            deepest, lowest = v, height
     if _extent(low, high) <= extent:
-        chosen[deepest] = True
-        return
+        return _pick(picked, picks, deepest)
     for d in range(directions.shape[0]):
         best, reach = -1, -np.inf
-        for v in range(size):
-            if heights[v] <= bound:
-                along = (
-                    world[v, 0] * directions[d, 0]
-                    + world[v, 1] * directions[d, 1]
-                    + world[v, 2] * directions[d, 2]
-                )
-                if along > reach:
-                    best, reach = v, along
-        chosen[best] = True
+        for t in range(n):
+            along = (
+                world[t, 0] * directions[d, 0]
+                + world[t, 1] * directions[d, 1]
+                + world[t, 2] * directions[d, 2]
+            )
+            if along > reach:
+                best, reach = order[t], along
+        picks = _pick(picked, picks, best)
+    return picks
 
 
 @njit(cache=True, inline="always")
