@@ -453,3 +453,40 @@ def test_a_turning_box_does_not_sink_the_corners_its_turn_brings_down(box):
 
     run(sim, sim.reset(q, v), 5, each=record)
     assert min(lowest) > -1e-6, lowest
+
+
+def test_a_friction_pass_moves_the_bounds_as_posing_the_rows_again_would(box, monkeypatch):
+    """A box sliding to a stop: each friction pass after a step's first changes the De Saxce shift
+    alone, so the last pass's rows with new bounds are taken; they equal the rows the kernel poses
+    again from the lagged slip (to round-off), and the kernel poses a step's rows once."""
+    from gaussim.constraints import contact
+
+    scene = gaussim.Scene(box, ground=gaussim.Ground(friction=0.5))
+    sim = gaussim.Simulator(scene, gaussim.Options(dt=1e-3))
+    state = sim.reset(at_height(box, HALF_HEIGHT + 1e-4), np.array([1.0, 0.3, 0, 0, 0, 0]))
+    module = next(m for m in sim.gauss.modules if isinstance(m, contact.ContactModule))
+    posed, compared = [], []
+    pose = contact.pyramid_rows
+    refine = contact.ContactModule.refine
+    monkeypatch.setattr(contact, "pyramid_rows", lambda *args: posed.append(1) or pose(*args))
+
+    def checking(self, ctx, rows, x, multipliers):
+        again = refine(self, ctx, rows, x, multipliers)
+        if again and self is module:
+            shifted = self.rows(ctx)
+            self._posed = None  # the kernel poses them (and they are the next pass's)
+            fresh = self.rows(ctx)
+            np.testing.assert_array_equal(shifted.J, fresh.J)
+            np.testing.assert_allclose(shifted.bound, fresh.bound, rtol=0, atol=1e-15)
+            np.testing.assert_array_equal(shifted.data.packed, fresh.data.packed)
+            compared.append(shifted.bound - rows.bound)
+        return again
+
+    passes = 0
+    for _ in range(150):
+        state = sim.step(state)
+        passes += len(sim.last_step.certificates)
+    assert len(posed) == 150 < passes  # once a step; more QPs: the friction passes
+    monkeypatch.setattr(contact.ContactModule, "refine", checking)
+    run(sim, state, 100)
+    assert len(compared) >= 50 and max(np.abs(c).max() for c in compared) > 1e-4  # the bounds moved

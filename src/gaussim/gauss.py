@@ -70,8 +70,8 @@ class GaussStage:
         report: StepReport,
         scale: float,
     ) -> np.ndarray:
-        """min 1/2 x^T M x + g^T x over the rows ``parts`` (posed from ``ctx`` when None), posed again
-        while a module's fixed-point iteration asks for it."""
+        """min 1/2 x^T M x + g^T x over the rows ``parts`` (posed from ``ctx`` when None), the rows of
+        a module posed again while its fixed-point iteration asks for it."""
         mark = report.mark
         for _ in range(self.options.friction_iterations):
             mark("")
@@ -85,12 +85,13 @@ class GaussStage:
             mark("solve")
             report.certificates += certificates
             blocks = [(module, rows, lam[part]) for module, rows, part in problem.blocks]
-            refine = False
-            for module, rows, multipliers in blocks:
-                refine |= module.refine(ctx, rows, x, multipliers)
-            if not refine:
+            again = [
+                module for module, rows, multipliers in blocks if module.refine(ctx, rows, x, multipliers)
+            ]
+            if not again:
                 break
-            parts = None
+            posed = [(module, module.rows(ctx) if module in again else rows) for module, rows in parts]
+            parts = [(module, rows) for module, rows in posed if rows is not None]
         report.blocks, report.scale = blocks, scale
         mark("")
         return x

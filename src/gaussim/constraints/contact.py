@@ -57,7 +57,7 @@ from ..dynamics import (
     point_jacobians,
     point_placements,
 )
-from ..kernels.contact import pyramids, slips, unpacked
+from ..kernels.contact import SLIP_SPEED, pyramids, slips, unpacked
 from .base import LEVELS, ConstraintModule, Context, Rows, is_active
 
 # Fixed-point iterations on the slip stop when the shifted bounds' error is below this [m/s].
@@ -304,6 +304,7 @@ class ContactModule(ConstraintModule[ContactBatch]):
         self._blanks: dict[int, tuple[np.ndarray, ...]] = {}
         self._data: pin.Data | None = None
         self._joint_jacobians = np.zeros((6, 0))
+        self._posed: tuple[Context, Rows[ContactBatch]] | None = None  # the last rows and their context
 
     def rows(self, ctx: Context) -> Rows[ContactBatch] | None:
         contacts = ctx.contacts
@@ -311,6 +312,9 @@ class ContactModule(ConstraintModule[ContactBatch]):
             return None
         level = ctx.level
         lagged: FrictionIterate = ctx.lagged.get(id(self), _FIRST_PASS)
+        last = self._posed
+        if last is not None and last[0] is ctx and lagged.slip is not None and level != "acceleration":
+            return _reshifted(last[1], lagged.slip, lagged.relaxed)
         if level != "velocity":
             J = point_jacobians(ctx.data, self.supports, contacts.joint, contacts.other_joint, contacts.point)
             keep = is_active(ctx, contacts.gap, _dot(J @ ctx.v, contacts.normal), 0.0)
@@ -341,7 +345,9 @@ class ContactModule(ConstraintModule[ContactBatch]):
             ]
 
         batch = ContactBatch(contacts, packed, starts, sliding, shifts, lagged.relaxed)
-        return Rows(rows, bound, False, labels, batch, force, joints=read)
+        posed = Rows(rows, bound, False, labels, batch, force, joints=read)
+        self._posed = (ctx, posed)
+        return posed
 
     def _jacobians(self, data: pin.Data) -> np.ndarray:
         """The joint Jacobians data.J (6, nv): a view of Pinocchio's array that follows every pass on
@@ -421,6 +427,26 @@ class ContactModule(ConstraintModule[ContactBatch]):
         if lagged is None:
             lagged = ctx.lagged[id(self)] = FrictionIterate()
         return lagged
+
+
+def _reshifted(rows: Rows[ContactBatch], slip: np.ndarray, relaxed: bool) -> Rows[ContactBatch]:
+    """``rows``, posed by the last pass of a solve at the velocity or impulse level, with the De Saxce
+    shift of the lagged ``slip`` (m, 3): only the bounds move (the rows' directions read the free
+    motion, not the slip), where posing them again cost a friction pass most of its time."""
+    b = rows.data
+    m, nv = len(b.contacts), rows.J.shape[1]
+    change = b.contacts.friction * (_shift(b.slip) - _shift(slip))  # the kernel's bound: ... - mu |s|
+    bound = rows.bound + np.repeat(change, np.diff(b.starts))
+    packed = b.packed.copy()
+    unpacked(packed, m, nv)[2][:] = slip
+    batch = ContactBatch(b.contacts, packed, b.starts, b.sliding, b.shifts, relaxed)
+    return Rows(rows.J, bound, False, rows.labels, batch, rows.force, joints=rows.joints)
+
+
+def _shift(slip: np.ndarray) -> np.ndarray:
+    """The speed each contact's De Saxce shift takes from its slip (m, 3): |s|, 0 below SLIP_SPEED."""
+    speed = np.sqrt(_dot(slip, slip))
+    return np.where(speed > SLIP_SPEED, speed, 0.0)
 
 
 def contact_batch(blocks: Iterable[tuple[ConstraintModule, Rows, Any]]) -> ContactBatch | None:
