@@ -162,6 +162,8 @@ def checked(
     """(x, multipliers) as a solution of ``status`` (after ``iterations`` of its solver) when the KKT
     check's relative residual certifies it to ``tolerance``, else None."""
     p, n_eq = problem, len(problem.b)
+    if len(p.l) and (p.C @ x - p.l).min() < -tolerance:  # a row violated: refused at a product's cost
+        return None
     residual, relative, primal, dual, gap = kkt_residuals(
         p.H, p.g, p.A, p.b, p.C, p.l, x, multipliers[:n_eq], multipliers[n_eq:]
     )
