@@ -490,3 +490,30 @@ def test_a_friction_pass_moves_the_bounds_as_posing_the_rows_again_would(box, mo
     monkeypatch.setattr(contact.ContactModule, "refine", checking)
     run(sim, state, 100)
     assert len(compared) >= 50 and max(np.abs(c).max() for c in compared) > 1e-4  # the bounds moved
+
+
+def test_the_secant_step_matches_its_plain_statement():
+    """The compiled secant step gives the numpy statement's: each contact's residual F(s) - s scaled
+    by 1 / (1 - slope) within SECANT_SCALES, the slope along the last move (none at the first pass,
+    none along a zero move), and the next slips s + that step."""
+    from gaussim.constraints.contact import SECANT_SCALES, _secant
+
+    rng = np.random.default_rng(11)
+    m = 40
+    used, mapped = rng.normal(size=(m, 3)), rng.normal(size=(m, 3))
+    move, previous = rng.normal(size=(m, 3)), rng.normal(size=(m, 3))
+    move[:5] = 0.0  # no move: no slope
+    previous[5:10] = move[5:10] + (mapped - used)[5:10] + 5.0 * move[5:10]  # slope -5: the scale's floor
+
+    residual = mapped - used
+    length = np.einsum("mi,mi->m", move, move)
+    slope = np.einsum("mi,mi->m", residual + move - previous, move) / np.where(length > 0, length, np.inf)
+    scale = np.clip(1.0 / np.maximum(1.0 - slope, 1e-12), *SECANT_SCALES)
+    assert {SECANT_SCALES[0], 1.0} <= set(np.round(scale, 12)) and scale.max() == SECANT_SCALES[1]
+
+    following, (moved, got_residual) = _secant(used, mapped, (move, previous))
+    np.testing.assert_allclose(got_residual, residual, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(moved, scale[:, None] * residual, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(following, used + scale[:, None] * residual, rtol=1e-12, atol=1e-15)
+    first, (moved, _) = _secant(used, mapped, None)  # the first pass: the plain step
+    np.testing.assert_allclose(first, mapped, rtol=1e-12, atol=1e-15)

@@ -57,7 +57,7 @@ from ..dynamics import (
     point_jacobians,
     point_placements,
 )
-from ..kernels.contact import SLIP_SPEED, pyramids, slips, unpacked
+from ..kernels.contact import pyramids, secant_moves, shifted_bounds, slips, unpacked
 from .base import LEVELS, ConstraintModule, Context, Rows, is_active
 
 # Fixed-point iterations on the slip stop when the shifted bounds' error is below this [m/s].
@@ -435,18 +435,12 @@ def _reshifted(rows: Rows[ContactBatch], slip: np.ndarray, relaxed: bool) -> Row
     motion, not the slip), where posing them again cost a friction pass most of its time."""
     b = rows.data
     m, nv = len(b.contacts), rows.J.shape[1]
-    change = b.contacts.friction * (_shift(b.slip) - _shift(slip))  # the kernel's bound: ... - mu |s|
-    bound = rows.bound + np.repeat(change, np.diff(b.starts))
+    bound = np.empty_like(rows.bound)
+    shifted_bounds(rows.bound, b.starts, b.contacts.friction, b.slip, slip, bound)
     packed = b.packed.copy()
     unpacked(packed, m, nv)[2][:] = slip
     batch = ContactBatch(b.contacts, packed, b.starts, b.sliding, b.shifts, relaxed)
     return Rows(rows.J, bound, False, rows.labels, batch, rows.force, joints=rows.joints)
-
-
-def _shift(slip: np.ndarray) -> np.ndarray:
-    """The speed each contact's De Saxce shift takes from its slip (m, 3): |s|, 0 below SLIP_SPEED."""
-    speed = np.sqrt(_dot(slip, slip))
-    return np.where(speed > SLIP_SPEED, speed, 0.0)
 
 
 def contact_batch(blocks: Iterable[tuple[ConstraintModule, Rows, Any]]) -> ContactBatch | None:
@@ -497,16 +491,13 @@ def _secant(
     doubles it, where plain passes repeat or halve the error. The cap keeps the coupling between
     contacts, which each one's secant does not see, from overshooting (in the bin of
     examples/bin_pile.py, a cap of 3 or 4 took more passes than 2)."""
-    residual = mapped - used
-    scale = np.ones(len(used))
-    if last is not None:
-        move, previous = last
-        length = np.einsum("mi,mi->m", move, move)
-        # F(s_k) - F(s_k-1) = residual + move - previous, along the move
-        slope = np.einsum("mi,mi->m", residual + move - previous, move) / np.where(length > 0, length, np.inf)
-        scale = np.clip(1.0 / np.maximum(1.0 - slope, 1e-12), *SECANT_SCALES)
-    move = scale[:, None] * residual
-    return used + move, (move, residual)
+    moved, residual = np.empty_like(used), np.empty_like(used)
+    move, previous = (_NO_MOVE, _NO_MOVE) if last is None else last
+    secant_moves(used, mapped, move, previous, SECANT_SCALES, moved, residual)
+    return used + moved, (moved, residual)
+
+
+_NO_MOVE = np.zeros((0, 3))  # the first pass's: no secant yet
 
 
 def _drifts(ctx: Context, contacts: Contacts, radii: dict[str, float]) -> np.ndarray:

@@ -240,3 +240,45 @@ def _moving_slip(J, slip, starts, x, normal, i, support_starts, support_columns,
     u0, u1, u2 = u0 - along * normal[i, 0], u1 - along * normal[i, 1], u2 - along * normal[i, 2]
     speed = np.sqrt(slip[i, 0] ** 2 + slip[i, 1] ** 2 + slip[i, 2] ** 2)
     return speed > SLIP_SPEED or np.sqrt(u0**2 + u1**2 + u2**2) > SLIP_SPEED, u0, u1, u2
+
+
+@njit(cache=True)
+def secant_moves(used, mapped, move, previous, scales, moved, residual):  # type: ignore[no-untyped-def]
+    """:func:`gaussim.constraints.contact._secant` in scalars: fills ``residual`` (m, 3) with
+    F(s) - s (``mapped`` - ``used``) and ``moved`` with each contact's step, that residual scaled by
+    1 / (1 - a) within ``scales``, a the slope of its map along the last pass's ``move`` (whose
+    residual was ``previous``; both empty at the first pass: no scaling)."""
+    low, high = scales
+    for i in range(used.shape[0]):
+        r0, r1, r2 = mapped[i, 0] - used[i, 0], mapped[i, 1] - used[i, 1], mapped[i, 2] - used[i, 2]
+        scale = 1.0
+        if move.shape[0]:
+            m0, m1, m2 = move[i, 0], move[i, 1], move[i, 2]
+            length = m0 * m0 + m1 * m1 + m2 * m2
+            if length > 0.0:  # F(s_k) - F(s_k-1) = residual + move - previous, along the move
+                slope = (
+                    (r0 + m0 - previous[i, 0]) * m0
+                    + (r1 + m1 - previous[i, 1]) * m1
+                    + (r2 + m2 - previous[i, 2]) * m2
+                ) / length
+                scale = min(max(1.0 / max(1.0 - slope, 1e-12), low), high)
+        residual[i, 0], residual[i, 1], residual[i, 2] = r0, r1, r2
+        moved[i, 0], moved[i, 1], moved[i, 2] = scale * r0, scale * r1, scale * r2
+
+
+@njit(cache=True)
+def shifted_bounds(bound, starts, mu, used, slip, result):  # type: ignore[no-untyped-def]
+    """The bounds ``bound`` of contact rows (contact i's rows: ``starts[i]`` to ``starts[i + 1]``)
+    posed with the De Saxce shift of the slips ``used`` (m, 3), moved to the shift of ``slip``
+    (:func:`pyramids` subtracts mu |s| where |s| > SLIP_SPEED), into ``result``."""
+    for i in range(len(mu)):
+        change = mu[i] * (_shift_speed(used[i]) - _shift_speed(slip[i]))
+        for r in range(starts[i], starts[i + 1]):
+            result[r] = bound[r] + change
+
+
+@njit(cache=True, inline="always")
+def _shift_speed(s):  # type: ignore[no-untyped-def]
+    """The speed a De Saxce shift takes from slip s (3,): |s|, 0 below SLIP_SPEED."""
+    speed = np.sqrt(s[0] ** 2 + s[1] ** 2 + s[2] ** 2)
+    return speed if speed > SLIP_SPEED else 0.0
