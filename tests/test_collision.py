@@ -98,7 +98,7 @@ def _outline_reference(heights, world, bound, directions):
     return {int(near[np.argmax(world[near] @ d)]) for d in directions}
 
 
-def test_a_widened_patch_is_the_outline_of_each_hull_own_vertices(solo12):
+def test_a_widened_patch_is_the_plain_statement_of_its_outline(solo12):
     """Every Solo-12 mesh hull (287 to 672 vertices, padded to the largest) at random poses above
     the ground, its patch widened by 3 cm (a turning body): the compiled pass gives, hull by hull,
     the vertices of the plain statement (the extremes along the support directions of the vertices
@@ -134,6 +134,25 @@ def test_a_widened_patch_is_the_outline_of_each_hull_own_vertices(solo12):
             np.testing.assert_allclose(points[got], world[order], atol=1e-12)
             np.testing.assert_allclose(gaps[got], heights[order], atol=1e-12)
     assert wide >= 100, wide  # most hulls touch widely at 3 cm
+
+
+def test_a_rounded_hull_at_the_margin_keeps_its_deepest_vertex():
+    """A capsule's segment whose gap equals the margin, at heights where (h - r) + r rounds below h:
+    the widened outline still holds the deepest vertex (it picked none, then the padding, before)."""
+    from gaussim.kernels.collision import _outline
+
+    rounding, lowest = 0.04689779958975574, 0.11492688060828223
+    assert (lowest - rounding) + rounding < lowest  # the case: the bound rounds below the deepest
+    X = np.array([[0.0, 1.0], [0.0, 0.0], [lowest, lowest + 1.0], [1.0, 1.0]])  # two vertices, joint frame
+    ground = np.array([0.0, 0.0, 1.0, 0.0])  # z = 0, seen from the joint at the origin
+    directions = np.array([[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0]])
+    scratch = (np.empty(2, np.int64), np.empty((2, 3)))
+    picked = np.full(5, -7, np.int64)
+    picks = _outline(
+        ground, np.eye(3), np.zeros(3), X, 2, rounding, directions, lowest - rounding,
+        (PATCH_TOLERANCE, PATCH_MIN_EXTENT), lowest, scratch, picked, 0,
+    )  # fmt: skip
+    assert picked[:picks].tolist() == [0]
 
 
 def test_box_flat_on_ground_touches_at_its_corners(box):

@@ -342,7 +342,7 @@ def test_slip_update_matches_its_plain_statement():
     normal /= np.linalg.norm(normal, axis=1)[:, None]
     slip = rng.normal(size=(m, 3))
     slip[3] = 0.1 * SLIP_SPEED  # ... and has not moved: it keeps its slip
-    mu = np.array([0.5, 0.8, 0.7, 0.3, 0.6, 0.9])  # below 1: the error is mu times the change
+    mu = np.array([0.5, 0.8, 0.7, 0.3, 0.6, 0.9])  # below 1, where the old max(1, mu) rule would differ
     R = starts[-1]
     rows = rng.normal(size=(R, nv))
     bound = rows @ x - rng.uniform(-0.05, 0.05, R)  # slacks of either sign
@@ -490,6 +490,43 @@ def test_a_friction_pass_moves_the_bounds_as_posing_the_rows_again_would(box, mo
     monkeypatch.setattr(contact.ContactModule, "refine", checking)
     run(sim, state, 100)
     assert len(compared) >= 50 and max(np.abs(c).max() for c in compared) > 1e-4  # the bounds moved
+
+
+@pytest.mark.parametrize(
+    ("scheme", "passes", "friction", "level", "relaxed"),
+    [("acceleration", 10, 0.5, "impulse", False), ("velocity", 2, 1000.0, "velocity", True)],
+)
+def test_a_friction_pass_at_an_impact_or_relaxed_reshifts_as_posing_again(
+    box, monkeypatch, scheme, passes, friction, level, relaxed
+):
+    """The bounds-only passes where the rows are a subset (the acceleration scheme's impacts keep the
+    closing contacts) and where the last QP drops the shift (two passes and mu = 1000, far from the
+    fixed point): each pass's re-shifted rows equal the rows the kernel poses again."""
+    from gaussim.constraints import contact
+
+    scene = gaussim.Scene(box, ground=gaussim.Ground(friction=friction))
+    sim = gaussim.Simulator(scene, gaussim.Options(dt=1e-3, scheme=scheme, friction_iterations=passes))
+    tilt = pin.SE3ToXYZQUAT(pin.SE3(pin.rpy.rpyToMatrix(0.3, 0.2, 0.0), np.array([0.0, 0.0, 0.1])))
+    state = sim.reset(tilt, np.array([1.0, 0.3, -1.0, 2.0, -3.0, 1.0]))
+    module = next(m for m in sim.gauss.modules if isinstance(m, contact.ContactModule))
+    refine, seen = contact.ContactModule.refine, []
+
+    def checking(self, ctx, rows, x, multipliers):
+        again = refine(self, ctx, rows, x, multipliers)
+        if again and self is module and ctx.level != "acceleration":
+            shifted = self.rows(ctx)
+            self._posed = None
+            fresh = self.rows(ctx)
+            np.testing.assert_array_equal(shifted.J, fresh.J)
+            np.testing.assert_allclose(shifted.bound, fresh.bound, rtol=0, atol=1e-12)
+            np.testing.assert_array_equal(shifted.data.packed, fresh.data.packed)
+            assert shifted.data.relaxed == fresh.data.relaxed
+            seen.append((ctx.level, shifted.data.relaxed))
+        return again
+
+    monkeypatch.setattr(contact.ContactModule, "refine", checking)
+    run(sim, state, 300)
+    assert (level, relaxed) in seen, sorted(set(seen))
 
 
 def test_the_secant_step_matches_its_plain_statement():

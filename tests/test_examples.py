@@ -92,6 +92,45 @@ def test_a_custom_constraint_is_checked_once():
         example.AbovePlane(ball, "hand", height=0.1)
 
 
+def test_the_passes_pose_again_only_the_modules_that_asked_and_not_after_the_last():
+    """Two user modules holding a ball resting on planes: one asks for another pass after every QP,
+    the other never does and compares equal to anything. Each step poses the first once per QP
+    (Options.friction_iterations of them) and the second once: the rows of the last QP's answer are
+    not posed again, and a module is told from another by identity."""
+    example = _example("custom_constraint")
+
+    class Counted(example.AbovePlane):  # type: ignore[name-defined,misc]
+        def __init__(self, name: str, asks: bool) -> None:
+            super().__init__(ball, "ball", height=example.RADIUS)
+            self.name, self.asks, self.posed = name, asks, 0
+
+        def rows(self, ctx):  # type: ignore[no-untyped-def]
+            self.posed += 1
+            return super().rows(ctx)
+
+        def refine(self, ctx, rows, x, multipliers):  # type: ignore[no-untyped-def]
+            return self.asks
+
+        def __eq__(self, other: object) -> bool:
+            return True
+
+        __hash__ = object.__hash__
+
+    ball = gaussim.load_robot("ball", floating_base=True)
+    asking, quiet = Counted("asking", True), Counted("quiet", False)
+    passes = 3
+    options = gaussim.Options(friction_iterations=passes)
+    sim = gaussim.Simulator(gaussim.Scene(ball, ground=None), options, constraints=[asking, quiet])
+    q = ball.neutral()
+    q[2] = example.RADIUS
+    state = sim.reset(q)
+    steps = 5
+    for _ in range(steps):
+        state = sim.step(state)
+    assert sim.last_step is not None and len(sim.last_step.certificates) == passes
+    assert (asking.posed, quiet.posed) == (steps * passes, steps)
+
+
 def _page_holds(page: Path, names: list[str]) -> None:
     """The replay page's scene tree (its controls, once its scripts ran) has a node for each name."""
     from gaussim.viewer import page_dom

@@ -72,8 +72,8 @@ class GaussStage:
     ) -> np.ndarray:
         """min 1/2 x^T M x + g^T x over the rows ``parts`` (posed from ``ctx`` when None), the rows of
         a module posed again while its fixed-point iteration asks for it."""
-        mark = report.mark
-        for _ in range(self.options.friction_iterations):
+        mark, passes = report.mark, self.options.friction_iterations
+        for k in range(passes):
             mark("")
             parts = self.rows(ctx) if parts is None else parts
             if not parts:
@@ -88,9 +88,10 @@ class GaussStage:
             again = [
                 module for module, rows, multipliers in blocks if module.refine(ctx, rows, x, multipliers)
             ]
-            if not again:
+            if not again or k == passes - 1:  # the last pass's answer stands: no rows to pose for it
                 break
-            posed = [(module, module.rows(ctx) if module in again else rows) for module, rows in parts]
+            asked = {id(module) for module in again}  # by identity: a user's module may define __eq__
+            posed = [(module, module.rows(ctx) if id(module) in asked else rows) for module, rows in parts]
             parts = [(module, rows) for module, rows in posed if rows is not None]
         report.blocks, report.scale = blocks, scale
         mark("")

@@ -257,9 +257,9 @@ The error is the RMS over the run (sampled every {SAMPLE * 1e3:g} ms) of the dis
 (each joint's origin: a free body's centre, each of a robot's links) to the reference: the closed
 form, else the engine's own run at dt 0.1 ms (0.25 ms with `--quick`) and its tightest solver settings
 (gaussim eps_abs 1e-10; MuJoCo tolerance 1e-12, 1000 iterations). Each engine sweeps its time step
-(20 ms to 0.5 ms) and its solver tolerance (`gaussim.bench.motion`); the row is its cheapest setting
-(wall time of its steps per simulated second) that meets the tolerance, and that time's ratio to
-gaussim's cheapest."""
+(20 ms to 0.5 ms; 5 to 1 ms with `--quick`) and its solver tolerance (`gaussim.bench.motion`); the
+row is its cheapest setting (wall time of its steps per simulated second) that meets the tolerance,
+and that time's ratio to gaussim's cheapest."""
 
 
 def markdown(records: list[dict]) -> str:

@@ -304,7 +304,8 @@ class ContactModule(ConstraintModule[ContactBatch]):
         self._blanks: dict[int, tuple[np.ndarray, ...]] = {}
         self._data: pin.Data | None = None
         self._joint_jacobians = np.zeros((6, 0))
-        self._posed: tuple[Context, Rows[ContactBatch]] | None = None  # the last rows and their context
+        # the rows a solve posed first, and its context: its later passes re-shift their bounds
+        self._posed: tuple[Context, Rows[ContactBatch]] | None = None
 
     def rows(self, ctx: Context) -> Rows[ContactBatch] | None:
         contacts = ctx.contacts
@@ -430,7 +431,7 @@ class ContactModule(ConstraintModule[ContactBatch]):
 
 
 def _reshifted(rows: Rows[ContactBatch], slip: np.ndarray, relaxed: bool) -> Rows[ContactBatch]:
-    """``rows``, posed by the last pass of a solve at the velocity or impulse level, with the De Saxce
+    """``rows``, posed by the first pass of a solve at the velocity or impulse level, with the De Saxce
     shift of the lagged ``slip`` (m, 3): only the bounds move (the rows' directions read the free
     motion, not the slip), where posing them again cost a friction pass most of its time."""
     b = rows.data

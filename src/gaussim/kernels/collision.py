@@ -36,11 +36,13 @@ def ground_hulls(
 ):  # type: ignore[no-untyped-def]
     """The compiled pass of :func:`gaussim.collision.ground.touching` (the arrays of its ``Hulls``; updates
     ``deepest`` and ``narrow_at``): fills the first k entries of the ``*_out`` arrays with the contacts, hull
-    by hull; returns (k, the least gap of all the hulls). ``patch``: (PATCH_TOLERANCE, PATCH_MIN_EXTENT) of
-    :mod:`gaussim.collision.contacts`; ``widening``: per hull, what its turn within the step can bring its
-    other vertices down by [m]: its patch reaches that deep where it exceeds PATCH_TOLERANCE, and keeps
-    the outline of the resting patch and the deepest vertex (a resting body's patch stays as it was,
-    which bounds jitter of the bound would make flicker).
+    by hull; returns (k, the least gap of all the hulls). Hull k's own vertices are the first
+    ``sizes[k]`` columns of ``columns[k]`` (the rest pad it to the largest hull). ``patch``:
+    (PATCH_TOLERANCE, PATCH_MIN_EXTENT) of :mod:`gaussim.collision.contacts`; ``widening``: per hull,
+    what its turn within the step can bring its other vertices down by [m]: its patch reaches that
+    deep where it exceeds PATCH_TOLERANCE, and keeps the outline of the resting patch and the deepest
+    vertex (a resting body's patch stays as it was, which bounds jitter of the bound would make
+    flicker).
 
     The deepest vertex is found by descent along the hull's edges from the last one: a vertex no
     neighbour of which is deeper is the deepest of a convex polyhedron (a linear function has no
@@ -90,9 +92,9 @@ def ground_hulls(
         else:
             outline = (c, R, p, X, sizes[k], rounding[k], directions[k], margin)
             scratch = (order, world)
-            picks = _outline(*outline, (tolerance, extent), gap, scratch, picked, 0)
+            picks = _outline(*outline, (tolerance, extent), lowest, scratch, picked, 0)
             if tolerance > base:  # a widened outline's extremes may all be high: the resting patch's
-                picks = _outline(*outline, (base, extent), gap, scratch, picked, picks)  # outline too,
+                picks = _outline(*outline, (base, extent), lowest, scratch, picked, picks)  # outline too,
                 picks = _pick(picked, picks, i)  # and the deepest, which neither need hold
         picked[:picks].sort()
         for t in range(picks):
@@ -136,15 +138,16 @@ def _pick(picked, picks, v):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def _outline(c, R, p, X, size, rounding, directions, margin, patch, gap, scratch, picked, picks):  # type: ignore[no-untyped-def]
+def _outline(c, R, p, X, size, rounding, directions, margin, patch, lowest, scratch, picked, picks):  # type: ignore[no-untyped-def]
     """A hull touching widely (ground ``c`` seen from its joint at (R, p), its ``size`` vertices X,
-    the least ``gap``): adds to ``picked[:picks]`` its vertices within the
+    the deepest at height ``lowest``): adds to ``picked[:picks]`` its vertices within the
     patch tolerance of the deepest (or penetrating) that are extreme along ``directions``, or the
     deepest alone when they span at most PATCH_MIN_EXTENT; returns the new count. ``scratch``: the
     (order, world) buffers."""
     (tolerance, extent), (order, world) = patch, scratch
-    bound = max(0.0, min(margin, gap + tolerance))
-    n = _sublevel(c, X, size, bound + rounding, order)
+    bound = max(0.0, min(margin, lowest - rounding + tolerance))
+    # at least the deepest's own height: bound + rounding may round below it when the margin clamps
+    n = _sublevel(c, X, size, max(bound + rounding, lowest), order)
     low, high = _unbounded()
     deepest, lowest = -1, np.inf
     for t in range(n):

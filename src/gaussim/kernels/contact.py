@@ -128,8 +128,8 @@ def pyramids(  # type: ignore[no-untyped-def]
             closes = level == 1 or gap[i] + dt * (n0 * free[i, 0] + n1 * free[i, 1] + n2 * free[i, 2]) <= 0.0
             if e[i] > 0 and -u_n > threshold and closes:
                 contact_bound[i] = max(contact_bound[i], -e[i] * u_n)
-            if not pyramid and speed > SLIP_SPEED:  # slower, it sticks: no shift to make
-                contact_bound[i] -= mu[i] * speed
+            if not pyramid:  # the De Saxce shift (none below SLIP_SPEED: such a contact sticks)
+                contact_bound[i] -= mu[i] * _shift_speed(slip_used[i])
     total = starts[m]
     J, generators, slip, friction = unpacked(packed[: 3 * m * nv + 3 * total + 6 * m], m, nv)
     for i in range(m):
@@ -279,6 +279,7 @@ def shifted_bounds(bound, starts, mu, used, slip, result):  # type: ignore[no-un
 
 @njit(cache=True, inline="always")
 def _shift_speed(s):  # type: ignore[no-untyped-def]
-    """The speed a De Saxce shift takes from slip s (3,): |s|, 0 below SLIP_SPEED."""
+    """The speed a De Saxce shift takes from slip s (3,): |s|, 0 below SLIP_SPEED (the one rule of
+    :func:`pyramids` and :func:`shifted_bounds`)."""
     speed = np.sqrt(s[0] ** 2 + s[1] ** 2 + s[2] ** 2)
     return speed if speed > SLIP_SPEED else 0.0
