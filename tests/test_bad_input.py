@@ -305,10 +305,19 @@ BALL_SCENE = '[robot]\nname = "ball"\nfloating_base = true\n[initial]\nq = [0, 0
 
 
 def _cli(capsys, *argv):
-    """Run ``gaussim argv`` in this process: (exit code, stderr)."""
-    from gaussim.cli import main
+    """Run ``gaussim argv`` in this process: (exit code, stderr); the stop signals' handlers as they
+    were (a command that stopped ignores them until its process exits)."""
+    import signal
 
-    code = main([str(a) for a in argv])
+    from gaussim.cli import main
+    from gaussim.runner import STOP_SIGNALS
+
+    saved = {s: signal.getsignal(s) for s in STOP_SIGNALS}
+    try:
+        code = main([str(a) for a in argv])
+    finally:
+        for s, handling in saved.items():
+            signal.signal(s, handling)
     return code, capsys.readouterr().err
 
 

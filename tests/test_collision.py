@@ -112,8 +112,9 @@ def test_a_widened_patch_is_the_plain_statement_of_its_outline(solo12):
     widening, wide = 0.03, 0
     for data in _random_poses(solo12, 20, seed=3):
         hulls.narrow_at[:] = np.nan  # no kept verdict: each pose is judged afresh
+        turns, diameters = np.full(routine.index.max() + 1, widening), np.ones(len(routine.index))
         (pairs, points, _, gaps), _ = touching(
-            *routine.placements(data), hulls, 10.0, routine.index, np.full(len(routine.index), widening)
+            *routine.placements(data), hulls, 10.0, routine.index, turns, diameters
         )
         rotations, translations = routine.placements(data)
         for k, pair in enumerate(routine.index):

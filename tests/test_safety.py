@@ -175,6 +175,34 @@ def test_ctrl_c_again_and_again_while_the_log_is_written_keeps_it(tmp_path):
     assert len(log.t) == log.steps + 1 and len(log.tau) == log.steps
 
 
+def test_a_ctrl_c_landing_as_the_stop_surfaces_leaves_the_command_deaf_to_more(tmp_path, capsys, monkeypatch):
+    """A burst of Ctrl-Cs, one landing after the run restored the handlers and before the command
+    reported its stop (a plain KeyboardInterrupt where Interrupted was on its way): the command
+    names the log it wrote and from then on ignores the stop signals, where one more ended the
+    process by SIGINT, its exit status lost (seen once in CI)."""
+    import gaussim.runner
+
+    real = gaussim.runner.run
+
+    def stopped(spec, out, **kwargs):  # the steps made, logged; then the Ctrl-C surfaces
+        spec.duration = 5 * spec.options.dt
+        real(spec, out, **kwargs)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(gaussim.runner, "run", stopped)
+    saved = {s: signal.getsignal(s) for s in STOP_SIGNALS}
+    try:
+        code = main(["run", str(SCENES / "fourbar.toml"), "--out", str(tmp_path / "r"), "--quiet"])
+        after = {s: signal.getsignal(s) for s in STOP_SIGNALS}
+    finally:
+        for s, handling in saved.items():
+            signal.signal(s, handling)
+    err = capsys.readouterr().err
+    assert code == 1 and f"interrupted; the log of the steps made is in {tmp_path / 'r'}" in err, err
+    assert set(after.values()) == {signal.SIG_IGN}
+    assert gaussim.RunLog.load(tmp_path / "r").steps == 5
+
+
 def test_the_log_is_a_valid_prefix_at_any_instant_and_after_a_sigkill(tmp_path):
     """Read while chunks of 10 steps are written as fast as the run goes, then after a SIGKILL (most
     likely during a chunk's write): each read is a whole log of the first steps of the run."""

@@ -211,6 +211,7 @@ def main(argv: list[str] | None = None) -> int:
         }
         return commands_[args.command](args)
     except KeyboardInterrupt:
+        _ignore_stops()
         print("gaussim: interrupted", file=sys.stderr)
         return EXIT_FAILURE
     except OSError as err:  # a write that failed midway (a full disk): the message names the file
@@ -223,6 +224,15 @@ def main(argv: list[str] | None = None) -> int:
     except (InvalidOptions, InvalidRobot, InvalidState, GaussimError) as err:
         _say(f"gaussim: {err}", sys.stderr)
         return EXIT_BAD_INPUT
+
+
+def _ignore_stops() -> None:
+    """From a stop on, more Ctrl-Cs (SIGTERM, SIGHUP) change nothing: the command only reports and exits
+    (one landing later would end the process by the signal, its exit status lost)."""
+    from .runner import STOP_SIGNALS
+
+    for repeated in STOP_SIGNALS:
+        signal.signal(repeated, signal.SIG_IGN)
 
 
 def _bench(args: argparse.Namespace) -> int:
@@ -443,7 +453,6 @@ def _run(args: argparse.Namespace) -> int:
     from .runlog import is_run_log
     from .runner import (
         CHECKPOINT_STEPS,
-        STOP_SIGNALS,
         Interrupted,
         LogWriteError,
         announce,
@@ -492,8 +501,7 @@ def _run(args: argparse.Namespace) -> int:
         )
         done = True
     except Interrupted as stop:
-        for repeated in STOP_SIGNALS:  # more Ctrl-Cs while we report change nothing: the log is written
-            signal.signal(repeated, signal.SIG_IGN)
+        _ignore_stops()
         print(f"gaussim: {stop}; the log of the steps made is in {out}", file=sys.stderr)
         return EXIT_FAILURE
     except LogWriteError as err:
@@ -504,12 +512,11 @@ def _run(args: argparse.Namespace) -> int:
         return EXIT_FAILURE
     except InvalidState as err:  # the scene's initial state or its controller's torques
         raise InvalidState(f"{args.scene}: {err}") from err
-    except KeyboardInterrupt:
+    except KeyboardInterrupt:  # a Ctrl-C before the run began, or one that landed as its stop surfaced
+        _ignore_stops()
         written = is_run_log(out) and out.stat().st_mtime >= started - 1.0  # (a coarse clock's second)
-        print(
-            "gaussim: interrupted; " + (f"the steps made are in {out}" if written else "no log written"),
-            file=sys.stderr,
-        )
+        where = f"the log of the steps made is in {out}" if written else "no log written"
+        print(f"gaussim: interrupted; {where}", file=sys.stderr)
         return EXIT_FAILURE
     finally:
         if viewer is not None and not done:

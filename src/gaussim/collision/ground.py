@@ -93,8 +93,7 @@ class GroundHulls:
         ``data`` (each patch as deep as its pair's turn in ``turns`` [rad] times the hull's diameter,
         where that exceeds PATCH_TOLERANCE: see :class:`~.driver.Routine`), and the least gap of all
         the hulls [m]."""
-        widening = turns[self.index] * self.diameters
-        found, least = touching(*self.placements(data), self.hulls, margin, self.index, widening)
+        found, least = touching(*self.placements(data), self.hulls, margin, self.index, turns, self.diameters)
         return ([found] if len(found[0]) else []), least
 
 
@@ -104,22 +103,17 @@ def touching(
     hulls: Hulls,
     margin: float,
     index: np.ndarray,
-    widening: np.ndarray,
+    turns: np.ndarray,
+    diameters: np.ndarray,
 ) -> tuple[Piece, float]:
     """One compiled pass over the hulls (:func:`~gaussim.kernels.collision.ground_hulls`, which updates
     ``hulls.deepest`` and ``hulls.narrow_at``) at their joints' placements (P rotations (3, 3), translations
-    (3,)), for the contacts within ``margin`` [m], each hull's patch max(PATCH_TOLERANCE, ``widening``
-    (P,)) deep; ``index``: the declared pair of each hull, shape (P,).
+    (3,)), for the contacts within ``margin`` [m], each hull's patch max(PATCH_TOLERANCE, its pair's turn
+    in ``turns`` [rad] times its diameter in ``diameters`` (P,) [m]) deep; ``index``: the declared pair
+    of each hull, shape (P,).
     Returns: the contacts of the hulls (a :data:`Piece`, hull by hull) and the least gap of all the
     hulls [m]."""
-    count = len(index) * (2 * hulls.directions.shape[1] + 1)  # at most: two outlines and the deepest
-    pairs, points, normals, gaps = (
-        np.empty(count, np.int64),
-        np.empty((count, 3)),
-        np.empty((count, 3)),
-        np.empty(count),
-    )
-    k, least = ground_hulls(
+    return ground_hulls(  # type: ignore[no-any-return]
         rotations,
         translations,
         hulls.plane,
@@ -134,14 +128,10 @@ def touching(
         hulls.directions,
         margin,
         (PATCH_TOLERANCE, PATCH_MIN_EXTENT),
-        widening,
+        turns,
+        diameters,
         index,
-        pairs,
-        points,
-        normals,
-        gaps,
     )
-    return (pairs[:k], points[:k], normals[:k], gaps[:k]), least
 
 
 def _hulls(pairs: list[Pair]) -> Hulls:

@@ -27,19 +27,17 @@ def ground_hulls(
     directions,
     margin,
     patch,
-    widening,
+    turns,
+    diameters,
     pair,
-    pairs_out,
-    points_out,
-    normals_out,
-    gaps_out,
 ):  # type: ignore[no-untyped-def]
     """The compiled pass of :func:`gaussim.collision.ground.touching` (the arrays of its ``Hulls``; updates
-    ``deepest`` and ``narrow_at``): fills the first k entries of the ``*_out`` arrays with the contacts, hull
-    by hull; returns (k, the least gap of all the hulls). Hull k's own vertices are the first
+    ``deepest`` and ``narrow_at``): returns the contacts, hull by hull, as (pairs, points, normals, gaps),
+    and the least gap of all the hulls. Hull k's own vertices are the first
     ``sizes[k]`` columns of ``columns[k]`` (the rest pad it to the largest hull). ``patch``:
-    (PATCH_TOLERANCE, PATCH_MIN_EXTENT) of :mod:`gaussim.collision.contacts`; ``widening``: per hull,
-    what its turn within the step can bring its other vertices down by [m]: its patch reaches that
+    (PATCH_TOLERANCE, PATCH_MIN_EXTENT) of :mod:`gaussim.collision.contacts`; ``turns`` [rad] (per
+    declared pair) times ``diameters`` [m] (per hull): what hull k's turn within the step can bring its
+    other vertices down by (``pair[k]`` is its declared pair): its patch reaches that
     deep where it exceeds PATCH_TOLERANCE, and keeps the outline of the resting patch and the deepest
     vertex (a resting body's patch stays as it was, which bounds jitter of the bound would make
     flicker).
@@ -52,6 +50,9 @@ def ground_hulls(
     c = np.empty(4)  # the ground seen from the joint: (n^T R, n^T p - height)
     order, world = np.empty(size, np.int64), np.empty((size, 3))
     picked = np.empty(2 * directions.shape[1] + 1, np.int64)
+    most = count * len(picked)  # at most: two outlines and the deepest
+    pairs_out, points_out = np.empty(most, np.int64), np.empty((most, 3))
+    normals_out, gaps_out = np.empty((most, 3)), np.empty(most)
     out = 0
     least = np.inf
     for k in range(count):
@@ -75,7 +76,7 @@ def ground_hulls(
         least = min(least, gap)
         if gap > margin:
             continue
-        tolerance = max(base, widening[k])
+        tolerance = max(base, turns[pair[k]] * diameters[k])
         turned = (c[0] - narrow_at[k, 0]) ** 2 + (c[1] - narrow_at[k, 1]) ** 2 + (c[2] - narrow_at[k, 2]) ** 2
         narrow = turned <= turn2[k]  # False where no verdict was kept (NaN)
         if not narrow:
@@ -105,7 +106,7 @@ def ground_hulls(
                 points_out[out, j] = vertex - rounding[k] * plane[k, j]
                 normals_out[out, j] = plane[k, j]
             out += 1
-    return out, least
+    return (pairs_out[:out], points_out[:out], normals_out[:out], gaps_out[:out]), least
 
 
 @njit(cache=True, inline="always")

@@ -51,7 +51,7 @@ SIGNATURES = {
     "integrator.move_bases": ["f1r f1 f1 f i1 i1"],
     "actuation.damped_torque": ["f1 f1 f1r f1"],
     "collision.ground_hulls": [
-        f"f2F*{n} f1*{n} f2 f3 i2 i2 i1 i1 f2 f1 f1 f3 f f*2 f1 i1 i1 f2 f2 f1" for n in (1, 2, 4, 5)
+        f"f2F*{n} f1*{n} f2 f3 i2 i2 i1 i1 f2 f1 f1 f3 f f*2 f1 f1 i1" for n in (1, 2, 4, 5)
     ],
     "collision.travel": ["i1 i1 f1 f1r f1 f f f1"],
     "contact.unpacked": ["f1 i i"],
