@@ -93,15 +93,16 @@ def test_a_custom_constraint_is_checked_once():
 
 
 def test_the_passes_pose_again_only_the_modules_that_asked_and_not_after_the_last():
-    """Two user modules holding a ball resting on planes: one asks for another pass after every QP,
+    """Two user modules holding a ball resting on a plane and just above another: one asks for another
+    pass after every QP,
     the other never does and compares equal to anything. Each step poses the first once per QP
     (Options.friction_iterations of them) and the second once: the rows of the last QP's answer are
     not posed again, and a module is told from another by identity."""
     example = _example("custom_constraint")
 
     class Counted(example.AbovePlane):  # type: ignore[name-defined,misc]
-        def __init__(self, name: str, asks: bool) -> None:
-            super().__init__(ball, "ball", height=example.RADIUS)
+        def __init__(self, name: str, asks: bool, height: float) -> None:
+            super().__init__(ball, "ball", height=height)
             self.name, self.asks, self.posed = name, asks, 0
 
         def rows(self, ctx):  # type: ignore[no-untyped-def]
@@ -117,7 +118,8 @@ def test_the_passes_pose_again_only_the_modules_that_asked_and_not_after_the_las
         __hash__ = object.__hash__
 
     ball = gaussim.load_robot("ball", floating_base=True)
-    asking, quiet = Counted("asking", True), Counted("quiet", False)
+    # the quiet plane 2 mm lower: within the contact margin (posed), not touching (no degenerate QP)
+    asking, quiet = Counted("asking", True, example.RADIUS), Counted("quiet", False, example.RADIUS - 2e-3)
     passes = 3
     options = gaussim.Options(friction_iterations=passes)
     sim = gaussim.Simulator(gaussim.Scene(ball, ground=None), options, constraints=[asking, quiet])

@@ -190,9 +190,14 @@ def test_a_ctrl_c_landing_as_the_stop_surfaces_leaves_the_command_deaf_to_more(t
         raise KeyboardInterrupt
 
     monkeypatch.setattr(gaussim.runner, "run", stopped)
+    argv = ["run", str(SCENES / "fourbar.toml"), "--out", str(tmp_path / "r"), "--quiet"]
     saved = {s: signal.getsignal(s) for s in STOP_SIGNALS}
+    assert main(argv) == 1  # in-process, with its arguments: the caller's handlers are left as they were
+    assert {s: signal.getsignal(s) for s in STOP_SIGNALS} == saved
+    capsys.readouterr()
+    monkeypatch.setattr(sys, "argv", ["gaussim", *argv])
     try:
-        code = main(["run", str(SCENES / "fourbar.toml"), "--out", str(tmp_path / "r"), "--quiet"])
+        code = main()  # as the command: ignoring the stop signals until the process exits
         after = {s: signal.getsignal(s) for s in STOP_SIGNALS}
     finally:
         for s, handling in saved.items():

@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, TextIO
 from .exceptions import ContactError, GaussimError, InvalidOptions, InvalidRobot, InvalidState, SolverError
 from .files import atomic_path, check_writable
 from .options import FRICTION_MODES, SCHEMES
+from .stops import STOP_SIGNALS
 
 if TYPE_CHECKING:
     from .scene import Scene
@@ -195,6 +196,7 @@ def main(argv: list[str] | None = None) -> int:
     sweep.add_argument("--quiet", action="store_true", help="no progress lines")
 
     args = parser.parse_args(argv)
+    saved = {s: signal.getsignal(s) for s in STOP_SIGNALS}
     for stop in (signal.SIGTERM, signal.SIGHUP):  # stop as a Ctrl-C does: the viewers' servers stopped
         if signal.getsignal(stop) == signal.SIG_DFL:
             signal.signal(stop, signal.default_int_handler)
@@ -224,13 +226,15 @@ def main(argv: list[str] | None = None) -> int:
     except (InvalidOptions, InvalidRobot, InvalidState, GaussimError) as err:
         _say(f"gaussim: {err}", sys.stderr)
         return EXIT_BAD_INPUT
+    finally:
+        if argv is not None:  # called in-process (not as the command): its caller's handling as it was
+            for s, handling in saved.items():
+                signal.signal(s, handling)
 
 
 def _ignore_stops() -> None:
     """From a stop on, more Ctrl-Cs (SIGTERM, SIGHUP) change nothing: the command only reports and exits
     (one landing later would end the process by the signal, its exit status lost)."""
-    from .runner import STOP_SIGNALS
-
     for repeated in STOP_SIGNALS:
         signal.signal(repeated, signal.SIG_IGN)
 
@@ -393,6 +397,7 @@ def _sweep(args: argparse.Namespace) -> int:
     try:
         records = study(runs, out, args.workers, args.scheduler, progress)
     except KeyboardInterrupt:
+        _ignore_stops()
         print(
             f"gaussim: interrupted; {len(_finished(out) & set(labels))} of {len(runs)} runs are kept in "
             f"{out}: the same command again runs the others",
@@ -599,6 +604,7 @@ def _serve(message: str) -> None:
         while True:
             time.sleep(1.0)
     except KeyboardInterrupt:
+        _ignore_stops()
         print("gaussim: viewer stopped", file=sys.stderr)
 
 

@@ -21,6 +21,7 @@ from .runlog import RunLog, RunLogWriter
 from .scenefile import SceneSpec
 from .simulator import Simulator
 from .state import State
+from .stops import STOP_SIGNALS
 
 # While a run goes on, the steps recorded are written as a new chunk of its log this often [s of wall
 # time], and whenever this many are held in memory.
@@ -30,8 +31,6 @@ CHECKPOINT_STEPS = 10_000
 PROGRESS_SECONDS = {True: 0.2, False: 5.0}
 # What the progress line says while numba compiles a kernel its cache does not hold yet.
 COMPILING = "compiling kernels (first run only)"
-# The signals that stop a run at the end of its step, its log kept: Ctrl-C, kill / timeout, a closed terminal.
-STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
 class Interrupted(KeyboardInterrupt):

@@ -150,15 +150,15 @@ def _outline(c, R, p, X, size, rounding, directions, margin, patch, lowest, scra
     # at least the deepest's own height: bound + rounding may round below it when the margin clamps
     n = _sublevel(c, X, size, max(bound + rounding, lowest), order)
     low, high = _unbounded()
-    deepest, lowest = -1, np.inf
+    deepest, least = -1, np.inf
     for t in range(n):
         v = order[t]
         for j in range(3):
             world[t, j] = R[j, 0] * X[0, v] + R[j, 1] * X[1, v] + R[j, 2] * X[2, v] + p[j]
             low[j], high[j] = min(low[j], world[t, j]), max(high[j], world[t, j])
         height = _height(c, X, v)
-        if height < lowest:
-            deepest, lowest = v, height
+        if height < least:
+            deepest, least = v, height
     if _extent(low, high) <= extent:
         return _pick(picked, picks, deepest)
     for d in range(directions.shape[0]):
