@@ -305,19 +305,10 @@ BALL_SCENE = '[robot]\nname = "ball"\nfloating_base = true\n[initial]\nq = [0, 0
 
 
 def _cli(capsys, *argv):
-    """Run ``gaussim argv`` in this process: (exit code, stderr); the stop signals' handlers as they
-    were (a command that stopped ignores them until its process exits)."""
-    import signal
-
+    """Run ``gaussim argv`` in this process: (exit code, stderr)."""
     from gaussim.cli import main
-    from gaussim.runner import STOP_SIGNALS
 
-    saved = {s: signal.getsignal(s) for s in STOP_SIGNALS}
-    try:
-        code = main([str(a) for a in argv])
-    finally:
-        for s, handling in saved.items():
-            signal.signal(s, handling)
+    code = main([str(a) for a in argv])
     return code, capsys.readouterr().err
 
 
