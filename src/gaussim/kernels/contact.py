@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, vectorize
 
-from ..linalg import cross
+from ..linalg import cross, dot
 from .dynamics import point_jacobians_into, support_dot
 
 
@@ -129,7 +129,7 @@ def pyramids(  # type: ignore[no-untyped-def]
             if e[i] > 0 and -u_n > threshold and closes:
                 contact_bound[i] = max(contact_bound[i], -e[i] * u_n)
             if not pyramid:  # the De Saxce shift (none below SLIP_SPEED: such a contact sticks)
-                contact_bound[i] -= mu[i] * _shift_speed(slip_used[i])
+                contact_bound[i] -= mu[i] * _shift_speed(speed)
     total = starts[m]
     J, generators, slip, friction = unpacked(packed[: 3 * m * nv + 3 * total + 6 * m], m, nv)
     for i in range(m):
@@ -208,11 +208,10 @@ def slips(packed, starts, x, normal, mu, rows, bound, joints, other_joints, supp
     result, residual = slip.copy(), 0.0
     for i in range(len(slip)):
         a, b = joints[i], other_joints[i]
-        moving, u0, u1, u2 = _moving_slip(
+        moving, speed, u0, u1, u2 = _moving_slip(
             J, slip, starts, x, normal, i, support_starts, support_columns, a, b
         )
         if moving:
-            speed = np.sqrt(slip[i, 0] ** 2 + slip[i, 1] ** 2 + slip[i, 2] ** 2)
             error = mu[i] * abs(np.sqrt(u0**2 + u1**2 + u2**2) - speed)
             if error > residual:
                 slack = np.inf
@@ -228,9 +227,9 @@ def slips(packed, starts, x, normal, mu, rows, bound, joints, other_joints, supp
 @njit(cache=True, inline="always")
 def _moving_slip(J, slip, starts, x, normal, i, support_starts, support_columns, a, b):  # type: ignore[no-untyped-def]
     """(whether contact i refines its shift and its tangential velocity in solution x or its last
-    slip is moving, that velocity's 3 components)."""
+    slip is moving, that slip's speed, that velocity's 3 components)."""
     if starts[i + 1] - starts[i] == 1:
-        return False, 0.0, 0.0, 0.0
+        return False, 0.0, 0.0, 0.0, 0.0
     u0, u1, u2 = (
         support_dot(J[i, 0], x, support_starts, support_columns, a, b),
         support_dot(J[i, 1], x, support_starts, support_columns, a, b),
@@ -239,7 +238,7 @@ def _moving_slip(J, slip, starts, x, normal, i, support_starts, support_columns,
     along = u0 * normal[i, 0] + u1 * normal[i, 1] + u2 * normal[i, 2]
     u0, u1, u2 = u0 - along * normal[i, 0], u1 - along * normal[i, 1], u2 - along * normal[i, 2]
     speed = np.sqrt(slip[i, 0] ** 2 + slip[i, 1] ** 2 + slip[i, 2] ** 2)
-    return speed > SLIP_SPEED or np.sqrt(u0**2 + u1**2 + u2**2) > SLIP_SPEED, u0, u1, u2
+    return speed > SLIP_SPEED or np.sqrt(u0**2 + u1**2 + u2**2) > SLIP_SPEED, speed, u0, u1, u2
 
 
 @njit(cache=True)
@@ -272,14 +271,15 @@ def shifted_bounds(bound, starts, mu, used, slip, result):  # type: ignore[no-un
     posed with the De Saxce shift of the slips ``used`` (m, 3), moved to the shift of ``slip``
     (:func:`pyramids` subtracts mu |s| where |s| > SLIP_SPEED), into ``result``."""
     for i in range(len(mu)):
-        change = mu[i] * (_shift_speed(used[i]) - _shift_speed(slip[i]))
+        change = mu[i] * (
+            _shift_speed(np.sqrt(dot(used[i], used[i]))) - _shift_speed(np.sqrt(dot(slip[i], slip[i])))
+        )
         for r in range(starts[i], starts[i + 1]):
             result[r] = bound[r] + change
 
 
 @njit(cache=True, inline="always")
-def _shift_speed(s):  # type: ignore[no-untyped-def]
-    """The speed a De Saxce shift takes from slip s (3,): |s|, 0 below SLIP_SPEED (the one rule of
-    :func:`pyramids` and :func:`shifted_bounds`)."""
-    speed = np.sqrt(s[0] ** 2 + s[1] ** 2 + s[2] ** 2)
+def _shift_speed(speed):  # type: ignore[no-untyped-def]
+    """The speed a De Saxce shift takes from a slip of ``speed``: itself, 0 below SLIP_SPEED (the one
+    rule of :func:`pyramids` and :func:`shifted_bounds`)."""
     return speed if speed > SLIP_SPEED else 0.0
