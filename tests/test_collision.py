@@ -459,3 +459,133 @@ def test_the_travel_bound_holds_for_every_pair_of_a_world(solo12):
         closed = before - spheres.gaps(data, np.inf)
         finite = np.isfinite(closed)
         assert finite.sum() > 10 and closed[finite].max() <= travel
+
+
+def _world_of_solo_and_boxes(solo12: gaussim.Robot) -> tuple[gaussim.Simulator, np.ndarray]:
+    """Solo-12 and two free boxes (every pair declared), and a configuration of the three."""
+    boxes = {f"box{k}": gaussim.FreeBody.box(f"box{k}", (0.1, 0.2, 0.3), mass=1.0) for k in range(2)}
+    sim = gaussim.Simulator(gaussim.Scene(bodies={"solo": solo12, **boxes}, ground=gaussim.Ground()))
+    starts = {name: gaussim.pose(0.5 * k + 1.0, 0.2, 0.5) for k, name in enumerate(boxes)}
+    return sim, sim.reset({"solo": solo12.configuration("standing"), **starts}).q
+
+
+def _point(model: pin.Model, q: np.ndarray, joint: int, local: np.ndarray) -> np.ndarray:
+    """Where the point ``local`` of ``joint``'s frame (the world's for joint 0) is at q."""
+    data = model.createData()
+    pin.forwardKinematics(model, data, q)
+    return data.oMi[joint].act(local)
+
+
+def test_how_far_a_contact_point_closes_is_its_normal_speed_by_finite_differences(solo12):
+    """The closing kernel's dt (max(0, -n . u(v)) + max(0, -x_scale n . u(x))), for points of a leg on
+    the ground, of a box on a leg, of a foot on its own knee (a shared chain): u by central
+    differences of Pinocchio's placements of the two sides' points along v and x."""
+    from gaussim.dynamics import Supports, joint_jacobians
+    from gaussim.kernels.collision import closing
+
+    sim, q = _world_of_solo_and_boxes(solo12)
+    model, data = sim.model, sim.model.createData()
+    pin.computeJointJacobians(model, data, q)
+    foot, knee = model.getJointId("solo/FL_KFE"), model.getJointId("solo/FL_HFE")
+    box, hip = model.getJointId("box0/root_joint"), model.getJointId("solo/HR_HAA")
+    joints, others = np.array([foot, box, foot, hip, box]), np.array([0, foot, knee, 0, 0])
+    rng, dt, eps = np.random.default_rng(11), 1e-3, 1e-6
+    points = rng.normal(scale=0.3, size=(len(joints), 3)) + data.oMi[1].translation
+    normals = rng.normal(size=(len(joints), 3))
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    for x_scale in (1.0, dt):
+        v, x = rng.normal(size=(2, model.nv))
+        far = np.full(len(joints), np.nan)
+        jacobians, supports = joint_jacobians(data), Supports.of(model)
+        closing(jacobians, *supports, joints, others, points, normals, v, x, dt, x_scale, far)
+        for i, (a, b) in enumerate(zip(joints.tolist(), others.tolist())):
+            local_a, local_b = data.oMi[a].actInv(points[i]), data.oMi[b].actInv(points[i])
+            speeds = []
+            for w in (v, x_scale * x):
+                ahead, behind = pin.integrate(model, q, eps * w), pin.integrate(model, q, -eps * w)
+                gap = [
+                    normals[i] @ (_point(model, c, a, local_a) - _point(model, c, b, local_b))
+                    for c in (ahead, behind)
+                ]
+                speeds.append((gap[0] - gap[1]) / (2 * eps))
+            expected = dt * sum(max(0.0, -s) for s in speeds)
+            assert far[i] == pytest.approx(expected, rel=1e-6, abs=1e-12), (i, x_scale)
+    assert np.count_nonzero(far) >= 3  # some points close, on each kind of pair
+
+
+def test_the_turn_within_a_step_is_the_angular_speed_of_its_joint(solo12):
+    """The turning kernel lowers a pair's turn to dt (|w(v)| + x_scale |w(x)|), w Pinocchio's angular
+    velocity of the joint (forward kinematics at v and at x), and never raises it."""
+    from gaussim.dynamics import Supports, joint_jacobians
+    from gaussim.kernels.collision import turning
+
+    sim, q = _world_of_solo_and_boxes(solo12)
+    model, data, moved = sim.model, sim.model.createData(), sim.model.createData()
+    pin.computeJointJacobians(model, data, q)
+    names = ("solo/FL_KFE", "solo/HR_HAA", "box1/root_joint", "solo/root_joint")
+    joints = np.array([model.getJointId(name) for name in names])
+    rng, dt, x_scale = np.random.default_rng(4), 1e-3, 1.0
+    v, x = rng.normal(size=(2, model.nv))
+    speed = []
+    for w in (v, x):
+        pin.forwardKinematics(model, moved, q, w)
+        speed.append(np.array([np.linalg.norm(moved.v[j].angular) for j in joints.tolist()]))
+    expected = dt * (speed[0] + x_scale * speed[1])
+    turns = np.array([1.0, 1.0, 1.0, 1.0, expected[3] / 2])  # pair 3 reads the last: kept
+    pairs = np.array([0, 1, 2, 4])
+    turning(joint_jacobians(data), *Supports.of(model)[1:], pairs, joints, v, x, dt, x_scale, turns)
+    np.testing.assert_allclose(turns[[0, 1, 2]], expected[:3], rtol=1e-12)
+    assert turns[4] == expected[3] / 2 and turns[3] == 1.0
+
+
+def _without_sharpening(sim: gaussim.Simulator) -> gaussim.Simulator:
+    """``sim`` with every contact point the margin finds kept, and the turns of the levers."""
+    sim.detector.beyond_rest = lambda contacts: False  # type: ignore[method-assign]
+    sim.detector.sharpen = lambda *args: None  # type: ignore[method-assign]
+    return sim
+
+
+def test_points_a_fast_step_cannot_close_are_left_out_and_change_no_step(solo12):
+    """Solo-12 (every collision geometry) thrown spinning onto the ground at 12 m/s (a step closes
+    more than the base margin), its joints flailing: the margin widens to the fastest pair's travel;
+    the points that cannot close within a step (their own normal speed) are left out, as are the
+    patch points that a turn sharpened to the joints' angular speeds cannot bring down. A simulator
+    that keeps them all, stepped from each state of the run, finds the same v+ with more than twice
+    the points. (The velocity scheme's: the acceleration scheme's impacts change v within the step,
+    so it keeps every point, as the next test checks.)"""
+    scene = gaussim.Scene(solo12, ground=gaussim.Ground(friction=0.8))
+    sharp, full = gaussim.Simulator(scene), _without_sharpening(gaussim.Simulator(scene))
+    q0 = solo12.configuration("standing")
+    q0[2] += 0.15
+    v0 = np.random.default_rng(2).normal(scale=8.0, size=solo12.model.nv)
+    v0[:6] = 0.5, 0.0, -12.0, 3.0, -2.0, 1.0
+    state, kept, found, touching = sharp.reset(q0, v0), 0, 0, 0
+    for _ in range(150):
+        given = state
+        state = sharp.step(given)
+        v_full = full.step(given).v
+        np.testing.assert_allclose(state.v, v_full, atol=1e-6 * max(1.0, np.abs(v_full).max()))
+        kept, found = kept + len(sharp.last_step.contacts), found + len(full.last_step.contacts)
+        touching += bool(sharp.last_step.contacts)
+    assert touching > 50 and found > 2 * kept, (touching, kept, found)
+
+
+def test_the_acceleration_scheme_keeps_every_point_the_margin_finds(solo12):
+    """Its impacts change v within the step, so neither the points nor the patches are sharpened: a
+    fast landing widens the margin and never asks for either."""
+
+    def refused(*args):
+        raise AssertionError("the acceleration scheme sharpened a step")
+
+    scene = gaussim.Scene(solo12, ground=gaussim.Ground(friction=0.8))
+    sim = gaussim.Simulator(scene, gaussim.Options(scheme="acceleration"))
+    sim.detector.reachable = sim.detector.sharpen = refused  # type: ignore[method-assign]
+    q0 = solo12.configuration("standing")
+    q0[2] += 0.05
+    v0 = np.zeros(solo12.model.nv)
+    v0[2] = -12.0
+    state, widened = sim.reset(q0, v0), 0
+    for _ in range(20):
+        state = sim.step(state)
+        widened += bool(sim.last_step.contacts) and sim.detector.widened
+    assert widened > 3, widened

@@ -10,11 +10,13 @@ import coal
 import numpy as np
 import pinocchio as pin
 
+from ..dynamics import Supports, joint_jacobians
+from ..kernels.collision import closing
 from ..scene import Scene
 from .boxes import BoxPairs
 from .contacts import NO_CONTACTS, Contacts, Piece
 from .ground import GroundHulls
-from .margin import MarginSchedule
+from .margin import WIDENING, MarginSchedule
 from .narrow import NarrowPhase
 from .pairs import Pair
 from .primitives import PrimitivePairs
@@ -82,6 +84,7 @@ class ContactDetector:
         for k, pair in enumerate(self.pairs):
             groups.setdefault(routine_of(pair), []).append(k)
         self.schedule = MarginSchedule(scene.robot.model, self.pairs, margin, groups.get(GroundHulls, []))
+        self.supports = Supports.of(scene.robot.model)
         order = [*dict.fromkeys(ROUTINES.values()), NarrowPhase]
         self.routines = [routine(self.pairs, groups[routine]) for routine in order if routine in groups]
         self.friction = np.array([pair.friction for pair in self.pairs])
@@ -99,6 +102,48 @@ class ContactDetector:
     ) -> bool:
         """Whether a pair may be within the margin after this step (see :meth:`.MarginSchedule.cover`)."""
         return self.schedule.cover(v, x, dt, x_scale, reach)
+
+    @property
+    def widened(self) -> bool:
+        """Whether the margin exceeds what a point at rest needs (WIDENING times the base margin): a
+        fast pair widened it for all."""
+        return self.schedule.margin > WIDENING * self.schedule.base_margin
+
+    def beyond_rest(self, contacts: Contacts) -> bool:
+        """Whether some of ``contacts`` is farther than a point at rest keeps (WIDENING times the base
+        margin): only then can :meth:`reachable` leave points out."""
+        return len(contacts) > 0 and contacts.gap.max() > WIDENING * self.schedule.base_margin
+
+    def sharpen(self, data: pin.Data, v: np.ndarray, x: np.ndarray, dt: float, x_scale: float) -> None:
+        """Before :meth:`detect` in a step whose joint Jacobians are in data.J: the turns that deepen
+        the patches on the ground taken from the joints' angular velocities (see
+        :meth:`.MarginSchedule.sharpen_turns`)."""
+        self.schedule.sharpen_turns(joint_jacobians(data), self.supports, v, x, dt, x_scale)
+
+    def reachable(
+        self, contacts: Contacts, data: pin.Data, v: np.ndarray, x: np.ndarray, dt: float, x_scale: float
+    ) -> Contacts:
+        """The ``contacts`` the step can close: a gap within WIDENING times the base margin plus how far
+        the point itself can close (:func:`~gaussim.kernels.collision.closing`, at velocity v and free
+        velocity x, as in :meth:`cover`). The margin covers the fastest pair, so the points of slower
+        ones, and of bodies moving apart, would only add rows. Reads the joint Jacobians in data.J
+        (the step's Gauss problem posed)."""
+        far = np.empty(len(contacts))
+        closing(
+            joint_jacobians(data),
+            *self.supports,
+            contacts.joint,
+            contacts.other_joint,
+            contacts.point,
+            contacts.normal,
+            v,
+            x,
+            dt,
+            x_scale,
+            far,
+        )
+        keep = contacts.gap <= WIDENING * (self.schedule.base_margin + far)
+        return contacts if keep.all() else contacts.select(keep)
 
     def detect(self, data: pin.Data) -> Contacts:
         """Contacts at the placements held in ``data`` (after forward kinematics), in the order of the

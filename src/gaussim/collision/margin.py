@@ -5,9 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from ..dynamics import sparse_rows
-from ..kernels.collision import travel
+from ..dynamics import Supports, sparse_rows
+from ..kernels.collision import travel, turning
 from .pairs import Pair
+
+# The margin is this many times what the step needs: it changes by factors of this or more.
+WIDENING = 1.5
 
 
 class MarginSchedule:
@@ -49,6 +52,8 @@ class MarginSchedule:
             [_turn_levers(model, p) if k in read else np.zeros(model.nv) for k, p in enumerate(pairs)]
         )
         self._turning = bool(read)
+        self._turning_pairs = np.array(sorted(read), dtype=np.int64)
+        self._turning_joints = np.array([pairs[k].joint for k in sorted(read)], dtype=np.int64)
         # travel's per-pair closing, which only its maximum is read from
         self.turns, self._closing = np.zeros(len(pairs)), np.zeros(len(pairs))
         self.clearance = -np.inf
@@ -84,8 +89,16 @@ class MarginSchedule:
         self.clearance -= distance
         needed = self.base_margin + distance
         if needed > self.margin or (self.margin > self.base_margin and 3 * needed < self.margin):
-            self.margin = max(self.base_margin, 1.5 * needed)
+            self.margin = max(self.base_margin, WIDENING * needed)
         return not self.clearance > self.margin
+
+    def sharpen_turns(
+        self, J: np.ndarray, supports: Supports, v: np.ndarray, x: np.ndarray, dt: float, x_scale: float
+    ) -> None:
+        """Lower the turns of the last :meth:`cover` to what the joints' angular velocities at v and x
+        give (read from the joint Jacobians J (6, nv), WORLD): the levers' bound adds up the turns of
+        every joint of the chain, which a flailing limb's joints make many times too wide."""
+        turning(J, *supports[1:], self._turning_pairs, self._turning_joints, v, x, dt, x_scale, self.turns)
 
 
 def _turn_levers(model: pin.Model, pair: Pair) -> np.ndarray:

@@ -1,5 +1,6 @@
 """Compiled kernels of the collision stage: hulls on the ground plane (:mod:`gaussim.collision.ground`),
-the travel bound of the margin schedule (:mod:`gaussim.collision.margin`)."""
+the travel bound of the margin schedule and how far each contact point can close in a step
+(:mod:`gaussim.collision.margin`)."""
 
 from __future__ import annotations
 
@@ -204,3 +205,46 @@ def travel(starts, coordinates, levers, v, x, dt, x_scale, each):  # type: ignor
         each[k] = dt * total
         farthest = max(farthest, total)
     return dt * farthest
+
+
+@njit(cache=True)
+def closing(J, masks, starts, columns, joints, other_joints, points, normals, v, x, dt, x_scale, out):
+    """How far each contact point can close in a step, into ``out`` (m,) [m]: dt (max(0, -n . u(v)) +
+    max(0, -n . u(x_scale x))), u(w) the point's velocity relative to the other side at joint
+    velocity w, read from the joint Jacobians J (6, nv) as
+    :func:`~gaussim.kernels.dynamics.point_jacobians_into` reads them (``masks``, ``starts``,
+    ``columns``: :class:`gaussim.dynamics.Supports`)."""
+    for i in range(len(joints)):
+        px, py, pz = points[i, 0], points[i, 1], points[i, 2]
+        nx, ny, nz = normals[i, 0], normals[i, 1], normals[i, 2]
+        a, b = joints[i], other_joints[i]
+        along_v = along_x = 0.0
+        for joint in (a, b):
+            for c in range(starts[joint], starts[joint + 1]):
+                k = columns[c]
+                moving = masks[a, k] - masks[b, k]  # 0 on the chain the two share
+                normal_speed = moving * (
+                    nx * (J[0, k] + J[4, k] * pz - J[5, k] * py)
+                    + ny * (J[1, k] + J[5, k] * px - J[3, k] * pz)
+                    + nz * (J[2, k] + J[3, k] * py - J[4, k] * px)
+                )
+                along_v += normal_speed * v[k]
+                along_x += normal_speed * x[k]
+        out[i] = dt * (max(0.0, -along_v) + max(0.0, -x_scale * along_x))
+
+
+@njit(cache=True)
+def turning(J, starts, columns, pairs, joints, v, x, dt, x_scale, turns):
+    """Lower ``turns[pairs[t]]`` [rad] to dt (|w(v)| + x_scale |w(x)|), w the angular velocity of
+    joint ``joints[t]`` (a geometry on a fixed obstacle) at joint velocity v and x, read from the
+    joint Jacobians J (6, nv) over the joint's support (``starts``, ``columns``:
+    :class:`gaussim.dynamics.Supports`)."""
+    for t in range(len(pairs)):
+        j = joints[t]
+        vx = vy = vz = xx = xy = xz = 0.0
+        for c in range(starts[j], starts[j + 1]):
+            k = columns[c]
+            vx, vy, vz = vx + J[3, k] * v[k], vy + J[4, k] * v[k], vz + J[5, k] * v[k]
+            xx, xy, xz = xx + J[3, k] * x[k], xy + J[4, k] * x[k], xz + J[5, k] * x[k]
+        within = dt * (np.sqrt(vx * vx + vy * vy + vz * vz) + x_scale * np.sqrt(xx * xx + xy * xy + xz * xz))
+        turns[pairs[t]] = min(turns[pairs[t]], within)
