@@ -247,13 +247,14 @@ class Simulator:
         sharpen = self._sharpen and self.detector.widened
         if sharpen and self.dynamics.has_jacobians:
             self.detector.sharpen(self.data, v, x_free, dt, x_scale)
-        contacts = self.detector.detect(self.data)
-        report.mark("collision")
-        if sharpen and self.detector.beyond_rest(contacts):
+        found = self.detector.find(self.data)
+        if sharpen and self.detector.beyond_rest(found):
+            report.mark("collision")
             self.dynamics.problem()  # the Jacobians the step's rows need anyway
             report.mark("dynamics")
-            contacts = self.detector.reachable(contacts, self.data, v, x_free, dt, x_scale)
-            report.mark("collision")
+            found = self.detector.reachable(found, self.data, v, x_free, dt, x_scale)
+        contacts = self.detector.contacts(found)
+        report.mark("collision")
         return contacts
 
     def _advance(self, state: State, v_next: np.ndarray, report: StepReport) -> State:

@@ -69,6 +69,7 @@ NO_CONTACTS = Contacts(
 # (k, 3) [m], the unit normals from the obstacle towards the robot (k, 3), the gaps (k,) [m]. A plain
 # tuple: a step builds one per touching pair.
 Piece = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+NOTHING_FOUND: Piece = (np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0))
 
 
 def one_pair(pair: int, normal: np.ndarray, point: np.ndarray, gap: np.ndarray) -> Piece:

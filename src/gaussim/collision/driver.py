@@ -14,7 +14,7 @@ from ..dynamics import Supports, joint_jacobians
 from ..kernels.collision import closing
 from ..scene import Scene
 from .boxes import BoxPairs
-from .contacts import NO_CONTACTS, Contacts, Piece
+from .contacts import NO_CONTACTS, NOTHING_FOUND, Contacts, Piece
 from .ground import GroundHulls
 from .margin import WIDENING, MarginSchedule
 from .narrow import NarrowPhase
@@ -109,46 +109,43 @@ class ContactDetector:
         fast pair widened it for all."""
         return self.schedule.margin > WIDENING * self.schedule.base_margin
 
-    def beyond_rest(self, contacts: Contacts) -> bool:
-        """Whether some of ``contacts`` is farther than a point at rest keeps (WIDENING times the base
-        margin): only then can :meth:`reachable` leave points out."""
-        return len(contacts) > 0 and contacts.gap.max() > WIDENING * self.schedule.base_margin
+    def beyond_rest(self, found: Piece) -> bool:
+        """Whether some of the points ``found`` (:meth:`find`) is farther than a point at rest keeps
+        (WIDENING times the base margin): only then can :meth:`reachable` leave points out."""
+        gaps = found[3]
+        return len(gaps) > 0 and gaps.max() > WIDENING * self.schedule.base_margin
 
     def sharpen(self, data: pin.Data, v: np.ndarray, x: np.ndarray, dt: float, x_scale: float) -> None:
-        """Before :meth:`detect` in a step whose joint Jacobians are in data.J: the turns that deepen
+        """Before :meth:`find` in a step whose joint Jacobians are in data.J: the turns that deepen
         the patches on the ground taken from the joints' angular velocities (see
         :meth:`.MarginSchedule.sharpen_turns`)."""
         self.schedule.sharpen_turns(joint_jacobians(data), self.supports, v, x, dt, x_scale)
 
     def reachable(
-        self, contacts: Contacts, data: pin.Data, v: np.ndarray, x: np.ndarray, dt: float, x_scale: float
-    ) -> Contacts:
-        """The ``contacts`` the step can close: a gap within WIDENING times the base margin plus how far
-        the point itself can close (:func:`~gaussim.kernels.collision.closing`, at velocity v and free
-        velocity x, as in :meth:`cover`). The margin covers the fastest pair, so the points of slower
-        ones, and of bodies moving apart, would only add rows. Reads the joint Jacobians in data.J
-        (the step's Gauss problem posed)."""
-        far = np.empty(len(contacts))
-        closing(
-            joint_jacobians(data),
-            *self.supports,
-            contacts.joint,
-            contacts.other_joint,
-            contacts.point,
-            contacts.normal,
-            v,
-            x,
-            dt,
-            x_scale,
-            far,
-        )
-        keep = contacts.gap <= WIDENING * (self.schedule.base_margin + far)
-        return contacts if keep.all() else contacts.select(keep)
+        self, found: Piece, data: pin.Data, v: np.ndarray, x: np.ndarray, dt: float, x_scale: float
+    ) -> Piece:
+        """The points ``found`` (:meth:`find`) that the step can close: a gap within WIDENING times the
+        base margin plus how far the point itself can close (:func:`~gaussim.kernels.collision.closing`,
+        at velocity v and free velocity x, as in :meth:`cover`). The margin covers the fastest pair, so
+        the points of slower ones, and of bodies moving apart, would only add rows. Reads the joint
+        Jacobians in data.J (the step's Gauss problem posed)."""
+        owner, points, normals, gaps = found
+        far = np.empty(len(owner))
+        jacobians = joint_jacobians(data)
+        joints, others = self.joint[owner], self.other_joint[owner]
+        closing(jacobians, *self.supports, joints, others, points, normals, v, x, dt, x_scale, far)
+        keep = gaps <= WIDENING * (self.schedule.base_margin + far)
+        return found if keep.all() else (owner[keep], points[keep], normals[keep], gaps[keep])
 
     def detect(self, data: pin.Data) -> Contacts:
         """Contacts at the placements held in ``data`` (after forward kinematics), in the order of the
-        declared pairs; the least gap of all, a lower bound for the pairs coal answers, becomes the
-        schedule's clearance."""
+        declared pairs: :meth:`contacts` of :meth:`find`."""
+        return self.contacts(self.find(data))
+
+    def find(self, data: pin.Data) -> Piece:
+        """The points of every pair within the margin at the placements held in ``data``, in the order
+        of the declared pairs; the least gap of all, a lower bound for the pairs coal answers, becomes
+        the schedule's clearance."""
         pieces: list[Piece] = []
         least = []
         for routine in self.routines:
@@ -157,13 +154,18 @@ class ContactDetector:
             least.append(bound)
         self.schedule.clearance = min(least, default=np.inf)
         if not pieces:
-            return NO_CONTACTS
+            return NOTHING_FOUND
         if len(pieces) == 1:
-            owner, points, normals, gaps = pieces[0]
-        else:
-            owner, points, normals, gaps = (np.concatenate([p[i] for p in pieces]) for i in range(4))
-            order = np.argsort(owner, kind="stable")  # the declared order of the pairs
-            owner, points, normals, gaps = owner[order], points[order], normals[order], gaps[order]
+            return pieces[0]
+        owner, points, normals, gaps = (np.concatenate([p[i] for p in pieces]) for i in range(4))
+        order = np.argsort(owner, kind="stable")  # the declared order of the pairs
+        return owner[order], points[order], normals[order], gaps[order]
+
+    def contacts(self, found: Piece) -> Contacts:
+        """The :class:`Contacts` of the points ``found`` (:meth:`find`)."""
+        owner, points, normals, gaps = found
+        if not len(owner):
+            return NO_CONTACTS
         key = owner.tobytes()
         if key not in self._layouts:
             if len(self._layouts) > 1024:  # many pairs touching in ever new combinations

@@ -54,7 +54,7 @@ SIGNATURES = {
         f"f2F*{n} f1*{n} f2 f3 i2 i2 i1 i1 f2 f1 f1 f3 f f*2 f1 f1 i1" for n in (1, 2, 4, 5)
     ],
     "collision.travel": ["i1 i1 f1 f1r f1 f f f1"],
-    "collision.closing": [f"f2F f2 i1 i1 i1r i1r f2 f2 {v} f1 f f f1" for v in ("f1r", "f1")],
+    "collision.closing": [f"f2F f2 i1 i1 i1 i1 f2 f2 {v} f1 f f f1" for v in ("f1r", "f1")],
     "collision.turning": [f"f2F i1 i1 i1 i1 {v} f1 f f f1" for v in ("f1r", "f1")],
     "contact.unpacked": ["f1 i i"],
     "contact.pyramids": [
