@@ -13,6 +13,7 @@ import gaussim
 from gaussim.bench.cases import two_boxes
 from gaussim.collision import PATCH_MIN_EXTENT, PATCH_TOLERANCE, ContactDetector, driver
 from gaussim.collision.ground import GroundHulls, touching
+from gaussim.collision.margin import PairMotion
 from gaussim.collision.narrow import NarrowPhase
 from gaussim.collision.primitives import PrimitivePairs
 
@@ -114,12 +115,13 @@ def test_a_widened_patch_is_the_plain_statement_of_its_outline(solo12):
     # the hulls' pairs numbered from 3 (as among other pairs), so that hull k is not pair k
     index = routine.index + 3
     turns = np.random.default_rng(5).uniform(0.02, 0.2, index.max() + 1)
+    motion = PairMotion(turns, False, np.zeros((len(turns), 2, 6)), 0.0)
     widenings, wide = np.maximum(PATCH_TOLERANCE, turns[index] * routine.diameters), 0
     assert np.ptp(widenings) > 0.01 and (widenings == PATCH_TOLERANCE).any()
     for data in _random_poses(solo12, 20, seed=3):
         hulls.narrow_at[:] = np.nan  # no kept verdict: each pose is judged afresh
         (pairs, points, _, gaps), _ = touching(
-            *routine.placements(data), hulls, 10.0, index, turns, routine.diameters
+            *routine.placements(data), hulls, 10.0, index, motion, routine.diameters
         )
         rotations, translations = routine.placements(data)
         for k, pair in enumerate(index):
@@ -513,29 +515,77 @@ def test_how_far_a_contact_point_closes_is_its_normal_speed_by_finite_difference
     assert np.count_nonzero(far) >= 3  # some points close, on each kind of pair
 
 
-def test_the_turn_within_a_step_is_the_angular_speed_of_its_joint(solo12):
-    """The turning kernel lowers a pair's turn to dt (|w(v)| + x_scale |w(x)|), w Pinocchio's angular
-    velocity of the joint (forward kinematics at v and at x), and never raises it."""
+def test_the_motion_within_a_step_is_the_twist_of_its_joint(solo12):
+    """The motions kernel writes dt times Pinocchio's WORLD twist of each listed pair's joint at v, and
+    at x_scale x, and lowers the pair's turn to the sum of their angular parts' norms, never raising it."""
     from gaussim.dynamics import Supports, joint_jacobians
-    from gaussim.kernels.collision import turning
+    from gaussim.kernels.collision import motions_of
 
     sim, q = _world_of_solo_and_boxes(solo12)
     model, data, moved = sim.model, sim.model.createData(), sim.model.createData()
     pin.computeJointJacobians(model, data, q)
     names = ("solo/FL_KFE", "solo/HR_HAA", "box1/root_joint", "solo/root_joint")
     joints = np.array([model.getJointId(name) for name in names])
-    rng, dt, x_scale = np.random.default_rng(4), 1e-3, 1.0
-    v, x = rng.normal(size=(2, model.nv))
-    speed = []
-    for w in (v, x):
-        pin.forwardKinematics(model, moved, q, w)
-        speed.append(np.array([np.linalg.norm(moved.v[j].angular) for j in joints.tolist()]))
-    expected = dt * (speed[0] + x_scale * speed[1])
-    turns = np.array([1.0, 1.0, 1.0, 1.0, expected[3] / 2])  # pair 3 reads the last: kept
-    pairs = np.array([0, 1, 2, 4])
-    turning(joint_jacobians(data), *Supports.of(model)[1:], pairs, joints, v, x, dt, x_scale, turns)
-    np.testing.assert_allclose(turns[[0, 1, 2]], expected[:3], rtol=1e-12)
-    assert turns[4] == expected[3] / 2 and turns[3] == 1.0
+    rng, dt = np.random.default_rng(4), 1e-3
+    for x_scale in (1.0, dt):
+        v, x = rng.normal(size=(2, model.nv))
+        twists = []
+        for w in (v, x_scale * x):
+            pin.forwardKinematics(model, moved, q, w)
+            twists.append(
+                np.array([pin.getVelocity(model, moved, j, pin.WORLD).vector for j in joints.tolist()])
+            )
+        expected = dt * np.stack(twists, axis=1)  # (pairs, 2, 6)
+        turned = np.linalg.norm(expected[:, :, 3:], axis=2).sum(axis=1)
+        motions, turns = np.full((5, 2, 6), np.nan), np.array([1.0, 1.0, 1.0, 1.0, turned[3] / 2])
+        pairs = np.array([0, 1, 2, 4])  # pair 3 is no fixed obstacle's: untouched
+        motions_of(
+            joint_jacobians(data), *Supports.of(model)[1:], pairs, joints, v, x, dt, x_scale, motions, turns
+        )
+        np.testing.assert_allclose(motions[pairs], expected, rtol=1e-10, atol=1e-15)
+        np.testing.assert_allclose(turns[[0, 1, 2]], turned[:3], rtol=1e-12)
+        assert turns[4] == turned[3] / 2 and turns[3] == 1.0 and np.isnan(motions[3]).all()
+
+
+def test_a_sharpened_hull_looks_as_far_as_its_bounding_sphere_can_close(solo12):
+    """Every Solo-12 hull at random poses near the ground, each pair with a random motion within the
+    step: a sharpened pass finds a hull's contacts exactly when its gap is within WIDENING times the
+    base margin plus how far its bounding sphere can close (the centre's approach, at Pinocchio's
+    placement, and the radius times the turn, at both twists), when that is less than the margin."""
+    from gaussim.kernels.collision import WIDENING
+
+    scene = gaussim.Scene(solo12, ground=gaussim.Ground())
+    (routine,) = [r for r in ContactDetector(scene, 10.0).routines if isinstance(r, GroundHulls)]
+    hulls, index, rng = routine.hulls, routine.index, np.random.default_rng(8)
+    model, data = solo12.model, solo12.model.createData()
+    margin, base, kept, left_out = 0.1, 0.005, 0, 0
+    for _ in range(40):
+        q = solo12.configuration("standing")
+        q[2] = rng.uniform(0.15, 0.35)
+        q[3:7] = pin.Quaternion(pin.exp3(rng.normal(scale=0.3, size=3))).coeffs()
+        q[7:] += rng.normal(scale=0.5, size=12)
+        pin.forwardKinematics(model, data, q)
+        motions = rng.normal(scale=0.02, size=(index.max() + 1, 2, 6))
+        motion = PairMotion(np.zeros(index.max() + 1), True, motions, base)
+        hulls.narrow_at[:] = np.nan
+        (pairs, _, _, _), _ = touching(
+            *routine.placements(data), hulls, margin, index, motion, routine.diameters
+        )
+        rotations, translations = routine.placements(data)
+        for k, pair in enumerate(index.tolist()):
+            X = hulls.columns[k, :3, : hulls.sizes[k]]
+            gap = ((rotations[k] @ X)[2] + translations[k][2]).min() - hulls.rounding[k]
+            center = data.oMi[routine.pairs[k].joint].act(hulls.centers[k])
+            reach = 0.0
+            for w in range(2):
+                twist = pin.Motion(motions[pair, w])
+                reach += max(0.0, -(twist.linear + np.cross(twist.angular, center))[2])
+                reach += hulls.radii[k] * np.linalg.norm(twist.angular)
+            looks = min(margin, WIDENING * (base + reach))
+            assert (pair in pairs) == (gap <= looks), (k, gap, looks)
+            kept += gap <= looks
+            left_out += looks < gap <= margin
+    assert kept > 50 and left_out > 50, (kept, left_out)
 
 
 def _without_sharpening(sim: gaussim.Simulator) -> gaussim.Simulator:
@@ -584,8 +634,8 @@ def test_the_acceleration_scheme_keeps_every_point_the_margin_finds(solo12):
     q0[2] += 0.05
     v0 = np.zeros(solo12.model.nv)
     v0[2] = -12.0
-    state, widened = sim.reset(q0, v0), 0
+    state, fast = sim.reset(q0, v0), 0
     for _ in range(20):
         state = sim.step(state)
-        widened += bool(sim.last_step.contacts) and sim.detector.widened
-    assert widened > 3, widened
+        fast += bool(sim.last_step.contacts) and sim.detector.fast
+    assert fast > 3, fast

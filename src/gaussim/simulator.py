@@ -242,9 +242,9 @@ class Simulator:
         if not self.detector.cover(v, x_free, dt, x_scale, self.dynamics.reach):
             report.mark("collision")
             return NO_CONTACTS
-        # a fast step of the velocity scheme (the other's impacts change v within the step): the turns
-        # that deepen the patches from the joints' angular speeds, the points it cannot close left out
-        sharpen = self._sharpen and self.detector.widened
+        # a fast step of the velocity scheme (the other's impacts change v within the step): the pairs on
+        # the ground look as far as their joints' twists take them, the points it cannot close left out
+        sharpen = self._sharpen and self.detector.fast
         if sharpen and self.dynamics.has_jacobians:
             self.detector.sharpen(self.data, v, x_free, dt, x_scale)
         found = self.detector.find(self.data)

@@ -16,7 +16,7 @@ from ..scene import Scene
 from .boxes import BoxPairs
 from .contacts import NO_CONTACTS, NOTHING_FOUND, Contacts, Piece
 from .ground import GroundHulls
-from .margin import WIDENING, MarginSchedule
+from .margin import WIDENING, MarginSchedule, PairMotion
 from .narrow import NarrowPhase
 from .pairs import Pair
 from .primitives import PrimitivePairs
@@ -25,13 +25,13 @@ from .primitives import PrimitivePairs
 class Routine(Protocol):
     """A routine family: built once from the pairs it answers (``index`` into the declared pairs)."""
 
-    def detect(self, data: pin.Data, margin: float, turns: np.ndarray) -> tuple[list[Piece], float]:
+    def detect(self, data: pin.Data, margin: float, motion: PairMotion) -> tuple[list[Piece], float]:
         """The contacts of its pairs within ``margin`` [m] at the placements held in ``data``, and a
-        lower bound on every one of its pairs' gaps [m]. ``turns``: per declared pair, the most its
-        geometry may turn within the step [rad] (:class:`~.margin.MarginSchedule`): a polyhedron on
-        the ground whose turn times its size exceeds PATCH_TOLERANCE takes its patch that deep, the
-        points the turn can bring down (coal's patches, and the compiled pairs that reproduce them,
-        keep PATCH_TOLERANCE)."""
+        lower bound on every one of its pairs' gaps [m]. ``motion``: how the declared pairs may move
+        within the step (:class:`~.margin.PairMotion`): a polyhedron on the ground whose turn times
+        its size exceeds PATCH_TOLERANCE takes its patch that deep, the points the turn can bring
+        down (coal's patches, and the compiled pairs that reproduce them, keep PATCH_TOLERANCE), and
+        with a sharpened motion looks only as far as its own motion can close."""
         ...
 
 
@@ -104,10 +104,11 @@ class ContactDetector:
         return self.schedule.cover(v, x, dt, x_scale, reach)
 
     @property
-    def widened(self) -> bool:
-        """Whether the margin exceeds what a point at rest needs (WIDENING times the base margin): a
-        fast pair widened it for all."""
-        return self.schedule.margin > WIDENING * self.schedule.base_margin
+    def fast(self) -> bool:
+        """Whether the step may close a pair by more than the base margin (the levers' bound, as of the
+        last :meth:`cover`): the margin then covers the fastest pair, which :meth:`sharpen` and
+        :meth:`reachable` narrow down to each pair's and each point's own motion."""
+        return self.schedule.distance > self.schedule.base_margin
 
     def beyond_rest(self, found: Piece) -> bool:
         """Whether some of the points ``found`` (:meth:`find`) is farther than a point at rest keeps
@@ -116,10 +117,10 @@ class ContactDetector:
         return len(gaps) > 0 and gaps.max() > WIDENING * self.schedule.base_margin
 
     def sharpen(self, data: pin.Data, v: np.ndarray, x: np.ndarray, dt: float, x_scale: float) -> None:
-        """Before :meth:`find` in a step whose joint Jacobians are in data.J: the turns that deepen
-        the patches on the ground taken from the joints' angular velocities (see
-        :meth:`.MarginSchedule.sharpen_turns`)."""
-        self.schedule.sharpen_turns(joint_jacobians(data), self.supports, v, x, dt, x_scale)
+        """Before :meth:`find` in a step whose joint Jacobians are in data.J: the pairs on the ground
+        look as far, and their patches reach as deep, as their joints' twists can bring them (see
+        :meth:`.MarginSchedule.sharpen`)."""
+        self.schedule.sharpen(joint_jacobians(data), self.supports, v, x, dt, x_scale)
 
     def reachable(
         self, found: Piece, data: pin.Data, v: np.ndarray, x: np.ndarray, dt: float, x_scale: float
@@ -149,7 +150,7 @@ class ContactDetector:
         pieces: list[Piece] = []
         least = []
         for routine in self.routines:
-            found, bound = routine.detect(data, self.schedule.margin, self.schedule.turns)
+            found, bound = routine.detect(data, self.schedule.margin, self.schedule.motion)
             pieces += found
             least.append(bound)
         self.schedule.clearance = min(least, default=np.inf)

@@ -10,6 +10,8 @@ from numba import njit
 # A polyhedron on the ground found to touch at one point keeps that verdict while its orientation
 # cannot have brought a vertex this much closer to the ground than the deepest one [m].
 NARROW_SLACK = 2e-3
+# The detection margin is this many times what a step needs (see gaussim.collision.margin).
+WIDENING = 1.5
 
 
 @njit(cache=True)
@@ -26,11 +28,15 @@ def ground_hulls(
     turn2,
     rounding,
     directions,
-    margin,
+    margins,
     patch,
     turns,
     diameters,
     pair,
+    motions,
+    sharp,
+    centers,
+    radii,
 ):  # type: ignore[no-untyped-def]
     """The compiled pass of :func:`gaussim.collision.ground.touching` (the arrays of its ``Hulls``; updates
     ``deepest`` and ``narrow_at``): returns the contacts, hull by hull, as (pairs, points, normals, gaps),
@@ -41,13 +47,18 @@ def ground_hulls(
     other vertices down by (``pair[k]`` is its declared pair): its patch reaches that
     deep where it exceeds PATCH_TOLERANCE, and keeps the outline of the resting patch and the deepest
     vertex (a resting body's patch stays as it was, which bounds jitter of the bound would make
-    flicker).
+    flicker). ``margins``: (the margin, the base margin) [m]; with ``sharp``, ``motions`` (per declared
+    pair: how its joint moves within the step at v and at the free motion, WORLD twists times dt,
+    (2, 6)) bound how far hull k's bounding sphere (``centers[k]`` in its joint's frame, ``radii[k]``)
+    closes on the ground, and the hull looks for contacts within WIDENING times the base margin plus
+    that, when less than the margin.
 
     The deepest vertex is found by descent along the hull's edges from the last one: a vertex no
     neighbour of which is deeper is the deepest of a convex polyhedron (a linear function has no
     other local minimum on its vertex graph)."""
     count, size = columns.shape[0], columns.shape[2]
     base, extent = patch
+    widest, base_margin = margins
     c = np.empty(4)  # the ground seen from the joint: (n^T R, n^T p - height)
     order, world = np.empty(size, np.int64), np.empty((size, 3))
     picked = np.empty(2 * directions.shape[1] + 1, np.int64)
@@ -75,6 +86,10 @@ def ground_hulls(
         deepest[k] = i
         gap = lowest - rounding[k]
         least = min(least, gap)
+        margin = widest
+        if sharp:
+            reach = _closing(plane[k], R, p, centers[k], radii[k], motions[pair[k]])
+            margin = min(widest, WIDENING * (base_margin + reach))
         if gap > margin:
             continue
         tolerance = max(base, turns[pair[k]] * diameters[k])
@@ -108,6 +123,23 @@ def ground_hulls(
                 normals_out[out, j] = plane[k, j]
             out += 1
     return (pairs_out[:out], points_out[:out], normals_out[:out], gaps_out[:out]), least
+
+
+@njit(cache=True)
+def _closing(plane, R, p, center, radius, motion):  # type: ignore[no-untyped-def]
+    """How far a sphere (``center`` in the frame of a joint at (R, p), ``radius``) can close on the
+    ground ``plane`` in a step whose ``motion`` (2, 6) holds the joint's WORLD twists at v and at the
+    free motion, times dt: the sum over both of the centre's approach and the radius times the turn."""
+    cx = R[0, 0] * center[0] + R[0, 1] * center[1] + R[0, 2] * center[2] + p[0]
+    cy = R[1, 0] * center[0] + R[1, 1] * center[1] + R[1, 2] * center[2] + p[1]
+    cz = R[2, 0] * center[0] + R[2, 1] * center[1] + R[2, 2] * center[2] + p[2]
+    total = 0.0
+    for w in range(2):
+        vx, vy, vz, ax, ay, az = motion[w]
+        along = plane[0] * (vx + ay * cz - az * cy) + plane[1] * (vy + az * cx - ax * cz)
+        along += plane[2] * (vz + ax * cy - ay * cx)
+        total += max(0.0, -along) + radius * np.sqrt(ax * ax + ay * ay + az * az)
+    return total
 
 
 @njit(cache=True, inline="always")
@@ -234,17 +266,23 @@ def closing(J, masks, starts, columns, joints, other_joints, points, normals, v,
 
 
 @njit(cache=True)
-def turning(J, starts, columns, pairs, joints, v, x, dt, x_scale, turns):
-    """Lower ``turns[pairs[t]]`` [rad] to dt (|w(v)| + x_scale |w(x)|), w the angular velocity of
-    joint ``joints[t]`` (a geometry on a fixed obstacle) at joint velocity v and x, read from the
-    joint Jacobians J (6, nv) over the joint's support (``starts``, ``columns``:
-    :class:`gaussim.dynamics.Supports`)."""
+def motions_of(J, starts, columns, pairs, joints, v, x, dt, x_scale, motions, turns):  # type: ignore[no-untyped-def]
+    """For each listed pair ``pairs[t]`` of a geometry (on joint ``joints[t]``) and a fixed obstacle:
+    its joint's WORLD twists at v and at x_scale x, times dt, into ``motions[pairs[t]]`` (2, 6)
+    (linear at the world's origin, angular; read from the joint Jacobians J (6, nv) over the joint's
+    support: ``starts``, ``columns`` of :class:`gaussim.dynamics.Supports`), and the turn they make,
+    the sum of their angular parts' norms [rad], into ``turns[pairs[t]]`` where less."""
     for t in range(len(pairs)):
-        j = joints[t]
-        vx = vy = vz = xx = xy = xz = 0.0
+        j, motion = joints[t], motions[pairs[t]]
+        motion[:] = 0.0
         for c in range(starts[j], starts[j + 1]):
             k = columns[c]
-            vx, vy, vz = vx + J[3, k] * v[k], vy + J[4, k] * v[k], vz + J[5, k] * v[k]
-            xx, xy, xz = xx + J[3, k] * x[k], xy + J[4, k] * x[k], xz + J[5, k] * x[k]
-        within = dt * (np.sqrt(vx * vx + vy * vy + vz * vz) + x_scale * np.sqrt(xx * xx + xy * xy + xz * xz))
-        turns[pairs[t]] = min(turns[pairs[t]], within)
+            for r in range(6):
+                motion[0, r] += J[r, k] * v[k]
+                motion[1, r] += J[r, k] * x[k]
+        motion[0] *= dt
+        motion[1] *= dt * x_scale
+        turn = np.sqrt(motion[0, 3] ** 2 + motion[0, 4] ** 2 + motion[0, 5] ** 2) + np.sqrt(
+            motion[1, 3] ** 2 + motion[1, 4] ** 2 + motion[1, 5] ** 2
+        )
+        turns[pairs[t]] = min(turns[pairs[t]], turn)
