@@ -17,7 +17,6 @@ from gaussim.bench.scenes import bin_pile
 from gaussim.collision import ContactDetector, driver
 from gaussim.collision.boxes import BoxPairs
 from gaussim.collision.ground import GroundHulls
-from gaussim.collision.margin import PairMotion
 from gaussim.collision.narrow import NarrowPhase
 from gaussim.collision.primitives import PrimitivePairs
 
@@ -29,7 +28,7 @@ AGREEMENT = 1e-9
 EPA_AGREEMENT = 1e-8
 NORMAL_AGREEMENT = 1e-6
 MARGIN = 1e-3
-STILL = PairMotion.still(1)  # no pair turns within the step (the routines read one pair's entry)
+STILL = np.zeros(1)  # no pair turns within the step (the routines read one pair's entry)
 HALF_A, HALF_B = np.array([0.05, 0.04, 0.03]), np.array([0.1, 0.06, 0.05])
 
 
@@ -444,7 +443,6 @@ def test_the_bin_pile_steps_as_with_coal(monkeypatch):
         def checked(data: pin.Data):
             answer = find(data)
             compiled.schedule.margin = reference.schedule.margin
-            compiled.schedule.motion = reference.schedule.motion  # the step's, sharpened or not
             expected, found = reference.contacts(answer), compiled.detect(data)
             assert found.names == expected.names, (len(compared), set(found.names) ^ set(expected.names))
             np.testing.assert_allclose(found.point, expected.point, atol=GJK_AGREEMENT)

@@ -23,6 +23,7 @@ import pinocchio as pin
 
 from .actuation import Actuation
 from .collision import NO_CONTACTS, ContactDetector, Contacts
+from .collision.contacts import NOTHING_FOUND, Piece
 from .constraints import BilateralModule, ContactModule, LimitModule, checked_modules
 from .constraints.base import ConstraintModule
 from .dynamics import DynamicsStage
@@ -66,7 +67,10 @@ class Simulator:
         self.last_step: StepReport | None = None
         self._last_state: State | None = None  # the state the last step returned: already valid
         self._rigid_bases = bool(self.dynamics.bases.rigid.any())
-        self._sharpen = not self.scheme.acceleration  # see _detect
+        self._narrow = not self.scheme.acceleration  # see _detect
+        # the step's points, and those it left out (see _detect)
+        self._found: Piece = NOTHING_FOUND
+        self._left_out: Piece | None = None
         self._scratch = np.zeros(self.model.nv)  # the step's dt v+, read by Pinocchio's integrate
         self._unit_parts = _unit_parts(self.model)
 
@@ -214,6 +218,8 @@ class Simulator:
         x_free = self._free_motion(state, torque, tau, report)
         contacts = self._detect(state.v, x_free, report)
         v_next = self.scheme.next_velocity(state, torque, x_free, contacts, report)
+        if self._reaches_left_out(v_next):
+            report, v_next = self._again(state, torque, x_free)
         return self._advance(state, v_next, report)
 
     def _admit(self, state: State) -> None:
@@ -234,7 +240,11 @@ class Simulator:
         return x_free
 
     def _detect(self, v: np.ndarray, x_free: np.ndarray, report: StepReport) -> Contacts:
-        """The contacts, when the step's motion may have brought a pair within its margin."""
+        """The contacts, when the step's motion may have brought a pair within its margin; in a fast
+        step of the velocity scheme, only the points the step can close (the others are kept in
+        ``_left_out``, the points found in ``_found``). The acceleration scheme's impacts change v
+        within the step: it keeps every point."""
+        self._left_out = None
         if not self.detector:
             return NO_CONTACTS
         dt = self.options.dt
@@ -242,20 +252,30 @@ class Simulator:
         if not self.detector.cover(v, x_free, dt, x_scale, self.dynamics.reach):
             report.mark("collision")
             return NO_CONTACTS
-        # a fast step of the velocity scheme (the other's impacts change v within the step): the pairs on
-        # the ground look as far as their joints' twists take them, the points it cannot close left out
-        sharpen = self._sharpen and self.detector.fast
-        if sharpen and self.dynamics.has_jacobians:
-            self.detector.sharpen(self.data, v, x_free, dt, x_scale)
-        found = self.detector.find(self.data)
-        if sharpen and self.detector.beyond_rest(found):
+        found = self._found = self.detector.find(self.data)
+        if self._narrow and self.detector.fast and self.detector.beyond_rest(found):
             report.mark("collision")
             self.dynamics.problem()  # the Jacobians the step's rows need anyway
             report.mark("dynamics")
-            found = self.detector.reachable(found, self.data, v, x_free, dt, x_scale)
+            found, left_out = self.detector.reachable(found, self.data, v, x_free, dt, x_scale)
+            self._left_out = left_out if len(left_out[0]) else None
         contacts = self.detector.contacts(found)
         report.mark("collision")
         return contacts
+
+    def _reaches_left_out(self, v_next: np.ndarray) -> bool:
+        """Whether the step's answer v+ reaches a point :meth:`_detect` left out."""
+        if self._left_out is None or self.detector is None:
+            return False
+        return not self.detector.kept_apart(self._left_out, self.data, v_next, self.options.dt)
+
+    def _again(self, state: State, torque: np.ndarray, x_free: np.ndarray) -> tuple[StepReport, np.ndarray]:
+        """The step solved again with every point its detection found: its answer reached one that it
+        had left out as out of reach (a push elsewhere on that point's body)."""
+        assert self.detector is not None  # only a step that detected leaves points out
+        report = StepReport(state.t, self.options.timings)
+        contacts = self.detector.contacts(self._found)
+        return report, self.scheme.next_velocity(state, torque, x_free, contacts, report)
 
     def _advance(self, state: State, v_next: np.ndarray, report: StepReport) -> State:
         """The next state: q moved by dt v+ on each joint's manifold."""

@@ -9,7 +9,6 @@ import pinocchio as pin
 from numba import njit
 
 from .contacts import Piece, one_pair
-from .margin import PairMotion
 from .narrow import BoundingSpheres, NarrowPhase
 from .pairs import Pair
 
@@ -45,9 +44,9 @@ class CompiledPairs:
             [[p.local.translation, _other_placement(p).translation] for p in self.pairs]
         ).reshape(-1, 2, 3)
 
-    def detect(self, data: pin.Data, margin: float, motion: PairMotion) -> tuple[list[Piece], float]:
+    def detect(self, data: pin.Data, margin: float, turns: np.ndarray) -> tuple[list[Piece], float]:
         """The contacts of the pairs within ``margin`` [m] at the placements held in ``data``, and a
-        lower bound on every pair's gap [m] (``motion`` unused: these patches keep PATCH_TOLERANCE)."""
+        lower bound on every pair's gap [m] (``turns`` unused: these patches keep PATCH_TOLERANCE)."""
         apart = self.spheres.gaps(data, margin)
         far = apart > margin
         clearance = float(apart[far].min(initial=np.inf))

@@ -16,7 +16,7 @@ from ..scene import Scene
 from .boxes import BoxPairs
 from .contacts import NO_CONTACTS, NOTHING_FOUND, Contacts, Piece
 from .ground import GroundHulls
-from .margin import WIDENING, MarginSchedule, PairMotion
+from .margin import WIDENING, MarginSchedule
 from .narrow import NarrowPhase
 from .pairs import Pair
 from .primitives import PrimitivePairs
@@ -25,13 +25,13 @@ from .primitives import PrimitivePairs
 class Routine(Protocol):
     """A routine family: built once from the pairs it answers (``index`` into the declared pairs)."""
 
-    def detect(self, data: pin.Data, margin: float, motion: PairMotion) -> tuple[list[Piece], float]:
+    def detect(self, data: pin.Data, margin: float, turns: np.ndarray) -> tuple[list[Piece], float]:
         """The contacts of its pairs within ``margin`` [m] at the placements held in ``data``, and a
-        lower bound on every one of its pairs' gaps [m]. ``motion``: how the declared pairs may move
-        within the step (:class:`~.margin.PairMotion`): a polyhedron on the ground whose turn times
-        its size exceeds PATCH_TOLERANCE takes its patch that deep, the points the turn can bring
-        down (coal's patches, and the compiled pairs that reproduce them, keep PATCH_TOLERANCE), and
-        with a sharpened motion looks only as far as its own motion can close."""
+        lower bound on every one of its pairs' gaps [m]. ``turns``: per declared pair, the most its
+        geometry may turn within the step [rad] (:class:`~.margin.MarginSchedule`): a polyhedron on
+        the ground whose turn times its size exceeds PATCH_TOLERANCE takes its patch that deep, the
+        points the turn can bring down (coal's patches, and the compiled pairs that reproduce them,
+        keep PATCH_TOLERANCE)."""
         ...
 
 
@@ -105,9 +105,9 @@ class ContactDetector:
 
     @property
     def fast(self) -> bool:
-        """Whether the step may close a pair by more than the base margin (the levers' bound, as of the
-        last :meth:`cover`): the margin then covers the fastest pair, which :meth:`sharpen` and
-        :meth:`reachable` narrow down to each pair's and each point's own motion."""
+        """Whether the step may close a pair by more than the base margin (as of the last :meth:`cover`):
+        the margin then covers the fastest pair, and :meth:`reachable` narrows it down to each point's
+        own motion."""
         return self.schedule.distance > self.schedule.base_margin
 
     def beyond_rest(self, found: Piece) -> bool:
@@ -116,27 +116,40 @@ class ContactDetector:
         gaps = found[3]
         return len(gaps) > 0 and gaps.max() > WIDENING * self.schedule.base_margin
 
-    def sharpen(self, data: pin.Data, v: np.ndarray, x: np.ndarray, dt: float, x_scale: float) -> None:
-        """Before :meth:`find` in a step whose joint Jacobians are in data.J: the pairs on the ground
-        look as far, and their patches reach as deep, as their joints' twists can bring them (see
-        :meth:`.MarginSchedule.sharpen`)."""
-        self.schedule.sharpen(joint_jacobians(data), self.supports, v, x, dt, x_scale)
-
     def reachable(
         self, found: Piece, data: pin.Data, v: np.ndarray, x: np.ndarray, dt: float, x_scale: float
-    ) -> Piece:
-        """The points ``found`` (:meth:`find`) that the step can close: a gap within WIDENING times the
-        base margin plus how far the point itself can close (:func:`~gaussim.kernels.collision.closing`,
-        at velocity v and free velocity x, as in :meth:`cover`). The margin covers the fastest pair, so
-        the points of slower ones, and of bodies moving apart, would only add rows. Reads the joint
-        Jacobians in data.J (the step's Gauss problem posed)."""
-        owner, points, normals, gaps = found
+    ) -> tuple[Piece, Piece]:
+        """The points ``found`` (:meth:`find`) that the step can close, and the others: a gap within
+        WIDENING times the base margin plus how far the point itself can close at velocity v and at
+        the free motion x (:func:`~gaussim.kernels.collision.closing`, which counts the friction
+        pyramid's rows too). The margin covers the fastest pair, so the points of slower ones, and of
+        bodies moving apart, would only add rows; the step's answer v+ can still reach one (a push
+        elsewhere on its body), which :meth:`kept_apart` checks. Reads the joint Jacobians in data.J
+        (the step's Gauss problem posed)."""
+        far = self._closing(found, data, v, x, dt, x_scale)
+        keep = found[3] <= WIDENING * (self.schedule.base_margin + far)
+        if keep.all():
+            return found, NOTHING_FOUND
+        apart = ~keep
+        return tuple(a[keep] for a in found), tuple(a[apart] for a in found)  # type: ignore[return-value]
+
+    def kept_apart(self, left_out: Piece, data: pin.Data, v_next: np.ndarray, dt: float) -> bool:
+        """Whether the points ``left_out`` by :meth:`reachable` stay apart at the step's answer v+: each
+        of their rows holds at v+, so the Gauss problem with them has the same answer."""
+        far = self._closing(left_out, data, v_next, np.zeros(len(v_next)), dt, 0.0)
+        return bool(np.all(far < left_out[3]))
+
+    def _closing(
+        self, found: Piece, data: pin.Data, v: np.ndarray, x: np.ndarray, dt: float, x_scale: float
+    ) -> np.ndarray:
+        """:func:`~gaussim.kernels.collision.closing` of the points ``found``."""
+        owner, points, normals, _ = found
         far = np.empty(len(owner))
-        jacobians = joint_jacobians(data)
-        joints, others = self.joint[owner], self.other_joint[owner]
-        closing(jacobians, *self.supports, joints, others, points, normals, v, x, dt, x_scale, far)
-        keep = gaps <= WIDENING * (self.schedule.base_margin + far)
-        return found if keep.all() else (owner[keep], points[keep], normals[keep], gaps[keep])
+        joints, others, mu = self.joint[owner], self.other_joint[owner], self.friction[owner]
+        closing(
+            joint_jacobians(data), *self.supports, joints, others, points, normals, mu, v, x, dt, x_scale, far
+        )
+        return far
 
     def detect(self, data: pin.Data) -> Contacts:
         """Contacts at the placements held in ``data`` (after forward kinematics), in the order of the
@@ -150,7 +163,7 @@ class ContactDetector:
         pieces: list[Piece] = []
         least = []
         for routine in self.routines:
-            found, bound = routine.detect(data, self.schedule.margin, self.schedule.motion)
+            found, bound = routine.detect(data, self.schedule.margin, self.schedule.turns)
             pieces += found
             least.append(bound)
         self.schedule.clearance = min(least, default=np.inf)

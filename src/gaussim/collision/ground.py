@@ -16,7 +16,6 @@ import pinocchio as pin
 
 from ..kernels.collision import NARROW_SLACK, ground_hulls
 from .contacts import PATCH_MIN_EXTENT, PATCH_TOLERANCE, Piece
-from .margin import PairMotion
 from .pairs import JointPlacements, Pair
 
 # A flat face on the ground is supported by the vertices extreme along these many directions of
@@ -44,7 +43,6 @@ class Hulls(NamedTuple):
         deepest: where each search for the deepest vertex starts (updated by each pass), (P,).
         narrow_at: the ground normal, in the joint frame, of each one-point verdict, NaN where none
             is kept (updated by each pass), shape (P, 3).
-        centers, radii: each hull's bounding sphere, in its joint's frame, shapes (P, 3), (P,) [m].
     """
 
     plane: np.ndarray
@@ -57,8 +55,6 @@ class Hulls(NamedTuple):
     turn2: np.ndarray
     deepest: np.ndarray
     narrow_at: np.ndarray
-    centers: np.ndarray
-    radii: np.ndarray
 
 
 class GroundHulls:
@@ -92,13 +88,12 @@ class GroundHulls:
         offsets = vertices - vertices.mean(axis=2, keepdims=True)
         self.diameters = 2.0 * np.sqrt((offsets**2).sum(axis=1)).max(axis=1, initial=0.0)
 
-    def detect(self, data: pin.Data, margin: float, motion: PairMotion) -> tuple[list[Piece], float]:
+    def detect(self, data: pin.Data, margin: float, turns: np.ndarray) -> tuple[list[Piece], float]:
         """The contacts of the hulls within ``margin`` [m] of the ground at the placements held in
-        ``data`` (each patch as deep as its pair's turn in ``motion`` [rad] times the hull's diameter,
-        where that exceeds PATCH_TOLERANCE; a sharpened motion's hull looks only as far as its own can
-        close: see :class:`~.driver.Routine`), and the least gap of all the hulls [m]."""
-        placements = self.placements(data)
-        found, least = touching(*placements, self.hulls, margin, self.index, motion, self.diameters)
+        ``data`` (each patch as deep as its pair's turn in ``turns`` [rad] times the hull's diameter,
+        where that exceeds PATCH_TOLERANCE: see :class:`~.driver.Routine`), and the least gap of all
+        the hulls [m]."""
+        found, least = touching(*self.placements(data), self.hulls, margin, self.index, turns, self.diameters)
         return ([found] if len(found[0]) else []), least
 
 
@@ -108,15 +103,14 @@ def touching(
     hulls: Hulls,
     margin: float,
     index: np.ndarray,
-    motion: PairMotion,
+    turns: np.ndarray,
     diameters: np.ndarray,
 ) -> tuple[Piece, float]:
     """One compiled pass over the hulls (:func:`~gaussim.kernels.collision.ground_hulls`, which updates
     ``hulls.deepest`` and ``hulls.narrow_at``) at their joints' placements (P rotations (3, 3), translations
-    (3,)), for the contacts within ``margin`` [m] (a sharpened ``motion``'s hull: within WIDENING times
-    its base margin plus how far the hull can close, when less), each hull's patch max(PATCH_TOLERANCE,
-    its pair's turn in ``motion`` [rad] times its diameter in ``diameters`` (P,) [m]) deep; ``index``:
-    the declared pair of each hull, shape (P,).
+    (3,)), for the contacts within ``margin`` [m], each hull's patch max(PATCH_TOLERANCE, its pair's turn
+    in ``turns`` [rad] times its diameter in ``diameters`` (P,) [m]) deep; ``index``: the declared pair
+    of each hull, shape (P,).
     Returns: the contacts of the hulls (a :data:`Piece`, hull by hull) and the least gap of all the
     hulls [m]."""
     return ground_hulls(  # type: ignore[no-any-return]
@@ -132,15 +126,11 @@ def touching(
         hulls.turn2,
         hulls.rounding,
         hulls.directions,
-        (margin, motion.base_margin),
+        margin,
         (PATCH_TOLERANCE, PATCH_MIN_EXTENT),
-        motion.turns,
+        turns,
         diameters,
         index,
-        motion.motions,
-        motion.sharp,
-        hulls.centers,
-        hulls.radii,
     )
 
 
@@ -176,8 +166,6 @@ def _hulls(pairs: list[Pair]) -> Hulls:
         turn2=np.array([(NARROW_SLACK / (2.0 * r)) ** 2 if r > 0 else np.inf for r in reach]),
         deepest=np.zeros(len(pairs), dtype=np.int64),
         narrow_at=np.full((len(pairs), 3), np.nan),
-        centers=np.array([p.center for p in pairs]).reshape(len(pairs), 3),
-        radii=np.array([p.radius for p in pairs], dtype=float),
     )
 
 

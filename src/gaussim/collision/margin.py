@@ -2,38 +2,15 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 import pinocchio as pin
 
-from ..dynamics import Supports, sparse_rows
-from ..kernels.collision import WIDENING, motions_of, travel
+from ..dynamics import sparse_rows
+from ..kernels.collision import travel
 from .pairs import Pair
 
-
-@dataclass
-class PairMotion:
-    """How the declared pairs may move within the step, as the detection routines read it.
-
-    Attributes:
-        turns: per pair, the most its geometry may turn within the step [rad] (see
-            :meth:`MarginSchedule.cover`, :meth:`MarginSchedule.sharpen`).
-        sharp: whether ``motions`` hold this step's (:meth:`MarginSchedule.sharpen`).
-        motions: per pair on a fixed obstacle, its joint's WORLD twists at v and at the free motion
-            times dt, shape (pairs, 2, 6) [m, rad].
-        base_margin: the margin a point at rest needs [m].
-    """
-
-    turns: np.ndarray
-    sharp: bool
-    motions: np.ndarray
-    base_margin: float
-
-    @classmethod
-    def still(cls, pairs: int, base_margin: float = 0.0) -> PairMotion:
-        """No pair turning, nothing sharpened."""
-        return cls(np.zeros(pairs), False, np.zeros((pairs, 2, 6)), base_margin)
+# The margin is this many times what the step needs: it changes by factors of this or more.
+WIDENING = 1.5
 
 
 class MarginSchedule:
@@ -60,13 +37,12 @@ class MarginSchedule:
         turn_levers: per pair and velocity coordinate, how fast (at most) the pair's robot geometry
             turns per unit of |v_k| [rad/s per unit], in the same CSR form (its joint chain's angular
             parts; for two robot geometries, their sum: how fast they turn relative to each other).
-        motion: how the pairs may move within the step (:class:`PairMotion`; its turns as of the last
-            :meth:`cover` that looked, or :meth:`sharpen`; 0 before, and for the pairs no routine
-            reads them of).
+        turns: per pair, the most it may turn within the step [rad], as of the last :meth:`cover`
+            that looked (0 before, and for the pairs no routine reads it of).
         clearance: the least gap of the last detection less what the pairs may have closed since
             [m] (-inf: unknown, so the next detection runs).
         distance: the farthest the pairs may close within the step, as of the last :meth:`cover`
-            that looked [m] (the levers' bound).
+            that looked [m].
     """
 
     def __init__(self, model: pin.Model, pairs: list[Pair], margin: float, turning: list[int]) -> None:
@@ -78,16 +54,14 @@ class MarginSchedule:
             [_turn_levers(model, p) if k in read else np.zeros(model.nv) for k, p in enumerate(pairs)]
         )
         self._turning = bool(read)
-        self._turning_pairs = np.array(sorted(read), dtype=np.int64)
-        self._turning_joints = np.array([pairs[k].joint for k in sorted(read)], dtype=np.int64)
-        self.motion = PairMotion.still(len(pairs), margin)
-        self._closing = np.zeros(len(pairs))  # travel's per-pair closing, which only its maximum is read from
+        # travel's per-pair closing, which only its maximum is read from
+        self.turns, self._closing = np.zeros(len(pairs)), np.zeros(len(pairs))
         self.distance = 0.0
         self.clearance = -np.inf
 
     def forget(self) -> None:
         """Detect afresh at the next step: the configuration did not come from the last one's motion."""
-        self.clearance, self.motion.sharp = -np.inf, False
+        self.clearance = -np.inf
 
     def cover(
         self, v: np.ndarray, x: np.ndarray, dt: float, x_scale: float, reach: float | None = None
@@ -111,27 +85,14 @@ class MarginSchedule:
                 self.clearance -= coarse
                 return False
         distance = travel(*self.levers, v, x, dt, x_scale, self._closing)
-        self.motion.sharp = False
         if self._turning:
-            travel(*self.turn_levers, v, x, dt, x_scale, self.motion.turns)
+            travel(*self.turn_levers, v, x, dt, x_scale, self.turns)
         self.clearance -= distance
         self.distance = distance
         needed = self.base_margin + distance
         if needed > self.margin or (self.margin > self.base_margin and 3 * needed < self.margin):
             self.margin = max(self.base_margin, WIDENING * needed)
         return not self.clearance > self.margin
-
-    def sharpen(
-        self, J: np.ndarray, supports: Supports, v: np.ndarray, x: np.ndarray, dt: float, x_scale: float
-    ) -> None:
-        """After :meth:`cover`: the motions of the pairs on the ground from their joints' twists at v
-        and x (read from the joint Jacobians J (6, nv), WORLD), and their turns lowered to what those
-        give: the levers' bound adds up the turns and speeds of every joint of the chain, which a
-        flailing limb's joints make many times too wide (see :class:`PairMotion`)."""
-        motion = self.motion
-        pairs, joints = self._turning_pairs, self._turning_joints
-        motions_of(J, *supports[1:], pairs, joints, v, x, dt, x_scale, motion.motions, motion.turns)
-        motion.sharp = True
 
 
 def _turn_levers(model: pin.Model, pair: Pair) -> np.ndarray:

@@ -10,7 +10,6 @@ from numba import njit
 from ..exceptions import ContactError
 from ..linalg import finite
 from .contacts import PATCH_MIN_EXTENT, PATCH_TOLERANCE, Piece, one_pair
-from .margin import PairMotion
 from .pairs import JointPlacements, Pair
 
 
@@ -39,9 +38,9 @@ class NarrowPhase:
         self.patch_result = coal.ContactPatchResult(self.patch_request)
         self.spheres = BoundingSpheres(self.pairs)
 
-    def detect(self, data: pin.Data, margin: float, motion: PairMotion) -> tuple[list[Piece], float]:
+    def detect(self, data: pin.Data, margin: float, turns: np.ndarray) -> tuple[list[Piece], float]:
         """The contacts of the pairs within ``margin`` [m] at the placements held in ``data``, and a
-        lower bound on every pair's gap [m] (``motion`` unused: these patches keep PATCH_TOLERANCE)."""
+        lower bound on every pair's gap [m] (``turns`` unused: these patches keep PATCH_TOLERANCE)."""
         self.use_margin(margin)
         apart = self.spheres.gaps(data, margin)
         far = apart > margin

@@ -1,6 +1,6 @@
 """Compiled kernels of the collision stage: hulls on the ground plane (:mod:`gaussim.collision.ground`),
-the travel bound of the margin schedule and how far each contact point can close in a step
-(:mod:`gaussim.collision.margin`)."""
+the travel bound of the margin schedule (:mod:`gaussim.collision.margin`), and how far a contact
+point can close in a step (:class:`gaussim.collision.ContactDetector`)."""
 
 from __future__ import annotations
 
@@ -10,8 +10,6 @@ from numba import njit
 # A polyhedron on the ground found to touch at one point keeps that verdict while its orientation
 # cannot have brought a vertex this much closer to the ground than the deepest one [m].
 NARROW_SLACK = 2e-3
-# The detection margin is this many times what a step needs (see gaussim.collision.margin).
-WIDENING = 1.5
 
 
 @njit(cache=True)
@@ -28,15 +26,11 @@ def ground_hulls(
     turn2,
     rounding,
     directions,
-    margins,
+    margin,
     patch,
     turns,
     diameters,
     pair,
-    motions,
-    sharp,
-    centers,
-    radii,
 ):  # type: ignore[no-untyped-def]
     """The compiled pass of :func:`gaussim.collision.ground.touching` (the arrays of its ``Hulls``; updates
     ``deepest`` and ``narrow_at``): returns the contacts, hull by hull, as (pairs, points, normals, gaps),
@@ -47,18 +41,13 @@ def ground_hulls(
     other vertices down by (``pair[k]`` is its declared pair): its patch reaches that
     deep where it exceeds PATCH_TOLERANCE, and keeps the outline of the resting patch and the deepest
     vertex (a resting body's patch stays as it was, which bounds jitter of the bound would make
-    flicker). ``margins``: (the margin, the base margin) [m]; with ``sharp``, ``motions`` (per declared
-    pair: how its joint moves within the step at v and at the free motion, WORLD twists times dt,
-    (2, 6)) bound how far hull k's bounding sphere (``centers[k]`` in its joint's frame, ``radii[k]``)
-    closes on the ground, and the hull looks for contacts within WIDENING times the base margin plus
-    that, when less than the margin.
+    flicker).
 
     The deepest vertex is found by descent along the hull's edges from the last one: a vertex no
     neighbour of which is deeper is the deepest of a convex polyhedron (a linear function has no
     other local minimum on its vertex graph)."""
     count, size = columns.shape[0], columns.shape[2]
     base, extent = patch
-    widest, base_margin = margins
     c = np.empty(4)  # the ground seen from the joint: (n^T R, n^T p - height)
     order, world = np.empty(size, np.int64), np.empty((size, 3))
     picked = np.empty(2 * directions.shape[1] + 1, np.int64)
@@ -86,10 +75,6 @@ def ground_hulls(
         deepest[k] = i
         gap = lowest - rounding[k]
         least = min(least, gap)
-        margin = widest
-        if sharp:
-            reach = _closing(plane[k], R, p, centers[k], radii[k], motions[pair[k]])
-            margin = min(widest, WIDENING * (base_margin + reach))
         if gap > margin:
             continue
         tolerance = max(base, turns[pair[k]] * diameters[k])
@@ -123,23 +108,6 @@ def ground_hulls(
                 normals_out[out, j] = plane[k, j]
             out += 1
     return (pairs_out[:out], points_out[:out], normals_out[:out], gaps_out[:out]), least
-
-
-@njit(cache=True)
-def _closing(plane, R, p, center, radius, motion):  # type: ignore[no-untyped-def]
-    """How far a sphere (``center`` in the frame of a joint at (R, p), ``radius``) can close on the
-    ground ``plane`` in a step whose ``motion`` (2, 6) holds the joint's WORLD twists at v and at the
-    free motion, times dt: the sum over both of the centre's approach and the radius times the turn."""
-    cx = R[0, 0] * center[0] + R[0, 1] * center[1] + R[0, 2] * center[2] + p[0]
-    cy = R[1, 0] * center[0] + R[1, 1] * center[1] + R[1, 2] * center[2] + p[1]
-    cz = R[2, 0] * center[0] + R[2, 1] * center[1] + R[2, 2] * center[2] + p[2]
-    total = 0.0
-    for w in range(2):
-        vx, vy, vz, ax, ay, az = motion[w]
-        along = plane[0] * (vx + ay * cz - az * cy) + plane[1] * (vy + az * cx - ax * cz)
-        along += plane[2] * (vz + ax * cy - ay * cx)
-        total += max(0.0, -along) + radius * np.sqrt(ax * ax + ay * ay + az * az)
-    return total
 
 
 @njit(cache=True, inline="always")
@@ -240,49 +208,37 @@ def travel(starts, coordinates, levers, v, x, dt, x_scale, each):  # type: ignor
 
 
 @njit(cache=True)
-def closing(J, masks, starts, columns, joints, other_joints, points, normals, v, x, dt, x_scale, out):
-    """How far each contact point can close in a step, into ``out`` (m,) [m]: dt (max(0, -n . u(v)) +
-    max(0, -n . u(x_scale x))), u(w) the point's velocity relative to the other side at joint
-    velocity w, read from the joint Jacobians J (6, nv) as
-    :func:`~gaussim.kernels.dynamics.point_jacobians_into` reads them (``masks``, ``starts``,
-    ``columns``: :class:`gaussim.dynamics.Supports`)."""
+def closing(J, masks, starts, columns, joints, other_joints, points, normals, mu, v, x, dt, x_scale, out):  # type: ignore[no-untyped-def]
+    """How far each contact point can close on its pair in a step, into ``out`` (m,) [m]: dt (c(v) +
+    c(x_scale x)), c(w) = max(0, mu |u_t(w)| - n . u(w)), u(w) the point's velocity relative to the
+    other side at joint velocity w and u_t its part along the contact plane: the velocity-level rows
+    of a contact with gap g (its normal row and its friction pyramid's, whose bounds the De Saxce
+    shift only lowers) all hold at w once g / dt + n . u(w) >= mu |u_t(w)|. The point velocities are
+    read from the joint Jacobians J (6, nv) as :func:`~gaussim.kernels.dynamics.point_jacobians_into`
+    reads them (``masks``, ``starts``, ``columns``: :class:`gaussim.dynamics.Supports`)."""
     for i in range(len(joints)):
         px, py, pz = points[i, 0], points[i, 1], points[i, 2]
-        nx, ny, nz = normals[i, 0], normals[i, 1], normals[i, 2]
         a, b = joints[i], other_joints[i]
-        along_v = along_x = 0.0
+        uv, ux = np.zeros(3), np.zeros(3)
         for joint in (a, b):
             for c in range(starts[joint], starts[joint + 1]):
                 k = columns[c]
                 moving = masks[a, k] - masks[b, k]  # 0 on the chain the two share
-                normal_speed = moving * (
-                    nx * (J[0, k] + J[4, k] * pz - J[5, k] * py)
-                    + ny * (J[1, k] + J[5, k] * px - J[3, k] * pz)
-                    + nz * (J[2, k] + J[3, k] * py - J[4, k] * px)
+                if moving == 0.0:
+                    continue
+                column = (
+                    moving * (J[0, k] + J[4, k] * pz - J[5, k] * py),
+                    moving * (J[1, k] + J[5, k] * px - J[3, k] * pz),
+                    moving * (J[2, k] + J[3, k] * py - J[4, k] * px),
                 )
-                along_v += normal_speed * v[k]
-                along_x += normal_speed * x[k]
-        out[i] = dt * (max(0.0, -along_v) + max(0.0, -x_scale * along_x))
-
-
-@njit(cache=True)
-def motions_of(J, starts, columns, pairs, joints, v, x, dt, x_scale, motions, turns):  # type: ignore[no-untyped-def]
-    """For each listed pair ``pairs[t]`` of a geometry (on joint ``joints[t]``) and a fixed obstacle:
-    its joint's WORLD twists at v and at x_scale x, times dt, into ``motions[pairs[t]]`` (2, 6)
-    (linear at the world's origin, angular; read from the joint Jacobians J (6, nv) over the joint's
-    support: ``starts``, ``columns`` of :class:`gaussim.dynamics.Supports`), and the turn they make,
-    the sum of their angular parts' norms [rad], into ``turns[pairs[t]]`` where less."""
-    for t in range(len(pairs)):
-        j, motion = joints[t], motions[pairs[t]]
-        motion[:] = 0.0
-        for c in range(starts[j], starts[j + 1]):
-            k = columns[c]
-            for r in range(6):
-                motion[0, r] += J[r, k] * v[k]
-                motion[1, r] += J[r, k] * x[k]
-        motion[0] *= dt
-        motion[1] *= dt * x_scale
-        turn = np.sqrt(motion[0, 3] ** 2 + motion[0, 4] ** 2 + motion[0, 5] ** 2) + np.sqrt(
-            motion[1, 3] ** 2 + motion[1, 4] ** 2 + motion[1, 5] ** 2
-        )
-        turns[pairs[t]] = min(turns[pairs[t]], turn)
+                for j in range(3):
+                    uv[j] += column[j] * v[k]
+                    ux[j] += column[j] * x[k]
+        total = 0.0
+        for u, scale in ((uv, 1.0), (ux, x_scale)):
+            along = scale * (normals[i, 0] * u[0] + normals[i, 1] * u[1] + normals[i, 2] * u[2])
+            slip = 0.0
+            for j in range(3):
+                slip += (scale * u[j] - along * normals[i, j]) ** 2
+            total += max(0.0, mu[i] * np.sqrt(slip) - along)
+        out[i] = dt * total

@@ -51,11 +51,10 @@ SIGNATURES = {
     "integrator.move_bases": ["f1r f1 f1 f i1 i1"],
     "actuation.damped_torque": ["f1 f1 f1r f1"],
     "collision.ground_hulls": [
-        f"f2F*{n} f1*{n} f2 f3 i2 i2 i1 i1 f2 f1 f1 f3 f*2 f*2 f1 f1 i1 f3 b f2 f1" for n in (1, 2, 4, 5)
+        f"f2F*{n} f1*{n} f2 f3 i2 i2 i1 i1 f2 f1 f1 f3 f f*2 f1 f1 i1" for n in (1, 2, 4, 5)
     ],
     "collision.travel": ["i1 i1 f1 f1r f1 f f f1"],
-    "collision.closing": [f"f2F f2 i1 i1 i1 i1 f2 f2 {v} f1 f f f1" for v in ("f1r", "f1")],
-    "collision.motions_of": [f"f2F i1 i1 i1 i1 {v} f1 f f f3 f1" for v in ("f1r", "f1")],
+    "collision.closing": [f"f2F f2 i1 i1 i1 i1 f2 f2 f1 {v} f1 f f f1" for v in ("f1r", "f1")],
     "contact.unpacked": ["f1 i i"],
     "contact.pyramids": [
         f"f2F f2 i1 i1 {joints} {joints} f2 {v} {x} f2r f2 f1 {mu} {mu} f2r b1r f1r i f1 f1 b f*3 "
