@@ -564,17 +564,20 @@ def test_points_a_fast_step_cannot_close_are_left_out_and_change_no_step(solo12)
 
 
 def test_a_point_left_out_that_the_answer_reaches_is_solved_with():
-    """A 1 m bar lands on one end while its other end, 10 mm up, rises (dt 10 ms): that end is out of
-    reach at v and at the free motion, and left out, but the landing end's push swings it down within
-    the step: its rows fail at v+, and the step is solved again with it (found by a helper's review:
-    v+ was 1 m/s off, and 10 mm deep the step after). Tumbling boxes dropped at 5 to 20 ms steps, the
+    """A 1 m bar lands on one end while its other end, 10 mm up, rises (dt 10 ms), beside two boxes
+    20 mm above the ground: the bar's far end and the boxes are out of reach at v and at the free
+    motion, and left out, but the landing end's push swings the far end down within the step: its
+    rows fail at v+, and the step is solved again with every point (found by a helper's review: v+
+    was 1 m/s off, and 10 mm deep the step after). Tumbling boxes dropped at 5 to 20 ms steps: the
     same v+ as keeping every point."""
     bar = gaussim.FreeBody.box("bar", (1.0, 0.1, 0.05), mass=1.0)
-    scene = gaussim.Scene(bodies={"bar": bar}, ground=gaussim.Ground(friction=0.5))
+    waiting = {f"box{k}": gaussim.FreeBody.box(f"box{k}", (0.1, 0.1, 0.1), mass=1.0) for k in range(2)}
+    scene = gaussim.Scene(bodies={"bar": bar, **waiting}, ground=gaussim.Ground(friction=0.5))
     tilt = np.arcsin(0.009)  # one end 1 mm up, the other 10 mm
     height = 0.001 + 0.5 * np.sin(tilt) + 0.025 * np.cos(tilt)
-    sim = gaussim.Simulator(scene)
-    start = sim.reset({"bar": gaussim.pose(0, 0, height, rpy=(0, tilt, 0))}, {"bar": [0, 0, -2.0, 0, 4.4, 0]})
+    poses = {"bar": gaussim.pose(0, 0, height, rpy=(0, tilt, 0))}
+    poses |= {name: gaussim.pose(4 * k - 2, 0, 0.07) for k, name in enumerate(waiting)}
+    start = gaussim.Simulator(scene).reset(poses, {"bar": [0, 0, -2.0, 0, 4.4, 0]})
     _, _, again = _same_steps(scene, start, 3, dt=0.01)
     assert again >= 1
     box = gaussim.FreeBody.box("box", (0.4, 0.1, 0.1), mass=1.0)

@@ -21,6 +21,11 @@ from .narrow import NarrowPhase
 from .pairs import Pair
 from .primitives import PrimitivePairs
 
+# A fast step leaves out the points it cannot close only when they are at least this fraction of
+# those found: fewer rows do not repay what a new set of rows costs the solver's warm start (bin_pile,
+# 4 of 74 points left out: 90 us a step more, not less).
+LEAVE_OUT = 0.5
+
 
 class Routine(Protocol):
     """A routine family: built once from the pairs it answers (``index`` into the declared pairs)."""
@@ -119,7 +124,8 @@ class ContactDetector:
     def reachable(
         self, found: Piece, data: pin.Data, v: np.ndarray, x: np.ndarray, dt: float, x_scale: float
     ) -> tuple[Piece, Piece]:
-        """The points ``found`` (:meth:`find`) that the step can close, and the others: a gap within
+        """The points ``found`` (:meth:`find`) that the step can close, and the others (none unless they
+        are at least the fraction LEAVE_OUT of the points): a gap within
         WIDENING times the base margin plus how far the point itself can close at velocity v and at
         the free motion x (:func:`~gaussim.kernels.collision.closing`, which counts the friction
         pyramid's rows too). The margin covers the fastest pair, so the points of slower ones, and of
@@ -128,7 +134,7 @@ class ContactDetector:
         (the step's Gauss problem posed)."""
         far = self._closing(found, data, v, x, dt, x_scale)
         keep = found[3] <= WIDENING * (self.schedule.base_margin + far)
-        if keep.all():
+        if np.count_nonzero(keep) > (1.0 - LEAVE_OUT) * len(keep):
             return found, NOTHING_FOUND
         apart = ~keep
         return tuple(a[keep] for a in found), tuple(a[apart] for a in found)  # type: ignore[return-value]
