@@ -213,11 +213,6 @@ class DynamicsStage:
         self._dynamics, self._pending, self.reach = None, (q, x_free), reach
         return x_free
 
-    @property
-    def has_jacobians(self) -> bool:
-        """Whether this step's joint Jacobians are in data.J (its Gauss problem is posed)."""
-        return self._dynamics is not None
-
     def problem(self) -> Dynamics:
         """The Gauss problem of the last free motion (posed now when that skipped it)."""
         self._posed = True

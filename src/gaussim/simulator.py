@@ -219,7 +219,7 @@ class Simulator:
         contacts = self._detect(state.v, x_free, report)
         v_next = self.scheme.next_velocity(state, torque, x_free, contacts, report)
         if self._reaches_left_out(v_next):
-            report, v_next = self._again(state, torque, x_free)
+            v_next = self._again(state, torque, x_free, report)
         return self._advance(state, v_next, report)
 
     def _admit(self, state: State) -> None:
@@ -269,13 +269,13 @@ class Simulator:
             return False
         return not self.detector.kept_apart(self._left_out, self.data, v_next, self.options.dt)
 
-    def _again(self, state: State, torque: np.ndarray, x_free: np.ndarray) -> tuple[StepReport, np.ndarray]:
-        """The step solved again with every point its detection found: its answer reached one that it
-        had left out as out of reach (a push elsewhere on that point's body)."""
+    def _again(self, state: State, torque: np.ndarray, x_free: np.ndarray, report: StepReport) -> np.ndarray:
+        """The step solved again with every point its detection found, into the same ``report`` (its
+        certificates then count both solves): its answer reached a point it had left out as out of
+        reach (a push elsewhere on that point's body)."""
         assert self.detector is not None  # only a step that detected leaves points out
-        report = StepReport(state.t, self.options.timings)
         contacts = self.detector.contacts(self._found)
-        return report, self.scheme.next_velocity(state, torque, x_free, contacts, report)
+        return self.scheme.next_velocity(state, torque, x_free, contacts, report)
 
     def _advance(self, state: State, v_next: np.ndarray, report: StepReport) -> State:
         """The next state: q moved by dt v+ on each joint's manifold."""
