@@ -23,7 +23,7 @@ import pinocchio as pin
 
 from .actuation import Actuation
 from .collision import NO_CONTACTS, ContactDetector, Contacts
-from .collision.contacts import NOTHING_FOUND, Piece
+from .collision.contacts import NOTHING_FOUND
 from .constraints import BilateralModule, ContactModule, LimitModule, checked_modules
 from .constraints.base import ConstraintModule
 from .dynamics import DynamicsStage
@@ -69,8 +69,7 @@ class Simulator:
         self._rigid_bases = bool(self.dynamics.bases.rigid.any())
         self._narrow = not self.scheme.acceleration  # see _detect
         # the step's points, and those it left out (see _detect)
-        self._found: Piece = NOTHING_FOUND
-        self._left_out: Piece | None = None
+        self._found = self._left_out = NOTHING_FOUND
         self._scratch = np.zeros(self.model.nv)  # the step's dt v+, read by Pinocchio's integrate
         self._unit_parts = _unit_parts(self.model)
 
@@ -244,7 +243,7 @@ class Simulator:
         step of the velocity scheme, only the points the step can close (the others are kept in
         ``_left_out``, the points found in ``_found``). The acceleration scheme's impacts change v
         within the step: it keeps every point."""
-        self._left_out = None
+        self._left_out = NOTHING_FOUND
         if not self.detector:
             return NO_CONTACTS
         dt = self.options.dt
@@ -257,15 +256,14 @@ class Simulator:
             report.mark("collision")
             self.dynamics.problem()  # the Jacobians the step's rows need anyway
             report.mark("dynamics")
-            found, left_out = self.detector.reachable(found, self.data, v, x_free, dt, x_scale)
-            self._left_out = left_out if len(left_out[0]) else None
+            found, self._left_out = self.detector.reachable(found, self.data, v, x_free, dt, x_scale)
         contacts = self.detector.contacts(found)
         report.mark("collision")
         return contacts
 
     def _reaches_left_out(self, v_next: np.ndarray) -> bool:
         """Whether the step's answer v+ reaches a point :meth:`_detect` left out."""
-        if self._left_out is None or self.detector is None:
+        if not len(self._left_out[0]) or self.detector is None:
             return False
         return not self.detector.kept_apart(self._left_out, self.data, v_next, self.options.dt)
 

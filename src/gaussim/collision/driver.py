@@ -142,7 +142,7 @@ class ContactDetector:
     def kept_apart(self, left_out: Piece, data: pin.Data, v_next: np.ndarray, dt: float) -> bool:
         """Whether the points ``left_out`` by :meth:`reachable` stay apart at the step's answer v+: each
         of their rows holds at v+, so the Gauss problem with them has the same answer."""
-        far = self._closing(left_out, data, v_next, np.zeros(len(v_next)), dt, 0.0)
+        far = self._closing(left_out, data, v_next, v_next, dt, 0.0)  # x_scale 0: v+ alone
         return bool(np.all(far < left_out[3]))
 
     def _closing(

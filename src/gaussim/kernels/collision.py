@@ -7,6 +7,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .dynamics import point_column
+
 # A polyhedron on the ground found to touch at one point keeps that verdict while its orientation
 # cannot have brought a vertex this much closer to the ground than the deepest one [m].
 NARROW_SLACK = 2e-3
@@ -217,7 +219,6 @@ def closing(J, masks, starts, columns, joints, other_joints, points, normals, mu
     read from the joint Jacobians J (6, nv) as :func:`~gaussim.kernels.dynamics.point_jacobians_into`
     reads them (``masks``, ``starts``, ``columns``: :class:`gaussim.dynamics.Supports`)."""
     for i in range(len(joints)):
-        px, py, pz = points[i, 0], points[i, 1], points[i, 2]
         a, b = joints[i], other_joints[i]
         uv, ux = np.zeros(3), np.zeros(3)
         for joint in (a, b):
@@ -226,14 +227,10 @@ def closing(J, masks, starts, columns, joints, other_joints, points, normals, mu
                 moving = masks[a, k] - masks[b, k]  # 0 on the chain the two share
                 if moving == 0.0:
                     continue
-                column = (
-                    moving * (J[0, k] + J[4, k] * pz - J[5, k] * py),
-                    moving * (J[1, k] + J[5, k] * px - J[3, k] * pz),
-                    moving * (J[2, k] + J[3, k] * py - J[4, k] * px),
-                )
+                column = point_column(J, k, points[i])
                 for j in range(3):
-                    uv[j] += column[j] * v[k]
-                    ux[j] += column[j] * x[k]
+                    uv[j] += moving * column[j] * v[k]
+                    ux[j] += moving * column[j] * x[k]
         total = 0.0
         for u, scale in ((uv, 1.0), (ux, x_scale)):
             along = scale * (normals[i, 0] * u[0] + normals[i, 1] * u[1] + normals[i, 2] * u[2])

@@ -196,16 +196,26 @@ def point_jacobians_into(out, J, masks, starts, columns, joints, other_joints, p
     ``out`` (m, 3, nv): zero but on the columns of the two joints' supports (``masks``, ``starts``,
     ``columns``: :class:`gaussim.dynamics.Supports`)."""
     for i in range(len(joints)):
-        px, py, pz = points[i, 0], points[i, 1], points[i, 2]
         a, b = joints[i], other_joints[i]
         out[i] = 0.0
         for joint in (a, b):
             for c in range(starts[joint], starts[joint + 1]):
                 k = columns[c]
                 moving = masks[a, k] - masks[b, k]  # 0 on the chain the two share
-                out[i, 0, k] = moving * (J[0, k] + J[4, k] * pz - J[5, k] * py)
-                out[i, 1, k] = moving * (J[1, k] + J[5, k] * px - J[3, k] * pz)
-                out[i, 2, k] = moving * (J[2, k] + J[3, k] * py - J[4, k] * px)
+                x, y, z = point_column(J, k, points[i])
+                out[i, 0, k], out[i, 1, k], out[i, 2, k] = moving * x, moving * y, moving * z
+
+
+@njit(cache=True, inline="always")
+def point_column(J, k, point):  # type: ignore[no-untyped-def]
+    """Column k of the Jacobian of the world velocity of ``point`` (3,) moving with a body whose
+    joint Jacobian holds column k of J (6, nv, WORLD): v_O + w x p."""
+    px, py, pz = point[0], point[1], point[2]
+    return (
+        J[0, k] + J[4, k] * pz - J[5, k] * py,
+        J[1, k] + J[5, k] * px - J[3, k] * pz,
+        J[2, k] + J[3, k] * py - J[4, k] * px,
+    )
 
 
 @njit(cache=True, inline="always")
