@@ -156,11 +156,11 @@ def test_a_rounded_hull_at_the_margin_keeps_its_deepest_vertex():
     X = np.array([[0.0, 1.0], [0.0, 0.0], [lowest, lowest + 1.0], [1.0, 1.0]])  # two vertices, joint frame
     ground = np.array([0.0, 0.0, 1.0, 0.0])  # z = 0, seen from the joint at the origin
     directions = np.array([[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0]])
-    scratch = (np.empty(2, np.int64), np.empty((2, 3)))
+    order = np.empty(2, np.int64)
     picked = np.full(5, -7, np.int64)
-    picks = _outline(
+    picks, _ = _outline(
         ground, np.eye(3), np.zeros(3), X, 2, rounding, directions, lowest - rounding,
-        (PATCH_TOLERANCE, PATCH_MIN_EXTENT), lowest, scratch, picked, 0,
+        (PATCH_TOLERANCE, PATCH_MIN_EXTENT), lowest, order, picked, 0, -1,
     )  # fmt: skip
     assert picked[:picks].tolist() == [0]
 

@@ -37,7 +37,8 @@ class Hulls(NamedTuple):
             hull k are ``neighbours[k, first[k, i] : first[k, i + 1]]``, shapes (P, V + 1), (P, E).
         rounding: the radius of a sphere (around its one vertex) or a capsule (around its two), else
             0, shape (P,) [m].
-        directions: the SUPPORT_DIRECTIONS directions of each ground's plane, shape (P, D, 3).
+        directions: the SUPPORT_DIRECTIONS directions of each ground's plane, the second half the
+            first's opposites, shape (P, D, 3).
         turn2: the squared turn of the ground normal seen from the body that keeps a one-point
             verdict, shape (P,).
         deepest: where each search for the deepest vertex starts (updated by each pass), (P,).
@@ -170,11 +171,13 @@ def _hulls(pairs: list[Pair]) -> Hulls:
 
 
 def _support_directions(n: np.ndarray) -> np.ndarray:
-    """SUPPORT_DIRECTIONS unit directions of the plane of normal ``n`` (3,), shape (SUPPORT_DIRECTIONS, 3)."""
+    """SUPPORT_DIRECTIONS unit directions of the plane of normal ``n`` (3,), shape (SUPPORT_DIRECTIONS, 3):
+    the second half the first's exact opposites (one pass finds the extremes along both)."""
     t1 = np.cross(n, np.eye(3)[int(np.argmin(np.abs(n)))])
     t1 /= np.linalg.norm(t1)
-    angles = 2 * np.pi * np.arange(SUPPORT_DIRECTIONS) / SUPPORT_DIRECTIONS
-    return np.outer(np.cos(angles), t1) + np.outer(np.sin(angles), np.cross(n, t1))
+    angles = 2 * np.pi * np.arange(SUPPORT_DIRECTIONS // 2) / SUPPORT_DIRECTIONS
+    half = np.outer(np.cos(angles), t1) + np.outer(np.sin(angles), np.cross(n, t1))
+    return np.vstack([half, -half])
 
 
 def _vertices(shape: coal.CollisionGeometry) -> tuple[np.ndarray, list[list[int]]]:

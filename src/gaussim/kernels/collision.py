@@ -51,7 +51,7 @@ def ground_hulls(
     count, size = columns.shape[0], columns.shape[2]
     base, extent = patch
     c = np.empty(4)  # the ground seen from the joint: (n^T R, n^T p - height)
-    order, world = np.empty(size, np.int64), np.empty((size, 3))
+    order = np.empty(size, np.int64)
     picked = np.empty(2 * directions.shape[1] + 1, np.int64)
     most = count * len(picked)  # at most: two outlines and the deepest
     pairs_out, points_out = np.empty(most, np.int64), np.empty((most, 3))
@@ -83,22 +83,16 @@ def ground_hulls(
         turned = (c[0] - narrow_at[k, 0]) ** 2 + (c[1] - narrow_at[k, 1]) ** 2 + (c[2] - narrow_at[k, 2]) ** 2
         narrow = turned <= turn2[k]  # False where no verdict was kept (NaN)
         if not narrow:
-            n = _sublevel(c, X, sizes[k], lowest + tolerance + NARROW_SLACK, order)
-            low, high = _unbounded()
-            for t in range(n):
-                for j in range(3):
-                    low[j], high[j] = min(low[j], X[j, order[t]]), max(high[j], X[j, order[t]])
-            narrow = _extent(low, high) <= extent
+            narrow = _spans_within(c, X, sizes[k], lowest + tolerance + NARROW_SLACK, extent)
             for j in range(3):
                 narrow_at[k, j] = c[j] if narrow else np.nan
         if narrow:
             picked[0], picks = i, 1
         else:
             outline = (c, R, p, X, sizes[k], rounding[k], directions[k], margin)
-            scratch = (order, world)
-            picks = _outline(*outline, (tolerance, extent), lowest, scratch, picked, 0)
+            picks, n = _outline(*outline, (tolerance, extent), lowest, order, picked, 0, -1)
             if tolerance > base:  # a widened outline's extremes may all be high: the resting patch's
-                picks = _outline(*outline, (base, extent), lowest, scratch, picked, picks)  # outline too,
+                picks, _ = _outline(*outline, (base, extent), lowest, order, picked, picks, n)  # too,
                 picks = _pick(picked, picks, i)  # and the deepest, which neither need hold
         picked[:picks].sort()
         for t in range(picks):
@@ -132,6 +126,34 @@ def _sublevel(c, X, size, bound, order):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
+def _spans_within(c, X, size, bound, extent):  # type: ignore[no-untyped-def]
+    """Whether the hull's ``size`` vertices at most ``bound`` above the ground ``c`` span at most
+    ``extent`` (their bounding box in the joint's frame); the search stops at the first vertex that
+    makes them span more."""
+    low, high = _unbounded()
+    for v in range(size):
+        if _height(c, X, v) <= bound:
+            for j in range(3):
+                low[j], high[j] = min(low[j], X[j, v]), max(high[j], X[j, v])
+            if _extent(low, high) > extent:
+                return False
+    return True
+
+
+@njit(cache=True)
+def _within(c, X, order, n, bound):  # type: ignore[no-untyped-def]
+    """The number of the vertices ``order[:n]`` at most ``bound`` above the ground ``c``, moved to the
+    front of ``order`` in their order."""
+    kept = 0
+    for t in range(n):
+        v = order[t]
+        if _height(c, X, v) <= bound:
+            order[kept] = v
+            kept += 1
+    return kept
+
+
+@njit(cache=True)
 def _pick(picked, picks, v):  # type: ignore[no-untyped-def]
     """Add vertex v to ``picked[:picks]`` unless there; returns the new count."""
     for t in range(picks):
@@ -142,40 +164,47 @@ def _pick(picked, picks, v):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def _outline(c, R, p, X, size, rounding, directions, margin, patch, lowest, scratch, picked, picks):  # type: ignore[no-untyped-def]
+def _outline(c, R, p, X, size, rounding, directions, margin, patch, lowest, order, picked, picks, known):  # type: ignore[no-untyped-def]
     """A hull touching widely (ground ``c`` seen from its joint at (R, p), its ``size`` vertices X,
-    the deepest at height ``lowest``): adds to ``picked[:picks]`` its vertices within the
-    patch tolerance of the deepest (or penetrating) that are extreme along ``directions``, or the
-    deepest alone when they span at most PATCH_MIN_EXTENT; returns the new count. ``scratch``: the
-    (order, world) buffers."""
-    (tolerance, extent), (order, world) = patch, scratch
+    the deepest at height ``lowest``): adds to ``picked[:picks]`` its vertices within the patch
+    tolerance of the deepest (or penetrating) that are extreme along ``directions`` (the second half
+    the first's opposites), or the deepest alone when they span at most PATCH_MIN_EXTENT; returns the
+    new count and the number n of the vertices it read, which it leaves in ``order[:n]`` in ascending
+    order (a buffer of the largest hull's size). ``known``: -1, or the n of a call with a wider
+    patch, whose vertices this one reads alone."""
+    tolerance, extent = patch
     bound = max(0.0, min(margin, lowest - rounding + tolerance))
     # at least the deepest's own height: bound + rounding may round below it when the margin clamps
-    n = _sublevel(c, X, size, max(bound + rounding, lowest), order)
+    bound = max(bound + rounding, lowest)
+    n = _sublevel(c, X, size, bound, order) if known < 0 else _within(c, X, order, known, bound)
+    half = directions.shape[0] // 2  # directions[half + d] is -directions[d]
     low, high = _unbounded()
     deepest, least = -1, np.inf
+    most, reach = np.full(half, -1), np.full(half, -np.inf)  # the extremes along each direction
+    fewest, back = np.full(half, -1), np.full(half, np.inf)  # and along its opposite
     for t in range(n):
         v = order[t]
-        for j in range(3):
-            world[t, j] = R[j, 0] * X[0, v] + R[j, 1] * X[1, v] + R[j, 2] * X[2, v] + p[j]
-            low[j], high[j] = min(low[j], world[t, j]), max(high[j], world[t, j])
+        w0 = R[0, 0] * X[0, v] + R[0, 1] * X[1, v] + R[0, 2] * X[2, v] + p[0]
+        w1 = R[1, 0] * X[0, v] + R[1, 1] * X[1, v] + R[1, 2] * X[2, v] + p[1]
+        w2 = R[2, 0] * X[0, v] + R[2, 1] * X[1, v] + R[2, 2] * X[2, v] + p[2]
+        low[0], high[0] = min(low[0], w0), max(high[0], w0)
+        low[1], high[1] = min(low[1], w1), max(high[1], w1)
+        low[2], high[2] = min(low[2], w2), max(high[2], w2)
         height = _height(c, X, v)
         if height < least:
             deepest, least = v, height
+        for d in range(half):
+            along = w0 * directions[d, 0] + w1 * directions[d, 1] + w2 * directions[d, 2]
+            if along > reach[d]:
+                most[d], reach[d] = v, along
+            if along < back[d]:
+                fewest[d], back[d] = v, along
     if _extent(low, high) <= extent:
-        return _pick(picked, picks, deepest)
-    for d in range(directions.shape[0]):
-        best, reach = -1, -np.inf
-        for t in range(n):
-            along = (
-                world[t, 0] * directions[d, 0]
-                + world[t, 1] * directions[d, 1]
-                + world[t, 2] * directions[d, 2]
-            )
-            if along > reach:
-                best, reach = order[t], along
-        picks = _pick(picked, picks, best)
-    return picks
+        return _pick(picked, picks, deepest), n
+    for d in range(half):
+        picks = _pick(picked, picks, most[d])
+        picks = _pick(picked, picks, fewest[d])
+    return picks, n
 
 
 @njit(cache=True, inline="always")
