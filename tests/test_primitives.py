@@ -465,3 +465,85 @@ def test_the_bin_pile_steps_as_with_coal(monkeypatch):
     capsule_on_box = {(coal.Capsule, coal.Box), (coal.Box, coal.Capsule)}
     compiled_run, _ = run(capsule_on_box)
     np.testing.assert_allclose(compiled_run, with_coal, rtol=0, atol=SAME)
+
+
+@pytest.mark.parametrize("normal", [(0.0, 0.0, 1.0), (0.2, -0.3, 1.0)])
+def test_a_cylinder_on_the_ground_touches_where_coal_says(normal):
+    """A cylinder (radius 5 cm, length 20 cm) at random heights within the margin of a (tilted)
+    ground, standing on a cap, lying on its side (each within 0 to 0.03 rad) or at any angle: the
+    compiled pass gives coal's points (its tightest tolerances: the cap's 12 rim samples, the two ends
+    of the side, or the deepest rim point), gaps and normal; coal answers only what round-off could
+    decide."""
+    from gaussim.collision.cylinders import CAP_SAMPLES, GroundCylinders
+
+    cylinder = FreeBody.cylinder("c", radius=0.05, length=0.2, mass=1.0)
+    ground = gaussim.Ground(normal=normal, height=-0.3)
+    scene = gaussim.Scene(bodies={"c": cylinder}, ground=ground)
+    detector = ContactDetector(scene, MARGIN)
+    (routine,) = detector.routines
+    assert isinstance(routine, GroundCylinders)
+    asked, reference = _asking(routine), _tight(detector.pairs, [0])
+    data, n = scene.robot.model.createData(), np.asarray(ground.normal)
+    rng, counts, handed = np.random.default_rng(7), {1: 0, 2: 0, CAP_SAMPLES: 0}, 0
+    up = pin.Quaternion.FromTwoVectors(np.array([0.0, 0.0, 1.0]), n).matrix()
+    for k in range(300):
+        tilt = pin.rpy.rpyToMatrix(*rng.uniform(-1, 1, 3) * [0.0, 1e-6, 1e-3, 3e-2][k % 4])
+        kind = k % 3
+        if kind == 0:  # on a cap (either)
+            R = up @ pin.rpy.rpyToMatrix(np.pi * rng.integers(2), 0, rng.uniform(-np.pi, np.pi)) @ tilt
+        elif kind == 1:  # on its side
+            R = up @ pin.rpy.rpyToMatrix(np.pi / 2, 0, rng.uniform(-np.pi, np.pi)) @ tilt
+        else:
+            R = pin.rpy.rpyToMatrix(*rng.uniform(-np.pi, np.pi, 3))
+        # the centre as high as the deepest point is below it, plus a gap within the margin
+        d = R.T @ -n
+        reach = 0.05 * np.hypot(d[0], d[1]) + 0.1 * abs(d[2])
+        centre = (-0.3 + reach + rng.uniform(-MARGIN, MARGIN)) * n + rng.uniform(-1, 1, 3) * [1, 1, 0]
+        _place(scene, data, pin.SE3(R, centre), ORIGIN)
+        asked.clear()
+        mine, least = routine.detect(data, MARGIN, STILL)
+        expected, _ = reference.detect(data, MARGIN, STILL)
+        assert len(mine) == len(expected), k
+        handed += bool(asked)
+        if asked or not mine:
+            continue
+        (_, points, normals, gaps), (_, points_ref, normals_ref, gaps_ref) = mine[0], expected[0]
+        assert points.shape == points_ref.shape, k
+        counts[len(points)] += 1
+        np.testing.assert_allclose(points, points_ref, atol=AGREEMENT, err_msg=str(k))
+        np.testing.assert_allclose(gaps, gaps_ref, atol=AGREEMENT, err_msg=str(k))
+        np.testing.assert_allclose(normals, normals_ref, atol=AGREEMENT, err_msg=str(k))
+        assert least == gaps[0]
+    assert min(counts.values()) >= 20 and handed <= 30, (counts, handed)  # each kind, answered here
+
+
+def test_a_cylinder_rolls_down_an_incline_as_the_closed_form_says():
+    """A solid cylinder (radius 5 cm, length 20 cm) on its side on a 20 degree incline (mu 0.8, above
+    tan(20 deg) / 3) rolls without slipping: its centre travels a t^2 / 2 down the slope, a = 2/3 g
+    sin(20 deg), and turns by that over its radius; it touches at the two ends of its side, which the
+    compiled pass gives."""
+    from gaussim.collision.cylinders import GroundCylinders
+
+    angle, r = np.radians(20.0), 0.05
+    down = np.array([np.cos(angle), 0.0, -np.sin(angle)])  # along the slope, downhill
+    n = np.array([np.sin(angle), 0.0, np.cos(angle)])
+    cylinder = FreeBody.cylinder("c", radius=r, length=0.2, mass=1.0)
+    scene = gaussim.Scene(bodies={"c": cylinder}, ground=gaussim.Ground(normal=n, friction=0.8))
+    sim = gaussim.Simulator(scene, gaussim.Options(dt=1e-3))
+    assert [type(routine) for routine in sim.detector.routines] == [GroundCylinders]
+    # the axis along y, across the slope; resting on it
+    R = pin.Quaternion.FromTwoVectors(np.array([0.0, 0.0, 1.0]), n).matrix() @ pin.rpy.rpyToMatrix(
+        np.pi / 2, 0.0, 0.0
+    )
+    start = r * n
+    state = sim.reset({"c": pin.SE3(R, start)})
+    points = []
+    for _ in range(500):
+        state = sim.step(state)
+        points.append(len(sim.last_step.contacts))
+    t, a = state.t, 2.0 / 3.0 * 9.81 * np.sin(angle)
+    travel = (state.q[:3] - start) @ down
+    assert travel == pytest.approx(a * t**2 / 2, rel=5e-3)
+    assert abs((state.q[:3] - start) @ n) < 1e-4  # on the slope
+    assert np.linalg.norm(state.v[3:6]) * r == pytest.approx(a * t, rel=5e-3)  # rolling: w r = v
+    assert min(points) == max(points) == 2

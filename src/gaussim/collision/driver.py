@@ -15,6 +15,7 @@ from ..kernels.collision import closing
 from ..scene import Scene
 from .boxes import BoxPairs
 from .contacts import NO_CONTACTS, NOTHING_FOUND, Contacts, Piece
+from .cylinders import GroundCylinders
 from .ground import GroundHulls
 from .margin import WIDENING, MarginSchedule
 from .narrow import NarrowPhase
@@ -47,6 +48,7 @@ ROUTINES: dict[tuple[type, type], Callable[[list[Pair], list[int]], Routine]] = 
     (coal.ConvexBase, coal.Halfspace): GroundHulls,
     (coal.Sphere, coal.Halfspace): GroundHulls,
     (coal.Capsule, coal.Halfspace): GroundHulls,
+    (coal.Cylinder, coal.Halfspace): GroundCylinders,
     (coal.Box, coal.Box): BoxPairs,
     (coal.Sphere, coal.Sphere): PrimitivePairs,
     (coal.Sphere, coal.Capsule): PrimitivePairs,
@@ -71,8 +73,9 @@ def routine_of(pair: Pair) -> Callable[[list[Pair], list[int]], Routine]:
 class ContactDetector:
     """Finds the contact points of the scene's declared pairs that are closer than the margin.
 
-    A polyhedron, a sphere or a capsule on a ground plane goes to :class:`~.ground.GroundHulls`, a box
-    on a box to :class:`~.boxes.BoxPairs`, a sphere, capsule or box on a sphere, capsule or box to
+    A polyhedron, a sphere or a capsule on a ground plane goes to :class:`~.ground.GroundHulls`, a
+    cylinder on a ground plane to :class:`~.cylinders.GroundCylinders`, a box on a box to
+    :class:`~.boxes.BoxPairs`, a sphere, capsule or box on a sphere, capsule or box to
     :class:`~.primitives.PrimitivePairs` (each one compiled pass for all its pairs), every other pair
     to :class:`~.narrow.NarrowPhase` (coal). The
     :class:`~.margin.MarginSchedule` widens the margin to what a step can travel and says when a step
