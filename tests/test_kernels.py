@@ -44,9 +44,7 @@ for scheme in ("velocity", "acceleration"):
 def test_a_signature_code_reads_back_as_written(name):
     for code in SIGNATURES[name]:
         assert code_of(parse(code)) == code
-    full = name.startswith("gaussim.")
-    module = name.rsplit(".", 1)[0] if full else f"gaussim.kernels.{name.split('.')[0]}"
-    assert kernel(name).py_func.__module__ == module
+    assert kernel(name).py_func.__module__ == f"gaussim.kernels.{name.split('.')[0]}"
 
 
 def test_the_build_compiles_every_signature_the_main_job_calls():

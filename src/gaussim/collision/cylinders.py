@@ -18,7 +18,7 @@ import numpy as np
 from numba import njit
 
 from .boxes import _order
-from .compiled import ASK_COAL, FAR, FOUND, CompiledPairs, place
+from .compiled import ASK_COAL, FAR, FOUND, CompiledPairs, place, stacked
 from .contacts import PATCH_MIN_EXTENT, PATCH_TOLERANCE
 from .pairs import Pair
 from .primitives import COAL_THRESHOLD, DECISION
@@ -51,9 +51,9 @@ class GroundCylinders(CompiledPairs):
         ).reshape(-1, 4)
 
     def _kernel(self, rotations, translations, near, margin, answer, gaps, normals, points, sizes):  # type: ignore[no-untyped-def]
-        _ground_cylinders(  # the placements as arrays: one signature, which the build compiles ahead
-            np.array(rotations),
-            np.array(translations),
+        _ground_cylinders(
+            rotations,
+            translations,
             self.spheres.side,
             self.local_rotation,
             self.local_translation,
@@ -89,13 +89,13 @@ def _ground_cylinders(
     """The compiled pass of :class:`GroundCylinders` on pairs ``near``: for each, fills ``answer``
     (FAR, FOUND or ASK_COAL), ``gaps`` (the gap when FAR or FOUND), and when FOUND its normal (the
     ground's) and its ``sizes`` points on the cylinder (a patch ordered by their place on it, as
-    :class:`~.narrow.NarrowPhase` orders them); ``rotations`` (J, 3, 3) and ``translations`` (J, 3): the
-    joints' placements."""
+    :class:`~.narrow.NarrowPhase` orders them)."""
+    joint_rotations, joint_translations = stacked(rotations, translations)
     R = np.empty((2, 3, 3))
     p = np.empty((2, 3))
     for k in range(near.shape[0]):
         i = near[k]
-        place(rotations, translations, side, local_rotation, local_translation, i, R, p)
+        place(joint_rotations, joint_translations, side, local_rotation, local_translation, i, R, p)
         answer[k], gaps[k], sizes[k] = _pair(R[0], p[0], dims[i], plane[i], margin, normals[k], points[k])
 
 

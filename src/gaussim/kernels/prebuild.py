@@ -25,7 +25,7 @@ _CODES: dict[types.Type, str] = {dtype: code for code, dtype in _DTYPES.items()}
 _SIDES = ("f2 f1 f2 f1", "f2 f1 f2r f1r", "f2r f1r f2 f1")
 
 # The signatures the shipped scenes call the kernels with from Python (both schemes): tests/test_kernels.py
-# checks that the main job needs no other; a name ``gaussim. ...`` is a kernel outside gaussim.kernels.
+# checks that the main job needs no other.
 SIGNATURES = {
     "dynamics.linear_term": [
         "f2 f1 f1r f1 f f1 f1",
@@ -77,8 +77,6 @@ SIGNATURES = {
         "f2 f1 f2r f1r f2 f1 f1r f1 f f f1 f1",
     ],
     "solver.read_results": [f"f2 f1 {sides} f1 f1 f1" for sides in _SIDES],
-    # a compiled routine's kernel, by its full name: cylinders on the ground (49 corpus robots)
-    "gaussim.collision.cylinders._ground_cylinders": ["f3 f2 i2 f4 f3 f2 f2 i1 f i1 f1 f2 f3 i1"],
 }
 
 
@@ -115,11 +113,9 @@ def _code_of_one(t: types.Type) -> str | None:
 
 
 def kernel(name: str) -> CPUDispatcher:
-    """The kernel ``module.function`` of gaussim.kernels, or the one a full name ``gaussim. ...``
-    names (a compiled routine's, beside its stage)."""
-    module, function = name.rsplit(".", 1)
-    path = module if name.startswith("gaussim.") else f"gaussim.kernels.{module}"
-    return getattr(importlib.import_module(path), function)
+    """The kernel ``module.function`` of gaussim.kernels."""
+    module, function = name.split(".")
+    return getattr(importlib.import_module(f"gaussim.kernels.{module}"), function)
 
 
 def main() -> int:
