@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from ..kernels.collision import _extent, _unbounded
 from .boxes import _order
 from .compiled import ASK_COAL, FAR, FOUND, CompiledPairs, place, stacked
 from .contacts import PATCH_MIN_EXTENT, PATCH_TOLERANCE
@@ -111,17 +112,16 @@ def _pair(R, c, dims, plane, margin, normal, points):  # type: ignore[no-untyped
         normal[a] = plane[a]
     across = np.sqrt(d[0] * d[0] + d[1] * d[1])
     deepest = np.zeros(3)  # coal's support point: the rim below the axis, on the lower cap
-    if max(abs(d[0]), abs(d[1])) > ALIGNED:
+    standing = max(abs(d[0]), abs(d[1])) <= ALIGNED  # straight: the cap's centre
+    if not standing:
         deepest[0], deepest[1] = r * d[0] / across, r * d[1] / across
-    else:  # standing straight: the cap's centre, coal's half length inflated by INFLATE
-        h *= INFLATE
+    half = INFLATE * h if standing else h  # coal inflates the half length of a cylinder standing straight
     if d[2] > ALIGNED:
-        deepest[2] = h
+        deepest[2] = half
     elif d[2] < -ALIGNED:
-        deepest[2] = -h
+        deepest[2] = -half
     else:  # lying straight: the middle of the side, coal's radius inflated by INFLATE
         deepest[0], deepest[1] = INFLATE * deepest[0], INFLATE * deepest[1]
-    h = dims[1]
     z = h if d[2] > 0.0 else -h  # the cap coal samples
     world = np.empty(3)
     _to_world(R, c, deepest, world)
@@ -152,16 +152,14 @@ def _pair(R, c, dims, plane, margin, normal, points):  # type: ignore[no-untyped
                 _to_world(R, c, local, points[count])
                 count += 1
     if count >= 2:
+        low, high = _unbounded()
         for s in range(count):  # onto the plane through the deepest point, along the normal
-            above = (points[s, 0] - world[0]) * plane[0] + (points[s, 1] - world[1]) * plane[1]
-            above += (points[s, 2] - world[2]) * plane[2]
+            offset = (points[s, 0] - world[0]) * plane[0] + (points[s, 1] - world[1]) * plane[1]
+            offset += (points[s, 2] - world[2]) * plane[2]
             for a in range(3):
-                points[s, a] -= above * plane[a]
-        low, high = points[0].copy(), points[0].copy()
-        for s in range(1, count):
-            for a in range(3):
+                points[s, a] -= offset * plane[a]
                 low[a], high[a] = min(low[a], points[s, a]), max(high[a], points[s, a])
-        extent = max(high[0] - low[0], high[1] - low[1], high[2] - low[2])
+        extent = _extent(low, high)
         if abs(extent - PATCH_MIN_EXTENT) <= DECISION:
             return ASK_COAL, 0.0, 0
         if extent > PATCH_MIN_EXTENT:
