@@ -118,14 +118,15 @@ def test_a_widened_patch_is_the_plain_statement_of_its_outline(solo12):
     assert np.ptp(widenings) > 0.01 and (widenings == PATCH_TOLERANCE).any()
     for data in _random_poses(solo12, 20, seed=3):
         hulls.narrow_at[:] = np.nan  # no kept verdict: each pose is judged afresh
+        placements = routine.placements(data)
         (pairs, points, _, gaps), _ = touching(
-            *routine.placements(data), hulls, 10.0, index, turns, routine.diameters
+            placements, routine.joints, hulls, 10.0, index, turns, routine.diameters
         )
-        rotations, translations = routine.placements(data)
         for k, pair in enumerate(index):
             widening = widenings[k]
             X = hulls.columns[k, :3, : hulls.sizes[k]]  # the hull's own vertices, joint frame
-            world = (rotations[k] @ X).T + translations[k]
+            joint = data.oMi[int(routine.joints[k])]  # Pinocchio's own, not the kernel's view of it
+            world = (joint.rotation @ X).T + joint.translation
             heights = world[:, 2] + 2.0
             lowest = heights.min()
             near = X[:, heights <= lowest + widening + NARROW_SLACK]
@@ -613,3 +614,38 @@ def test_the_acceleration_scheme_keeps_every_point_the_margin_finds(solo12):
         state = sim.step(state)
         fast += bool(sim.last_step.contacts) and sim.detector.fast
     assert fast > 3, fast
+
+
+def test_the_kernels_read_the_joint_placements_where_pinocchio_keeps_them(solo12, monkeypatch):
+    """JointPlacements is a read-only view of data.oMi's memory: after every kinematics pass on that data
+    it holds Pinocchio's placements (each joint's rotation columns, then its translation). Where a
+    Pinocchio lays them out otherwise it copies them: a pile settling (boxes, balls and capsules on each
+    other, a fixed box and the ground) runs the same through the copies, bit for bit."""
+    from gaussim.bench.scenes import SCENES
+    from gaussim.collision import pairs
+
+    placements = pairs.JointPlacements()
+    for data in _random_poses(solo12, 5, seed=11):
+        view = placements(data)
+        assert not view.flags.writeable and view.shape == (solo12.model.njoints, 4, 3)
+        for j, M in enumerate(data.oMi):
+            np.testing.assert_array_equal(view[j, :3].T, M.rotation)
+            np.testing.assert_array_equal(view[j, 3], M.translation)
+        pin.forwardKinematics(
+            solo12.model, data, pin.randomConfiguration(solo12.model, -np.ones(19), np.ones(19))
+        )
+        np.testing.assert_array_equal(view[5, 3], data.oMi[5].translation)  # the same view follows the pass
+
+    def trajectory() -> np.ndarray:
+        setup = SCENES["bin_pile"].build()
+        sim = gaussim.Simulator(setup.scene)
+        state, qs = sim.reset(setup.q, setup.v), []
+        for _ in range(300):
+            state = sim.step(state)
+            qs.append(state.q)
+        assert len(sim.last_step.contacts) > 20
+        return np.array(qs)
+
+    viewed = trajectory()
+    monkeypatch.setattr(pairs, "_view", lambda oMi: None)
+    np.testing.assert_array_equal(trajectory(), viewed)

@@ -11,9 +11,9 @@ from dataclasses import dataclass
 from functools import cache
 
 import numpy as np
-from numba import njit
 
 from .constraints.base import ConstraintModule, Rows
+from .kernels.solver import cut
 
 
 @dataclass
@@ -52,7 +52,7 @@ class GaussProblem:
     def island(self, cols: np.ndarray, eq: np.ndarray, ineq: np.ndarray) -> GaussProblem:
         """The problem on the coordinates ``cols`` and the equality and inequality rows ``eq``,
         ``ineq`` (an island: no other row reads those coordinates, and H couples them to no other)."""
-        H, g, A, b, C, l = _cut(self.H, self.g, self.A, self.b, self.C, self.l, cols, eq, ineq)
+        H, g, A, b, C, l = cut(self.H, self.g, self.A, self.b, self.C, self.l, cols, eq, ineq)
         return GaussProblem(H, g, A, b, C, l, [], None, (self, eq, ineq))
 
 
@@ -81,23 +81,6 @@ def _stack(chosen: list[tuple[ConstraintModule, Rows]], nv: int) -> tuple[np.nda
     if not chosen:
         return _none(nv)
     return np.vstack([rows.J for _, rows in chosen]), np.concatenate([rows.bound for _, rows in chosen])
-
-
-@njit(cache=True)
-def _cut(H, g, A, b, C, l, cols, eq, ineq):  # type: ignore[no-untyped-def]
-    """(H, g, A, b, C, l) on the coordinates ``cols`` and the rows ``eq``, ``ineq``."""
-    n = len(cols)
-    H_, A_, C_ = np.empty((n, n)), np.empty((len(eq), n)), np.empty((len(ineq), n))
-    for j in range(n):
-        for k in range(n):
-            H_[j, k] = H[cols[j], cols[k]]
-    for i in range(len(eq)):
-        for k in range(n):
-            A_[i, k] = A[eq[i], cols[k]]
-    for i in range(len(ineq)):
-        for k in range(n):
-            C_[i, k] = C[ineq[i], cols[k]]
-    return H_, g[cols], A_, b[eq], C_, l[ineq]
 
 
 @cache

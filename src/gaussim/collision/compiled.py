@@ -6,14 +6,11 @@ from __future__ import annotations
 
 import numpy as np
 import pinocchio as pin
-from numba import njit
 
+from ..kernels.pairs import ASK_COAL, FOUND
 from .contacts import Piece, one_pair
 from .narrow import BoundingSpheres, NarrowPhase
 from .pairs import Pair
-
-# Answers of a kernel per pair: farther apart than the margin, points found, or coal's to answer.
-FAR, FOUND, ASK_COAL = 0, 1, 2
 
 
 class CompiledPairs:
@@ -53,12 +50,11 @@ class CompiledPairs:
         near = np.flatnonzero(~far)
         if not len(near):
             return [], clearance
-        rotations, translations = self.spheres.placements(data)
         count = len(near)
         answer, gaps = np.empty(count, np.int64), np.empty(count)
         normals, points = np.empty((count, 3)), np.empty((count, self.max_points, 3))
         sizes = np.empty(count, np.int64)
-        self._kernel(rotations, translations, near, margin, answer, gaps, normals, points, sizes)
+        self._kernel(self.spheres.placements(data), near, margin, answer, gaps, normals, points, sizes)
         clearance = float(gaps[answer != ASK_COAL].min(initial=clearance))
         pieces: list[Piece] = []
         found = np.flatnonzero(answer == FOUND)
@@ -83,8 +79,7 @@ class CompiledPairs:
 
     def _kernel(
         self,
-        rotations: tuple[np.ndarray, ...],
-        translations: tuple[np.ndarray, ...],
+        placements: np.ndarray,
         near: np.ndarray,
         margin: float,
         answer: np.ndarray,
@@ -95,8 +90,7 @@ class CompiledPairs:
     ) -> None:
         """Fills, for each pair ``near[k]`` (an index into :attr:`pairs`), ``answer[k]``, ``gaps[k]``,
         ``normals[k]`` (from the other side towards the robot's) and the ``sizes[k]`` points
-        ``points[k]``, at the joint placements (``rotations``, ``translations``) of
-        :attr:`spheres`."""
+        ``points[k]``, at the joint placements ``placements`` (see :mod:`gaussim.kernels.pairs`)."""
         raise NotImplementedError
 
 
@@ -105,34 +99,3 @@ def _other_placement(pair: Pair) -> pin.SE3:
     if pair.other_local is not None:
         return pair.other_local
     return pair.obstacle.placement()  # type: ignore[union-attr]
-
-
-@njit(cache=True)
-def stacked(rotations, translations):  # type: ignore[no-untyped-def]
-    """The joints' placements, tuples of views, as arrays (J, 3, 3) and (J, 3): once per kernel call
-    (a call that takes the tuples copies them and counts references to every view)."""
-    R = np.empty((len(rotations), 3, 3))
-    p = np.empty((len(rotations), 3))
-    for j in range(len(rotations)):
-        Rj, pj = rotations[j], translations[j]
-        for a in range(3):
-            p[j, a] = pj[a]
-            for b in range(3):
-                R[j, a, b] = Rj[a, b]
-    return R, p
-
-
-@njit(cache=True)
-def place(rotations, translations, side, local_rotation, local_translation, i, R, p):  # type: ignore[no-untyped-def]
-    """Both sides of pair ``i`` in the world: (R[s] (columns: its axes), p[s]) for s = 0 (the robot's)
-    and 1, its joint's placement (``rotations`` (J, 3, 3), ``translations`` (J, 3), see
-    :func:`stacked`) times its own."""
-    for s in range(2):
-        j = side[i, s]
-        for a in range(3):  # loops: a BLAS call per 3 x 3 product costs more than its arithmetic
-            p[s, a] = translations[j, a]
-            for b in range(3):
-                R[s, a, b] = 0.0
-                p[s, a] += rotations[j, a, b] * local_translation[i, s, b]
-                for c in range(3):
-                    R[s, a, b] += rotations[j, a, c] * local_rotation[i, s, c, b]

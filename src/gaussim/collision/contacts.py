@@ -6,11 +6,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-# Surface points within this distance of the support plane belong to a contact patch [m].
-PATCH_TOLERANCE = 1e-3
-# A contact patch narrower than this is one point (the rounded foot of a mesh hull touches on a
-# ring of nearby vertices; several points there would only add redundant rows) [m].
-PATCH_MIN_EXTENT = 2e-2
+from ..kernels.pairs import PATCH_MIN_EXTENT, PATCH_TOLERANCE
+
+__all__ = ["PATCH_MIN_EXTENT", "PATCH_TOLERANCE", "Contacts", "NO_CONTACTS", "Piece", "one_pair"]
 
 
 @dataclass

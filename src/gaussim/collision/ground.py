@@ -81,7 +81,10 @@ class GroundHulls:
     def __init__(self, pairs: list[Pair], index: list[int]) -> None:
         self.index = np.array(index, dtype=int)
         self.pairs = [pairs[k] for k in index]
-        self.placements = JointPlacements([pair.joint for pair in self.pairs])
+        self.placements, self.joints = (
+            JointPlacements(),
+            np.array([p.joint for p in self.pairs], dtype=np.int64),
+        )
         self.hulls = _hulls(self.pairs)
         # twice the farthest vertex from the mean, at least each hull's diameter (all pairs of a mesh's
         # thousands of vertices, padded to the largest hull, took gigabytes: b1_z1, centauro)
@@ -94,13 +97,16 @@ class GroundHulls:
         ``data`` (each patch as deep as its pair's turn in ``turns`` [rad] times the hull's diameter,
         where that exceeds PATCH_TOLERANCE: see :class:`~.driver.Routine`), and the least gap of all
         the hulls [m]."""
-        found, least = touching(*self.placements(data), self.hulls, margin, self.index, turns, self.diameters)
+        placements = self.placements(data)
+        found, least = touching(
+            placements, self.joints, self.hulls, margin, self.index, turns, self.diameters
+        )
         return ([found] if len(found[0]) else []), least
 
 
 def touching(
-    rotations: tuple[np.ndarray, ...],
-    translations: tuple[np.ndarray, ...],
+    placements: np.ndarray,
+    joints: np.ndarray,
     hulls: Hulls,
     margin: float,
     index: np.ndarray,
@@ -108,15 +114,15 @@ def touching(
     diameters: np.ndarray,
 ) -> tuple[Piece, float]:
     """One compiled pass over the hulls (:func:`~gaussim.kernels.collision.ground_hulls`, which updates
-    ``hulls.deepest`` and ``hulls.narrow_at``) at their joints' placements (P rotations (3, 3), translations
-    (3,)), for the contacts within ``margin`` [m], each hull's patch max(PATCH_TOLERANCE, its pair's turn
-    in ``turns`` [rad] times its diameter in ``diameters`` (P,) [m]) deep; ``index``: the declared pair
-    of each hull, shape (P,).
+    ``hulls.deepest`` and ``hulls.narrow_at``) at the placements of their joints ``joints`` (P,) among
+    ``placements`` (see :class:`~.pairs.JointPlacements`), for the contacts within ``margin`` [m], each
+    hull's patch max(PATCH_TOLERANCE, its pair's turn in ``turns`` [rad] times its diameter in
+    ``diameters`` (P,) [m]) deep; ``index``: the declared pair of each hull, shape (P,).
     Returns: the contacts of the hulls (a :data:`Piece`, hull by hull) and the least gap of all the
     hulls [m]."""
     return ground_hulls(  # type: ignore[no-any-return]
-        rotations,
-        translations,
+        placements,
+        joints,
         hulls.plane,
         hulls.columns,
         hulls.first,

@@ -5,9 +5,9 @@ from __future__ import annotations
 import coal
 import numpy as np
 import pinocchio as pin
-from numba import njit
 
 from ..exceptions import ContactError
+from ..kernels.pairs import sphere_gaps
 from ..linalg import finite
 from .contacts import PATCH_MIN_EXTENT, PATCH_TOLERANCE, Piece, one_pair
 from .pairs import JointPlacements, Pair
@@ -138,10 +138,9 @@ class BoundingSpheres:
     """
 
     def __init__(self, pairs: list[Pair]) -> None:
-        sides = np.array([[p.joint, p.other_joint] for p in pairs], dtype=int).reshape(-1, 2)
-        # the joints whose placements are read, and where each pair's two sides find theirs
-        joints, side = np.unique(sides, return_inverse=True)
-        self.placements, self.side = JointPlacements(joints.tolist()), side.reshape(-1, 2)
+        # the joints of each pair's two sides, whose placements are read
+        self.side = np.array([[p.joint, p.other_joint] for p in pairs], dtype=np.int64).reshape(-1, 2)
+        self.placements = JointPlacements()
         self.centers = np.array([[p.center, p.obstacle_center] for p in pairs]).reshape(-1, 2, 3)
         self.radius = np.array([p.radius for p in pairs])
         self.obstacle_radius = np.array([p.obstacle_radius for p in pairs])
@@ -151,47 +150,8 @@ class BoundingSpheres:
         """The pairs' gaps at the joint placements held in ``data``, shape (P,) [m] (-inf against a
         ground): the spheres', or within ``margin`` [m] the larger of that and the sphere's to the
         obstacle's box."""
-        rotations, translations = self.placements(data)
         gaps = np.empty(len(self.radius))
         if len(gaps):
             spheres = (self.side, self.centers, self.radius, self.obstacle_radius)
-            _sphere_gaps(rotations, translations, *spheres, self.boxes, margin, gaps)
+            sphere_gaps(self.placements(data), *spheres, self.boxes, margin, gaps)
         return gaps
-
-
-@njit(cache=True)
-def _sphere_gaps(rotations, translations, side, centers, radius, obstacle_radius, boxes, margin, gaps):  # type: ignore[no-untyped-def]
-    """The compiled pass of :meth:`BoundingSpheres.gaps`: each pair's centres in the world, the
-    distance of the two spheres into ``gaps``, and within ``margin`` the larger of that and the
-    distance of the robot geometry's sphere to the obstacle's box (``boxes``: its half sides and its
-    three axes, in the frame of the obstacle's joint, from the centre the spheres share)."""
-    d = np.empty(3)  # the robot sphere's centre less the obstacle's, in the world
-    for i in range(gaps.shape[0]):
-        squared = 0.0
-        for a in range(3):
-            d[a] = 0.0
-            for s in range(2):
-                R, p = rotations[side[i, s]], translations[side[i, s]]
-                x = (
-                    p[a]
-                    + R[a, 0] * centers[i, s, 0]
-                    + R[a, 1] * centers[i, s, 1]
-                    + R[a, 2] * centers[i, s, 2]
-                )
-                d[a] += x if s == 0 else -x
-            squared += d[a] * d[a]
-        gaps[i] = np.sqrt(squared) - radius[i] - obstacle_radius[i]
-        if gaps[i] <= margin and np.isfinite(obstacle_radius[i]):  # not a ground's
-            R, outside = rotations[side[i, 1]], 0.0
-            for b in range(3):  # along the box's axis b: R boxes[i, 1 + b]
-                along = 0.0
-                for a in range(3):
-                    axis = (
-                        R[a, 0] * boxes[i, 1 + b, 0]
-                        + R[a, 1] * boxes[i, 1 + b, 1]
-                        + R[a, 2] * boxes[i, 1 + b, 2]
-                    )
-                    along += d[a] * axis
-                beyond = max(abs(along) - boxes[i, 0, b], 0.0)
-                outside += beyond * beyond
-            gaps[i] = max(gaps[i], np.sqrt(outside) - radius[i])

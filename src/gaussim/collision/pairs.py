@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import ctypes
+
 import coal
 import numpy as np
 import pinocchio as pin
@@ -85,26 +87,48 @@ def convex(shape: coal.CollisionGeometry) -> coal.CollisionGeometry:
 
 
 class JointPlacements:
-    """The placements of some joints in the world as (rotations (3, 3), translations (3,)): views of
-    Pinocchio's arrays inside ``data.oMi`` itself, which follow every kinematics pass on that data
-    (made once per data).
+    """Every joint's placement in the world as one read-only array (njoints, 4, 3), the kernels' input
+    (:mod:`gaussim.kernels.pairs`): row j holds the columns of joint j's rotation, then its translation.
 
-    Args:
-        joints: the joints, in the order their placements are given.
+    Pinocchio keeps ``data.oMi`` as consecutive SE3s, each its column-major rotation then its translation:
+    the array is a view of that memory, which follows every kinematics pass on that data without a copy
+    (made once per data, after its layout is checked). Where a build of Pinocchio lays them out otherwise,
+    each call copies them instead.
     """
 
-    def __init__(self, joints: list[int]) -> None:
-        self.joints = joints
+    def __init__(self) -> None:
         self._data: pin.Data | None = None
-        self._views: tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...]] = ((), ())
+        self._view: np.ndarray | None = None
 
-    def __call__(self, data: pin.Data) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...]]:
-        """The joints' (rotations, translations) in ``data``."""
+    def __call__(self, data: pin.Data) -> np.ndarray:
+        """The placements held in ``data``."""
         if self._data is not data:
-            oMi = data.oMi
-            self._views = (
-                tuple(oMi[j].rotation for j in self.joints),
-                tuple(oMi[j].translation for j in self.joints),
-            )
-            self._data = data  # keeps the memory the views read alive
-        return self._views
+            self._data, self._view = data, _view(data.oMi)  # the data keeps the memory the view reads alive
+        return self._view if self._view is not None else copied(data.oMi)
+
+
+def copied(oMi: pin.StdVec_SE3) -> np.ndarray:
+    """The placements ``oMi`` as :class:`JointPlacements` gives them, copied (read-only)."""
+    placements = np.array([np.vstack([M.rotation.T, M.translation]) for M in oMi]).reshape(-1, 4, 3)
+    placements.flags.writeable = False
+    return placements
+
+
+def _view(oMi: pin.StdVec_SE3) -> np.ndarray | None:
+    """A read-only view of ``oMi``'s memory as :class:`JointPlacements` gives it, or None where the
+    placements do not lie there as such."""
+    start = oMi[0].rotation.__array_interface__["data"][0]
+    step = 12 * 8  # bytes: a rotation's 9 doubles, then a translation's 3
+    for j, M in enumerate(oMi):
+        rotation, translation = M.rotation, M.translation
+        if (
+            rotation.__array_interface__["data"][0] != start + j * step
+            or rotation.strides != (8, 24)
+            or translation.__array_interface__["data"][0] != start + j * step + 72
+            or translation.strides != (8,)
+        ):
+            return None
+    memory = (ctypes.c_double * (12 * len(oMi))).from_address(start)
+    view = np.ctypeslib.as_array(memory).reshape(-1, 4, 3)
+    view.flags.writeable = False
+    return view if np.array_equal(view, copied(oMi)) else None

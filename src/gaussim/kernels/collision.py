@@ -16,8 +16,8 @@ NARROW_SLACK = 2e-3
 
 @njit(cache=True)
 def ground_hulls(
-    rotations,
-    translations,
+    placements,
+    joints,
     plane,
     columns,
     first,
@@ -36,9 +36,10 @@ def ground_hulls(
 ):  # type: ignore[no-untyped-def]
     """The compiled pass of :func:`gaussim.collision.ground.touching` (the arrays of its ``Hulls``; updates
     ``deepest`` and ``narrow_at``): returns the contacts, hull by hull, as (pairs, points, normals, gaps),
-    and the least gap of all the hulls. Hull k's own vertices are the first
-    ``sizes[k]`` columns of ``columns[k]`` (the rest pad it to the largest hull). ``patch``:
-    (PATCH_TOLERANCE, PATCH_MIN_EXTENT) of :mod:`gaussim.collision.contacts`; ``turns`` [rad] (per
+    and the least gap of all the hulls. Hull k is carried by joint ``joints[k]`` (its placement one of
+    ``placements``, see :mod:`gaussim.kernels.pairs`); its own vertices are the first ``sizes[k]``
+    columns of ``columns[k]`` (the rest pad it to the largest hull). ``patch``: (PATCH_TOLERANCE,
+    PATCH_MIN_EXTENT) of :mod:`gaussim.kernels.pairs`; ``turns`` [rad] (per
     declared pair) times ``diameters`` [m] (per hull): what hull k's turn within the step can bring its
     other vertices down by (``pair[k]`` is its declared pair): its patch reaches that
     deep where it exceeds PATCH_TOLERANCE, and keeps the outline of the resting patch and the deepest
@@ -51,6 +52,7 @@ def ground_hulls(
     count, size = columns.shape[0], columns.shape[2]
     base, extent = patch
     c = np.empty(4)  # the ground seen from the joint: (n^T R, n^T p - height)
+    R, p = np.empty((3, 3)), np.empty(3)  # hull k's joint's placement
     order = np.empty(size, np.int64)
     picked = np.empty(2 * directions.shape[1] + 1, np.int64)
     most = count * len(picked)  # at most: two outlines and the deepest
@@ -59,7 +61,11 @@ def ground_hulls(
     out = 0
     least = np.inf
     for k in range(count):
-        R, p, X = rotations[k], translations[k], columns[k]
+        placement, X = placements[joints[k]], columns[k]
+        for a in range(3):
+            p[a] = placement[3, a]
+            for j in range(3):
+                R[a, j] = placement[j, a]
         for j in range(3):
             c[j] = plane[k, 0] * R[0, j] + plane[k, 1] * R[1, j] + plane[k, 2] * R[2, j]
         c[3] = plane[k, 0] * p[0] + plane[k, 1] * p[1] + plane[k, 2] * p[2] + plane[k, 3]

@@ -50,9 +50,12 @@ SIGNATURES = {
     "integrator.midpoint_turns": ["f1r f1 f i1 b1 f1"],
     "integrator.move_bases": ["f1r f1 f1 f i1 i1"],
     "actuation.damped_torque": ["f1 f1 f1r f1"],
-    "collision.ground_hulls": [
-        f"f2F*{n} f1*{n} f2 f3 i2 i2 i1 i1 f2 f1 f1 f3 f f*2 f1 f1 i1" for n in (1, 2, 4, 5)
-    ],
+    # the joints' placements: one array whatever the scene (gaussim.kernels.pairs)
+    "collision.ground_hulls": ["f3r i1 f2 f3 i2 i2 i1 i1 f2 f1 f1 f3 f f*2 f1 f1 i1"],
+    "pairs.sphere_gaps": ["f3r i2 f3 f1 f1 f3 f f1"],
+    "boxes.box_pairs": ["f3r i2 f4 f3 f3 b1 i1 f i1 f1 f2 f3 i1"],
+    "primitives.primitive_pairs": ["f3r i2 f4 f3 i2 f3 i1 f i1 f1 f2 f3 i1"],
+    "cylinders.ground_cylinders": ["f3r i2 f4 f3 f2 f2 i1 f i1 f1 f2 f3 i1"],
     "collision.travel": ["i1 i1 f1 f1r f1 f f f1"],
     "collision.closing": [f"f2F f2 i1 i1 i1 i1 f2 f2 f1 {v} f1 f f f1" for v in ("f1r", "f1")],
     "contact.unpacked": ["f1 i i"],
@@ -77,6 +80,10 @@ SIGNATURES = {
         "f2 f1 f2r f1r f2 f1 f1r f1 f f f1 f1",
     ],
     "solver.read_results": [f"f2 f1 {sides} f1 f1 f1" for sides in _SIDES],
+    # the scenes of several bodies: their islands, and each one's problem
+    "solver.islands": [f"{a} {c} i2 i1 f1 i1 i" for a, c in (("f2r", "f2"), ("f2", "f2"), ("f2", "f2r"))],
+    "solver.members": ["i1 i"],
+    "solver.cut": [f"f2 f1 {sides} i1 i1 i1" for sides in _SIDES],
 }
 
 

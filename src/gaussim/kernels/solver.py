@@ -1,5 +1,5 @@
 """Compiled kernels of the solve (:mod:`gaussim.solver`): the KKT residuals, the active-set candidate,
-ProxQP's results read out."""
+ProxQP's results read out, the islands of a problem and its part on one of them."""
 
 from __future__ import annotations
 
@@ -178,3 +178,107 @@ def read_results(H, g, A, b, C, l, x, y, z):  # type: ignore[no-untyped-def]
     for i in range(n_in):
         multipliers[n_eq + i] = -z[i]
     return (x, multipliers, *kkt_residuals(H, g, A, b, C, l, x, multipliers[:n_eq], multipliers[n_eq:]))
+
+
+@njit(cache=True)
+def cut(H, g, A, b, C, l, cols, eq, ineq):  # type: ignore[no-untyped-def]
+    """(H, g, A, b, C, l) on the coordinates ``cols`` and the rows ``eq``, ``ineq``."""
+    n = len(cols)
+    H_, A_, C_ = np.empty((n, n)), np.empty((len(eq), n)), np.empty((len(ineq), n))
+    for j in range(n):
+        for k in range(n):
+            H_[j, k] = H[cols[j], cols[k]]
+    for i in range(len(eq)):
+        for k in range(n):
+            A_[i, k] = A[eq[i], cols[k]]
+    for i in range(len(ineq)):
+        for k in range(n):
+            C_[i, k] = C[ineq[i], cols[k]]
+    return H_, g[cols], A_, b[eq], C_, l[ineq]
+
+
+@njit(cache=True)
+def _root(parent, t):  # type: ignore[no-untyped-def]
+    while parent[t] != t:
+        parent[t] = parent[parent[t]]
+        t = parent[t]
+    return t
+
+
+@njit(cache=True)
+def _join(parent, s, t):  # type: ignore[no-untyped-def]
+    """Union of the sets of s and t (the smaller root stays)."""
+    a, b = _root(parent, s), _root(parent, t)
+    if a != b:
+        parent[max(a, b)] = min(a, b)
+
+
+@njit(cache=True)
+def islands(A, C, read, joint_tree, applied, tree, n_trees):  # type: ignore[no-untyped-def]
+    """(the island of each tree, -1 for a tree no row reads; the island of each row of [A; C], -1
+    for a row that reads no coordinate; the number of islands). A row reads the trees of its two
+    joints ``read[r]`` (``joint_tree``: each joint's tree, -1 for the world), or the trees of its
+    nonzero entries where ``read[r, 0]`` is -1. The trees of ``applied`` (nv,), the force the
+    modules apply outside the QP, are islands too."""
+    parent = np.arange(n_trees)
+    touched = np.zeros(n_trees, dtype=np.bool_)
+    n_eq, nv = A.shape[0], len(tree)
+    first = np.full(n_eq + C.shape[0], -1)
+    for r in range(len(first)):
+        if read[r, 0] >= 0:
+            for joint in (read[r, 0], read[r, 1]):
+                t = joint_tree[joint]
+                if t < 0:
+                    continue
+                touched[t] = True
+                if first[r] < 0:
+                    first[r] = t
+                else:
+                    _join(parent, first[r], t)
+            continue
+        last = -1
+        for k in range(nv):
+            value = A[r, k] if r < n_eq else C[r - n_eq, k]
+            if value == 0.0 or tree[k] == last:
+                continue
+            last = tree[k]
+            touched[last] = True
+            if first[r] < 0:
+                first[r] = last
+            else:
+                _join(parent, first[r], last)
+    for k in range(nv):
+        if applied[k] != 0.0:
+            touched[tree[k]] = True
+    island_of_root = np.full(n_trees, -1)
+    island_of_tree = np.full(n_trees, -1)
+    n = 0
+    for t in range(n_trees):
+        if touched[t]:
+            r = _root(parent, t)
+            if island_of_root[r] < 0:
+                island_of_root[r], n = n, n + 1
+            island_of_tree[t] = island_of_root[r]
+    island_of_row = np.full(len(first), -1)
+    for r in range(len(first)):
+        if first[r] >= 0:
+            island_of_row[r] = island_of_tree[first[r]]
+    return island_of_tree, island_of_row, n
+
+
+@njit(cache=True)
+def members(labels, n):  # type: ignore[no-untyped-def]
+    """(the indices of labels 0, ..., n - 1 in label order, ascending within each; where each label's
+    run starts, (n + 1,)); labels < 0 are left out."""
+    start = np.zeros(n + 1, dtype=np.int64)
+    for label in labels:
+        if label >= 0:
+            start[label + 1] += 1
+    for i in range(n):
+        start[i + 1] += start[i]
+    order, fill = np.empty(start[n], dtype=np.int64), start[:n].copy()
+    for k in range(len(labels)):
+        if labels[k] >= 0:
+            order[fill[labels[k]]] = k
+            fill[labels[k]] += 1
+    return order, start

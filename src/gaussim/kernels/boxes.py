@@ -1,0 +1,243 @@
+"""Box against box, compiled: the separating-axis test and, for a face on a face, its contact patch
+clipped on the reference face (after ODE's ``dBoxBox`` and MuJoCo's ``box_box``), the answer of
+coal's narrow phase and contact patch without their calls; what it cannot answer exactly goes to coal.
+
+For two boxes the largest separation along the 15 axes (3 face normals each, 9 edge cross products)
+is a lower bound on their distance and, when they overlap, minus their penetration depth (the
+minimum translation of two polytopes is along one of those axes). When that axis is a face's normal
+the boxes' support sets along it (their vertices within PATCH_TOLERANCE of their support planes)
+clipped to each other are coal's contact patch; when the incident points reach that separation it
+is also their distance. Pairs that touch edge to edge, at one point (a patch narrower than
+PATCH_MIN_EXTENT), or apart at a distance the patch does not reach go to coal.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from ..linalg import cross, dot
+from .pairs import ASK_COAL, FAR, FOUND, PATCH_MIN_EXTENT, PATCH_TOLERANCE, order, place
+
+# An edge-edge axis is taken over a face's normal only when it separates the boxes by this much
+# more: nearly parallel faces have edge axes that agree with the face's to round-off [m].
+EDGE_PREFERENCE = 1e-9
+# The incident points reach the separation within this when it is the boxes' distance [m].
+REACHED = 1e-12
+# Two patch points closer than this are one (a corner on the reference face's edge, clipped) [m].
+SAME_POINT = 1e-9
+MAX_POINTS = 8  # a quadrilateral clipped to a rectangle
+
+
+@njit(cache=True)
+def box_pairs(
+    placements,
+    side,
+    local_rotation,
+    local_translation,
+    half,
+    thin,
+    near,
+    margin,
+    answer,
+    gaps,
+    normals,
+    points,
+    sizes,
+):  # type: ignore[no-untyped-def]
+    """The compiled test of :class:`gaussim.collision.boxes.BoxPairs` on pairs ``near``: for each, fills
+    ``answer`` (FAR, FOUND or ASK_COAL), ``gaps`` (a lower bound when FAR, the gap of a patch), and for a
+    patch its normal (from the other box to the robot's) and its ``sizes`` points on the robot's box (ordered
+    by their place on it, as :class:`gaussim.collision.narrow.NarrowPhase` orders them)."""
+    R = np.empty((2, 3, 3))
+    p = np.empty((2, 3))
+    for k in range(near.shape[0]):
+        i = near[k]
+        place(placements, side, local_rotation, local_translation, i, R, p)
+        if thin[i]:
+            answer[k] = ASK_COAL
+            continue
+        answer[k], gaps[k], sizes[k] = _box_box(R, p, half[i], margin, normals[k], points[k])
+
+
+@njit(cache=True)
+def _box_box(R, p, half, margin, normal, points):  # type: ignore[no-untyped-def]
+    """Boxes 0 (the robot's) and 1 at (R[s] (columns: axes), p[s]), half sides ``half[s]``: returns
+    (answer, gap, number of points), the normal and points written into ``normal`` (3,) and
+    ``points`` (MAX_POINTS, 3)."""
+    d = p[0] - p[1]
+    T = np.empty((2, 3, 3))  # T[s, a]: axis a of box s (contiguous)
+    T[0], T[1] = R[0].T, R[1].T
+    best, axis_box, axis_index = -np.inf, -1, -1
+    for s in range(2):
+        for a in range(3):
+            axis = T[s, a]
+            separation = abs(dot(d, axis)) - _reach(T, half, axis)
+            if separation > best:
+                best, axis_box, axis_index = separation, s, a
+    if best > margin:  # a face axis separates them: the edge axes need not be tried
+        return FAR, best, 0
+    edge_best = -np.inf
+    axis = np.empty(3)
+    for a in range(3):
+        for b in range(3):
+            e, f = T[0, a], T[1, b]
+            axis[0], axis[1], axis[2] = cross(e[0], e[1], e[2], f[0], f[1], f[2])
+            length = np.sqrt(dot(axis, axis))
+            if length < 1e-6:  # parallel edges: their axis is a face's
+                continue
+            axis /= length
+            edge_best = max(edge_best, abs(dot(d, axis)) - _reach(T, half, axis))
+    lower = max(best, edge_best)
+    if lower > margin:
+        return FAR, lower, 0
+    if edge_best > best + EDGE_PREFERENCE:
+        return ASK_COAL, lower, 0
+    n = T[axis_box, axis_index].copy()
+    if dot(d, n) < 0:
+        n = -n  # from box 1 towards box 0
+    robot_support = dot(n, p[0]) - _extent(T[0], half[0], n)
+    other_support = dot(n, p[1]) + _extent(T[1], half[1], n)
+    gap = robot_support - other_support
+    # the reference face (of the axis' box, facing the other) and the other box's support set
+    ref = axis_box
+    inc = 1 - ref
+    towards = -n if ref == 0 else n  # the reference face's outward normal
+    centre = p[ref] + half[ref][axis_index] * towards
+    u, w = T[ref, (axis_index + 1) % 3], T[ref, (axis_index + 2) % 3]
+    hu, hw = half[ref][(axis_index + 1) % 3], half[ref][(axis_index + 2) % 3]
+    polygon = _support_polygon(R[inc], p[inc], half[inc], -towards)
+    if polygon.shape[0] == 0:
+        return ASK_COAL, lower, 0
+    clipped = _clip(polygon, centre, u, hu, w, hw)
+    if clipped.shape[0] == 0:
+        return ASK_COAL, lower, 0
+    # each clipped point is a point of the incident box over the reference face: the nearest is at
+    # the boxes' distance when it reaches the separation
+    reached = np.inf
+    for j in range(clipped.shape[0]):
+        reached = min(reached, dot(clipped[j] - centre, towards))
+    if gap > 0 and reached - gap > REACHED:
+        return ASK_COAL, lower, 0
+    count = 0
+    for j in range(clipped.shape[0]):  # onto the robot's support plane, without repeats
+        x = clipped[j] + n * (robot_support - dot(n, clipped[j]))
+        repeated = False
+        for m in range(count):
+            if np.sqrt(np.sum((points[m] - x) ** 2)) <= SAME_POINT:
+                repeated = True
+        if not repeated:
+            points[count] = x
+            count += 1
+    low, high = points[0].copy(), points[0].copy()
+    for j in range(count):
+        low, high = np.minimum(low, points[j]), np.maximum(high, points[j])
+    if (high - low).max() <= PATCH_MIN_EXTENT:
+        return ASK_COAL, lower, 0
+    order(points, count, R[0], p[0])
+    normal[:] = n
+    return FOUND, gap, count
+
+
+@njit(cache=True)
+def _reach(T, half, axis):  # type: ignore[no-untyped-def]
+    """The sum of both boxes' half extents along unit ``axis`` (their axes as rows ``T[s]``)."""
+    return _extent(T[0], half[0], axis) + _extent(T[1], half[1], axis)
+
+
+@njit(cache=True)
+def _extent(T, half, axis):  # type: ignore[no-untyped-def]
+    """A box's half extent along unit ``axis`` (its axes as rows of ``T``)."""
+    return half[0] * abs(dot(T[0], axis)) + half[1] * abs(dot(T[1], axis)) + half[2] * abs(dot(T[2], axis))
+
+
+@njit(cache=True)
+def _support_polygon(R, p, half, direction):  # type: ignore[no-untyped-def]
+    """The box's vertices within PATCH_TOLERANCE of its support plane along ``direction``, in order
+    around the face, edge or vertex they make, shape (k, 3); empty (0, 3) when they make none of
+    those (a box thinner than the tolerance)."""
+    signs = np.empty((8, 3))
+    corners = np.empty((8, 3))
+    heights = np.empty(8)
+    for v in range(8):
+        for a in range(3):
+            signs[v, a] = 1.0 if (v >> (2 - a)) & 1 else -1.0
+        for a in range(3):
+            corners[v, a] = (
+                p[a]
+                + R[a, 0] * signs[v, 0] * half[0]
+                + R[a, 1] * signs[v, 1] * half[1]
+                + R[a, 2] * signs[v, 2] * half[2]
+            )
+        heights[v] = dot(corners[v], direction)
+    top = heights.max()
+    chosen = np.flatnonzero(heights >= top - PATCH_TOLERANCE)
+    k = chosen.shape[0]
+    if k == 1 or k == 2:
+        return corners[chosen].copy()
+    if k != 4:
+        return np.empty((0, 3))
+    fixed = -1
+    for a in range(3):
+        if np.all(signs[chosen, a] == signs[chosen[0], a]):
+            fixed = a
+    if fixed < 0:
+        return np.empty((0, 3))
+    a, b = (fixed + 1) % 3, (fixed + 2) % 3
+    polygon = np.empty((4, 3))
+    for j, (sa, sb) in enumerate(((-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0))):
+        for v in chosen:
+            if signs[v, a] == sa and signs[v, b] == sb:
+                polygon[j] = corners[v]
+    return polygon
+
+
+@njit(cache=True)
+def _clip(polygon, centre, u, hu, w, hw):  # type: ignore[no-untyped-def]
+    """The part of a polygon (k, 3) (a segment when k = 2, a point when k = 1) over the rectangle
+    centred at ``centre`` with half sides ``hu``, ``hw`` along unit ``u``, ``w``; points keep their
+    place (they are only cut along the rectangle's sides)."""
+    current = polygon.copy()
+    for axis, bound in ((u, hu), (w, hw)):
+        for sign in (1.0, -1.0):
+            current = _cut(current, centre, sign * axis, bound)
+            if current.shape[0] == 0:
+                return current
+    return current
+
+
+@njit(cache=True)
+def _cut(polygon, centre, axis, bound):  # type: ignore[no-untyped-def]
+    """The part of ``polygon`` (k, 3) where (x - centre) . axis <= bound (Sutherland-Hodgman; a
+    segment or a point when k is 2 or 1)."""
+    k = polygon.shape[0]
+    inside = np.empty(k)
+    for j in range(k):
+        inside[j] = bound - dot(polygon[j] - centre, axis)
+    out = np.empty((2 * k, 3))
+    count = 0
+    if k <= 2:
+        for j in range(k):
+            if inside[j] >= 0:
+                out[count] = polygon[j]
+                count += 1
+        if k == 2 and inside[0] * inside[1] < 0:
+            t = inside[0] / (inside[0] - inside[1])
+            crossing = polygon[0] + t * (polygon[1] - polygon[0])
+            if inside[0] >= 0:
+                out[1] = crossing
+            else:
+                out[1] = out[0]
+                out[0] = crossing
+            count = 2
+        return out[:count].copy()
+    for j in range(k):
+        nxt = (j + 1) % k
+        if inside[j] >= 0:
+            out[count] = polygon[j]
+            count += 1
+        if inside[j] * inside[nxt] < 0:
+            t = inside[j] / (inside[j] - inside[nxt])
+            out[count] = polygon[j] + t * (polygon[nxt] - polygon[j])
+            count += 1
+    return out[:count].copy()

@@ -1,0 +1,110 @@
+"""Compiled kernels the collision routines share (:mod:`gaussim.collision`): the joints' placements read
+where Pinocchio keeps them, the bounding-sphere broad phase, a pair's two sides placed in the world, and
+a patch's points put in a stable order.
+
+Every kernel reads the placements of all the model's joints as one array (njoints, 4, 3): row j holds
+the three columns of joint j's rotation, then its translation
+(:class:`gaussim.collision.pairs.JointPlacements`, a view of ``data.oMi`` itself). One array, whatever
+the scene, is one signature, which the build compiles ahead (:mod:`.prebuild`)."""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+# Surface points within this distance of the support plane belong to a contact patch [m].
+PATCH_TOLERANCE = 1e-3
+# A contact patch narrower than this is one point (the rounded foot of a mesh hull touches on a
+# ring of nearby vertices; several points there would only add redundant rows) [m].
+PATCH_MIN_EXTENT = 2e-2
+
+# Answers of a pair family's kernel per pair: farther apart than the margin, points found, or coal's to
+# answer.
+FAR, FOUND, ASK_COAL = 0, 1, 2
+
+
+@njit(cache=True)
+def place(placements, side, local_rotation, local_translation, i, R, p):  # type: ignore[no-untyped-def]
+    """Both sides of pair ``i`` in the world: (R[s] (columns: its axes), p[s]) for s = 0 (the robot's)
+    and 1, its joint ``side[i, s]``'s placement (``placements``, see the module's docstring) times its
+    own (``local_rotation[i, s]``, ``local_translation[i, s]``)."""
+    for s in range(2):
+        X = placements[side[i, s]]  # X[c, a]: row a of the rotation's column c; X[3]: the translation
+        for a in range(3):  # loops: a BLAS call per 3 x 3 product costs more than its arithmetic
+            p[s, a] = X[3, a]
+            for b in range(3):
+                R[s, a, b] = 0.0
+                p[s, a] += X[b, a] * local_translation[i, s, b]
+                for c in range(3):
+                    R[s, a, b] += X[c, a] * local_rotation[i, s, c, b]
+
+
+@njit(cache=True)
+def sphere_gaps(placements, side, centers, radius, obstacle_radius, boxes, margin, gaps):  # type: ignore[no-untyped-def]
+    """The compiled pass of :meth:`gaussim.collision.narrow.BoundingSpheres.gaps`: each pair's centres in
+    the world, the distance of the two spheres into ``gaps``, and within ``margin`` the larger of that and
+    the distance of the robot geometry's sphere to the obstacle's box (``boxes``: its half sides and its
+    three axes, in the frame of the obstacle's joint, from the centre the spheres share)."""
+    d = np.empty(3)  # the robot sphere's centre less the obstacle's, in the world
+    for i in range(gaps.shape[0]):
+        squared = 0.0
+        for a in range(3):
+            d[a] = 0.0
+            for s in range(2):
+                X = placements[side[i, s]]
+                x = (
+                    X[3, a]
+                    + X[0, a] * centers[i, s, 0]
+                    + X[1, a] * centers[i, s, 1]
+                    + X[2, a] * centers[i, s, 2]
+                )
+                d[a] += x if s == 0 else -x
+            squared += d[a] * d[a]
+        gaps[i] = np.sqrt(squared) - radius[i] - obstacle_radius[i]
+        if gaps[i] <= margin and np.isfinite(obstacle_radius[i]):  # not a ground's
+            X, outside = placements[side[i, 1]], 0.0
+            for b in range(3):  # along the box's axis b: R boxes[i, 1 + b]
+                along = 0.0
+                for a in range(3):
+                    axis = (
+                        X[0, a] * boxes[i, 1 + b, 0]
+                        + X[1, a] * boxes[i, 1 + b, 1]
+                        + X[2, a] * boxes[i, 1 + b, 2]
+                    )
+                    along += d[a] * axis
+                beyond = max(abs(along) - boxes[i, 0, b], 0.0)
+                outside += beyond * beyond
+            gaps[i] = max(gaps[i], np.sqrt(outside) - radius[i])
+
+
+@njit(cache=True)
+def order(points, count, R, p):  # type: ignore[no-untyped-def]
+    """Sorts the first ``count`` points by their coordinates on the robot's geometry (at R, p), rounded
+    to 0.1 mm, x first (the order of :meth:`gaussim.collision.narrow.NarrowPhase._patch`)."""
+    keys = np.empty((count, 3))
+    for j in range(count):
+        for c in range(3):
+            keys[j, c] = np.rint(
+                (
+                    (points[j, 0] - p[0]) * R[0, c]
+                    + (points[j, 1] - p[1]) * R[1, c]
+                    + (points[j, 2] - p[2]) * R[2, c]
+                )
+                * 1e4
+            )
+    for j in range(1, count):  # insertion sort: a handful of points
+        m = j
+        while m > 0 and _before(keys[m], keys[m - 1]):
+            for a in range(3):
+                keys[m, a], keys[m - 1, a] = keys[m - 1, a], keys[m, a]
+                points[m, a], points[m - 1, a] = points[m - 1, a], points[m, a]
+            m -= 1
+
+
+@njit(cache=True)
+def _before(a, b):  # type: ignore[no-untyped-def]
+    """Whether key ``a`` sorts before ``b`` (x, then y, then z)."""
+    for j in range(3):
+        if a[j] != b[j]:
+            return a[j] < b[j]
+    return False
