@@ -78,17 +78,38 @@ def _distance(a: pin.SE3, b: pin.SE3) -> float:
     return float(np.linalg.norm(A @ solution.x - (b.translation - a.translation)))
 
 
-@pytest.mark.parametrize("fixed", [False, True])
-def test_boxes_on_boxes_match_coal(fixed):
-    """Box a against box b (another body's, or a fixed obstacle) at random and resting poses: the
-    compiled pairs find a contact exactly when coal does; where they answer themselves (not handing
-    the pair to coal), their gap is the boxes' distance (scipy) or coal's depth, and their patch is
-    coal's, point for point in the same order."""
+def _edge_poses(count: int, seed: int) -> Iterator[tuple[pin.SE3, pin.SE3]]:
+    """Placements of box a and box b at random orientations with the line of an edge of a crossing the
+    line of an edge of b, mostly inside both edges (a fifth beyond an end), within MARGIN of touching
+    or overlapping by as much along their common normal."""
+    rng = np.random.default_rng(seed)
+    while count:
+        Ra, Rb = (pin.rpy.rpyToMatrix(*rng.uniform(-np.pi, np.pi, 3)) for _ in range(2))
+        i, j = rng.integers(3, size=2)
+        n = np.cross(Ra[:, i], Rb[:, j])
+        if np.linalg.norm(n) < 0.3:
+            continue
+        n /= np.linalg.norm(n)  # from b towards a
+        o_a = -sum(np.sign(n @ Ra[:, c]) * HALF_A[c] * Ra[:, c] for c in range(3) if c != i)
+        o_b = sum(np.sign(n @ Rb[:, c]) * HALF_B[c] * Rb[:, c] for c in range(3) if c != j)
+        s, t = rng.uniform(-1.2, 1.2) * HALF_A[i], rng.uniform(-1.2, 1.2) * HALF_B[j]  # some beyond
+        gap = rng.uniform(-MARGIN / 2, MARGIN / 2)
+        pb = rng.uniform(-0.1, 0.1, 3)
+        pa = pb + o_b + t * Rb[:, j] + gap * n - o_a - s * Ra[:, i]
+        count -= 1
+        yield pin.SE3(Ra, pa), pin.SE3(Rb, pb)
+
+
+def _compare_boxes(poses: Iterator[tuple[pin.SE3, pin.SE3]], fixed: bool) -> tuple[int, int]:
+    """Box a against box b (another body's, or a fixed obstacle) at each of ``poses``: the compiled
+    pairs find a contact exactly when coal does; where they answer themselves (not handing the pair
+    to coal), their gap is the boxes' distance (scipy) or coal's depth, and their patch is coal's,
+    point for point in the same order. Returns how many poses they answered, and of those at one
+    point."""
     a = FreeBody.box("a", tuple(2 * HALF_A), mass=1.0)
     b = FreeBody.box("b", tuple(2 * HALF_B), mass=1.0)
-    obstacle = gaussim.Box("b", tuple(2 * HALF_B))
-    answered = 0
-    for k, (pose_a, pose_b) in enumerate(_box_poses(240, seed=3)):
+    answered = ones = 0
+    for k, (pose_a, pose_b) in enumerate(poses):
         if fixed:
             obstacle = gaussim.Box(
                 "b", tuple(2 * HALF_B), position=pose_b.translation, rotation=pose_b.rotation
@@ -109,6 +130,7 @@ def test_boxes_on_boxes_match_coal(fixed):
         if not mine or all(np.array_equal(x, y) for x, y in zip(mine[0], current[0])):
             continue  # no contact, or coal's own answer
         answered += 1
+        ones += len(mine[0][1]) == 1
         assert least <= _distance(pose_a, pose_b) + AGREEMENT
         _, points, normals, gaps = mine[0]
         _, points_ref, normals_ref, gaps_ref = reference[0]
@@ -118,7 +140,23 @@ def test_boxes_on_boxes_match_coal(fixed):
         np.testing.assert_allclose(normals, normals_ref, atol=NORMAL_AGREEMENT, err_msg=str(k))
         assert points.shape == points_ref.shape, k
         np.testing.assert_allclose(points, points_ref, atol=EPA_AGREEMENT, err_msg=str(k))
-    assert answered >= 80, answered  # most resting poses are answered by the compiled pairs
+    return answered, ones
+
+
+@pytest.mark.parametrize("fixed", [False, True])
+def test_boxes_on_boxes_match_coal(fixed):
+    """At random and resting poses (see :func:`_compare_boxes`): most resting poses are answered by the
+    compiled pairs, and corners over a face at one point."""
+    answered, corners = _compare_boxes(_box_poses(240, seed=3), fixed)
+    assert answered >= 80 and corners >= 10, (answered, corners)
+
+
+@pytest.mark.parametrize("fixed", [False, True])
+def test_boxes_crossing_edge_to_edge_match_coal(fixed):
+    """Edges crossing inside both boxes (see :func:`_compare_boxes`): answered at coal's witness point
+    on the robot's edge, or at coal's patch of the two edges."""
+    answered, ones = _compare_boxes(_edge_poses(120, seed=4), fixed)
+    assert ones >= 40 and answered > ones, (answered, ones)
 
 
 def test_a_box_resting_on_a_box_touches_at_its_corners():

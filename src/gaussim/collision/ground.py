@@ -16,7 +16,7 @@ import pinocchio as pin
 
 from ..kernels.collision import NARROW_SLACK, ground_hulls
 from .contacts import PATCH_MIN_EXTENT, PATCH_TOLERANCE, Piece
-from .pairs import JointPlacements, Pair
+from .pairs import JointPlacements, Pair, vertices
 
 # A flat face on the ground is supported by the vertices extreme along these many directions of
 # the tangent plane (every 360/n degrees): the corners of a box, the outline of a sole.
@@ -143,13 +143,13 @@ def touching(
 
 def _hulls(pairs: list[Pair]) -> Hulls:
     """The :class:`Hulls` of polyhedra and spheres ``pairs`` on the ground."""
-    polyhedra = [_vertices(pair.shape) for pair in pairs]
-    size = max((len(vertices) for vertices, _ in polyhedra), default=0)
+    polyhedra = [vertices(pair.shape) for pair in pairs]
+    size = max((len(points) for points, _ in polyhedra), default=0)
     columns = []
-    for pair, (vertices, _) in zip(pairs, polyhedra):
-        vertices = vertices @ pair.local.rotation.T + pair.local.translation
-        vertices = np.vstack([vertices, np.repeat(vertices[:1], size - len(vertices), axis=0)])
-        columns.append(np.vstack([vertices.T, np.ones(size)]))
+    for pair, (points, _) in zip(pairs, polyhedra):
+        points = points @ pair.local.rotation.T + pair.local.translation
+        points = np.vstack([points, np.repeat(points[:1], size - len(points), axis=0)])
+        columns.append(np.vstack([points.T, np.ones(size)]))
     first = np.zeros((len(pairs), size + 1), dtype=np.int64)
     neighbours = np.zeros((len(pairs), max((sum(map(len, e)) for _, e in polyhedra), default=0)), np.int64)
     for k, (_, edges) in enumerate(polyhedra):
@@ -184,19 +184,3 @@ def _support_directions(n: np.ndarray) -> np.ndarray:
     angles = 2 * np.pi * np.arange(SUPPORT_DIRECTIONS // 2) / SUPPORT_DIRECTIONS
     half = np.outer(np.cos(angles), t1) + np.outer(np.sin(angles), np.cross(n, t1))
     return np.vstack([half, -half])
-
-
-def _vertices(shape: coal.CollisionGeometry) -> tuple[np.ndarray, list[list[int]]]:
-    """Vertices of a box or convex polyhedron in its own frame, shape (V, 3), and the vertices each
-    shares an edge with; a capsule's segment (its radius is the hull's rounding); else (a sphere) its
-    centre (its radius is the hull's rounding)."""
-    if isinstance(shape, coal.Box):
-        half = np.asarray(shape.halfSide)
-        corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=float)
-        return corners * half, [[i ^ 1, i ^ 2, i ^ 4] for i in range(8)]  # corner i = 4 x + 2 y + z
-    if isinstance(shape, coal.Capsule):
-        return np.array([[0.0, 0.0, -shape.halfLength], [0.0, 0.0, shape.halfLength]]), [[1], [0]]
-    if isinstance(shape, coal.ConvexBase):
-        points = np.asarray(shape.points())
-        return points, [list(shape.neighbors(i)) for i in range(len(points))]
-    return np.zeros((1, 3)), [[]]

@@ -7,10 +7,10 @@ import numpy as np
 import pinocchio as pin
 
 from ..exceptions import ContactError
-from ..kernels.pairs import sphere_gaps
+from ..kernels.pairs import sphere_gaps, support_gaps
 from ..linalg import finite
 from .contacts import PATCH_MIN_EXTENT, PATCH_TOLERANCE, Piece, one_pair
-from .pairs import JointPlacements, Pair
+from .pairs import JointPlacements, Pair, vertices
 
 
 class NarrowPhase:
@@ -36,7 +36,7 @@ class NarrowPhase:
         self.patch_request.setPatchTolerance(PATCH_TOLERANCE)
         self.result = coal.CollisionResult()
         self.patch_result = coal.ContactPatchResult(self.patch_request)
-        self.spheres = BoundingSpheres(self.pairs)
+        self.spheres = BoundingSpheres(self.pairs, supports=True)
 
     def detect(self, data: pin.Data, margin: float, turns: np.ndarray) -> tuple[list[Piece], float]:
         """The contacts of the pairs within ``margin`` [m] at the placements held in ``data``, and a
@@ -130,14 +130,17 @@ class BoundingSpheres:
     """The broad phase: the gaps of the P pairs' bounding spheres, lower bounds on their own, all at
     once (a pile of objects has a pair for every two of them, most of them far apart); a pair whose
     spheres are within the margin gets the gap of the robot geometry's sphere to the obstacle's
-    bounding box instead where that is larger (a table's or a wall's sphere holds much of the scene).
+    bounding box instead where that is larger (a table's or a wall's sphere holds much of the scene),
+    and with ``supports``, that of the geometry's vertices to that box where larger still (a robot's
+    link, whose sphere is loose, above a table).
 
     Args:
         pairs: the P pairs; a ground's sphere is infinite (its pairs always reach coal, whose
             half-space test is as cheap).
+        supports: whether to bound by the geometries' vertices (for the pairs that go to coal).
     """
 
-    def __init__(self, pairs: list[Pair]) -> None:
+    def __init__(self, pairs: list[Pair], supports: bool = False) -> None:
         # the joints of each pair's two sides, whose placements are read
         self.side = np.array([[p.joint, p.other_joint] for p in pairs], dtype=np.int64).reshape(-1, 2)
         self.placements = JointPlacements()
@@ -145,13 +148,39 @@ class BoundingSpheres:
         self.radius = np.array([p.radius for p in pairs])
         self.obstacle_radius = np.array([p.obstacle_radius for p in pairs])
         self.boxes = np.array([p.obstacle_box for p in pairs]).reshape(-1, 4, 3)
+        self.vertices = _supports(pairs) if supports else None
 
     def gaps(self, data: pin.Data, margin: float) -> np.ndarray:
         """The pairs' gaps at the joint placements held in ``data``, shape (P,) [m] (-inf against a
         ground): the spheres', or within ``margin`` [m] the larger of that and the sphere's to the
-        obstacle's box."""
+        obstacle's box (and its vertices' to that box, with ``supports``)."""
         gaps = np.empty(len(self.radius))
         if len(gaps):
-            spheres = (self.side, self.centers, self.radius, self.obstacle_radius)
-            sphere_gaps(self.placements(data), *spheres, self.boxes, margin, gaps)
+            placements, spheres = self.placements(data), (self.side, self.centers, self.radius)
+            sphere_gaps(placements, *spheres, self.obstacle_radius, self.boxes, margin, gaps)
+            if self.vertices is not None:
+                box = (self.centers, self.boxes, self.obstacle_radius)
+                support_gaps(placements, self.side, *self.vertices, *box, margin, gaps)
         return gaps
+
+
+def _supports(pairs: list[Pair]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(the vertices of every pair's robot geometry in the frame of its joint, stacked (N, 3); where
+    each pair's start, (P + 1,); how far each geometry reaches beyond their hull [m], (P,)): a box's
+    corners, a convex hull's vertices, a capsule's segment or a sphere's centre (with its radius);
+    none for another shape, or against a ground."""
+    chunks, rounding = [], np.zeros(len(pairs))
+    for k, pair in enumerate(pairs):
+        shape = pair.shape
+        if not np.isfinite(pair.obstacle_radius):  # a ground: coal's half-space test
+            points = np.zeros((0, 3))
+        elif isinstance(shape, coal.Box | coal.ConvexBase):
+            points = vertices(shape)[0]
+        elif isinstance(shape, coal.Capsule | coal.Sphere):
+            points, rounding[k] = vertices(shape)[0], shape.radius
+        else:
+            points = np.zeros((0, 3))
+        chunks.append(points @ pair.local.rotation.T + pair.local.translation)
+    start = np.concatenate([[0], np.cumsum([len(c) for c in chunks])]).astype(np.int64)
+    stacked = np.vstack(chunks) if chunks else np.zeros((0, 3))
+    return np.ascontiguousarray(stacked, dtype=float), start, rounding

@@ -132,3 +132,19 @@ def _view(oMi: pin.StdVec_SE3) -> np.ndarray | None:
     view = np.ctypeslib.as_array(memory).reshape(-1, 4, 3)
     view.flags.writeable = False
     return view if np.array_equal(view, copied(oMi)) else None
+
+
+def vertices(shape: coal.CollisionGeometry) -> tuple[np.ndarray, list[list[int]]]:
+    """Vertices of a box or convex polyhedron in its own frame, shape (V, 3), and the vertices each
+    shares an edge with; a capsule's segment (its radius is the hull's rounding); else (a sphere) its
+    centre (its radius is the hull's rounding)."""
+    if isinstance(shape, coal.Box):
+        half = np.asarray(shape.halfSide)
+        corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=float)
+        return corners * half, [[i ^ 1, i ^ 2, i ^ 4] for i in range(8)]  # corner i = 4 x + 2 y + z
+    if isinstance(shape, coal.Capsule):
+        return np.array([[0.0, 0.0, -shape.halfLength], [0.0, 0.0, shape.halfLength]]), [[1], [0]]
+    if isinstance(shape, coal.ConvexBase):
+        points = np.asarray(shape.points())
+        return points, [list(shape.neighbors(i)) for i in range(len(points))]
+    return np.zeros((1, 3)), [[]]

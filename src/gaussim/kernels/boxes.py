@@ -7,8 +7,10 @@ is a lower bound on their distance and, when they overlap, minus their penetrati
 minimum translation of two polytopes is along one of those axes). When that axis is a face's normal
 the boxes' support sets along it (their vertices within PATCH_TOLERANCE of their support planes)
 clipped to each other are coal's contact patch; when the incident points reach that separation it
-is also their distance. Pairs that touch edge to edge, at one point (a patch narrower than
-PATCH_MIN_EXTENT), or apart at a distance the patch does not reach go to coal.
+is also their distance. A corner over the other box's face is a patch of one point, coal's witness
+point: the corner, or its foot on the robot's face. Pairs that touch edge to edge, on a patch of more
+points narrower than PATCH_MIN_EXTENT (one point, which coal's witness decides), with a vertex within
+DECISION of the patch's tolerance, or apart at a distance the patch does not reach go to coal.
 """
 
 from __future__ import annotations
@@ -17,7 +19,8 @@ import numpy as np
 from numba import njit
 
 from ..linalg import cross, dot
-from .pairs import ASK_COAL, FAR, FOUND, PATCH_MIN_EXTENT, PATCH_TOLERANCE, order, place
+from .pairs import ASK_COAL, DECISION, FAR, FOUND, PATCH_MIN_EXTENT, PATCH_TOLERANCE, order, place
+from .primitives import BOX, NEAR_PARALLEL, _box_support, _patch
 
 # An edge-edge axis is taken over a face's normal only when it separates the boxes by this much
 # more: nearly parallel faces have edge axes that agree with the face's to round-off [m].
@@ -27,6 +30,7 @@ REACHED = 1e-12
 # Two patch points closer than this are one (a corner on the reference face's edge, clipped) [m].
 SAME_POINT = 1e-9
 MAX_POINTS = 8  # a quadrilateral clipped to a rectangle
+BOXES = np.array([BOX, BOX])  # the kinds of the primitives' patch (its sides)
 
 
 @njit(cache=True)
@@ -77,7 +81,8 @@ def _box_box(R, p, half, margin, normal, points):  # type: ignore[no-untyped-def
                 best, axis_box, axis_index = separation, s, a
     if best > margin:  # a face axis separates them: the edge axes need not be tried
         return FAR, best, 0
-    edge_best = -np.inf
+    edge_best = edge_next = -np.inf  # the largest edge separation, and the next one
+    edges = (-1, -1)
     axis = np.empty(3)
     for a in range(3):
         for b in range(3):
@@ -87,12 +92,18 @@ def _box_box(R, p, half, margin, normal, points):  # type: ignore[no-untyped-def
             if length < 1e-6:  # parallel edges: their axis is a face's
                 continue
             axis /= length
-            edge_best = max(edge_best, abs(dot(d, axis)) - _reach(T, half, axis))
+            separation = abs(dot(d, axis)) - _reach(T, half, axis)
+            if separation > edge_best:
+                edge_best, edge_next, edges = separation, edge_best, (a, b)
+            else:
+                edge_next = max(edge_next, separation)
     lower = max(best, edge_best)
     if lower > margin:
         return FAR, lower, 0
     if edge_best > best + EDGE_PREFERENCE:
-        return ASK_COAL, lower, 0
+        if edge_best - edge_next <= DECISION:
+            return ASK_COAL, lower, 0  # two edge axes about as good: coal's EPA picks one
+        return _edge_edge(R, p, T, half, edges[0], edges[1], d, lower, normal, points)
     n = T[axis_box, axis_index].copy()
     if dot(d, n) < 0:
         n = -n  # from box 1 towards box 0
@@ -132,11 +143,67 @@ def _box_box(R, p, half, margin, normal, points):  # type: ignore[no-untyped-def
     low, high = points[0].copy(), points[0].copy()
     for j in range(count):
         low, high = np.minimum(low, points[j]), np.maximum(high, points[j])
-    if (high - low).max() <= PATCH_MIN_EXTENT:
-        return ASK_COAL, lower, 0
+    if (high - low).max() <= PATCH_MIN_EXTENT and polygon.shape[0] > 1:
+        return ASK_COAL, lower, 0  # one point, which coal's witness decides
     order(points, count, R[0], p[0])
     normal[:] = n
     return FOUND, gap, count
+
+
+@njit(cache=True)
+def _edge_edge(R, p, T, half, a, b, d, lower, normal, points):  # type: ignore[no-untyped-def]
+    """Box 0's edge along its axis ``a`` against box 1's along its axis ``b``, whose axis separates the
+    boxes least (by ``lower``): returns (answer, gap, number of points) as :func:`_box_box`. The edges
+    are each box's support edge along the normal n (their cross product, from box 1 towards box 0);
+    coal's witness points are the closest points of their lines, when each lies inside its edge by
+    DECISION and the lines are not nearly parallel; its patch is the primitives' (coal's support sets
+    of the two boxes along n: edges, or a face within PATCH_TOLERANCE)."""
+    n = np.empty(3)
+    e, f = T[0, a], T[1, b]
+    n[0], n[1], n[2] = cross(e[0], e[1], e[2], f[0], f[1], f[2])
+    n /= np.sqrt(dot(n, n))
+    if dot(d, n) < 0:
+        n = -n
+    cosine = dot(e, f)
+    sine2 = 1.0 - cosine * cosine
+    if sine2 <= NEAR_PARALLEL:
+        return ASK_COAL, lower, 0
+    c0, c1 = p[0].copy(), p[1].copy()  # the support edges' centres
+    for c in range(3):
+        if c != a:
+            c0 -= np.sign(dot(n, T[0, c])) * half[0][c] * T[0, c]
+        if c != b:
+            c1 += np.sign(dot(n, T[1, c])) * half[1][c] * T[1, c]
+    r = c0 - c1
+    along_e, along_f = dot(e, r), dot(f, r)
+    s = (cosine * along_f - along_e) / sine2  # the closest points: c0 + s e, c1 + t f
+    t = (along_f - cosine * along_e) / sine2
+    if abs(s) > half[0][a] - DECISION or abs(t) > half[1][b] - DECISION:
+        return ASK_COAL, lower, 0  # a corner, not the edge's inside, is nearest
+    witness = c0 + s * e
+    towards = -n  # coal's normal: from the robot's box to the other
+    supports = np.empty((8, 3))
+    if (
+        _box_support(R[0], p[0], half[0], towards, supports) + _box_support(R[1], p[1], half[1], n, supports)
+        > 6
+    ):
+        return ASK_COAL, lower, 0  # a face on each side (or a test within DECISION): not an edge's patch
+    count = _patch(BOXES, half, R, p, towards, witness, points)
+    if count < 0:
+        return ASK_COAL, lower, 0
+    normal[:] = n
+    gap = dot(n, r) + s * dot(n, e) - t * dot(n, f)
+    if count == 2:
+        extent = 0.0
+        for j in range(3):
+            extent = max(extent, abs(points[0, j] - points[1, j]))
+        if abs(extent - PATCH_MIN_EXTENT) <= DECISION:
+            return ASK_COAL, lower, 0
+        if extent > PATCH_MIN_EXTENT:
+            order(points, 2, R[0], p[0])
+            return FOUND, gap, 2
+    points[0] = witness
+    return FOUND, gap, 1
 
 
 @njit(cache=True)
@@ -154,8 +221,9 @@ def _extent(T, half, axis):  # type: ignore[no-untyped-def]
 @njit(cache=True)
 def _support_polygon(R, p, half, direction):  # type: ignore[no-untyped-def]
     """The box's vertices within PATCH_TOLERANCE of its support plane along ``direction``, in order
-    around the face, edge or vertex they make, shape (k, 3); empty (0, 3) when they make none of
-    those (a box thinner than the tolerance)."""
+    around the face (or 3 of its corners), edge or vertex they make, shape (k, 3); empty (0, 3) when
+    they make none of those (a box thinner than the tolerance) or a vertex is within DECISION of the
+    tolerance."""
     signs = np.empty((8, 3))
     corners = np.empty((8, 3))
     heights = np.empty(8)
@@ -171,24 +239,29 @@ def _support_polygon(R, p, half, direction):  # type: ignore[no-untyped-def]
             )
         heights[v] = dot(corners[v], direction)
     top = heights.max()
+    for v in range(8):  # a vertex coal's round-off may count in or out: coal's
+        if abs(heights[v] - (top - PATCH_TOLERANCE)) <= DECISION:
+            return np.empty((0, 3))
     chosen = np.flatnonzero(heights >= top - PATCH_TOLERANCE)
     k = chosen.shape[0]
     if k == 1 or k == 2:
         return corners[chosen].copy()
-    if k != 4:
+    if k > 4:
         return np.empty((0, 3))
-    fixed = -1
+    fixed = -1  # 3 or 4 corners: of one face (a corner and two of its neighbours share a face)
     for a in range(3):
         if np.all(signs[chosen, a] == signs[chosen[0], a]):
             fixed = a
     if fixed < 0:
         return np.empty((0, 3))
     a, b = (fixed + 1) % 3, (fixed + 2) % 3
-    polygon = np.empty((4, 3))
-    for j, (sa, sb) in enumerate(((-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0))):
+    polygon = np.empty((k, 3))
+    j = 0
+    for sa, sb in ((-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)):  # around the face
         for v in chosen:
             if signs[v, a] == sa and signs[v, b] == sb:
                 polygon[j] = corners[v]
+                j += 1
     return polygon
 
 

@@ -18,8 +18,8 @@ import numpy as np
 from numba import njit
 
 from .collision import _extent, _unbounded
-from .pairs import ASK_COAL, FAR, FOUND, PATCH_MIN_EXTENT, PATCH_TOLERANCE, order, place
-from .primitives import COAL_THRESHOLD, DECISION
+from .pairs import ASK_COAL, DECISION, FAR, FOUND, PATCH_MIN_EXTENT, PATCH_TOLERANCE, order, place
+from .primitives import COAL_THRESHOLD
 
 # coal's sampling of a cap in a contact patch (ContactPatchRequest's default curved-shape samples).
 CAP_SAMPLES = 12

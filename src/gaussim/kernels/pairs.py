@@ -17,6 +17,9 @@ PATCH_TOLERANCE = 1e-3
 # A contact patch narrower than this is one point (the rounded foot of a mesh hull touches on a
 # ring of nearby vertices; several points there would only add redundant rows) [m].
 PATCH_MIN_EXTENT = 2e-2
+# A support-set, clipping or patch-width test this close to its threshold, where coal's round-off may
+# decide it the other way, is coal's [m].
+DECISION = 1e-9
 
 # Answers of a pair family's kernel per pair: farther apart than the margin, points found, or coal's to
 # answer.
@@ -108,3 +111,38 @@ def _before(a, b):  # type: ignore[no-untyped-def]
         if a[j] != b[j]:
             return a[j] < b[j]
     return False
+
+
+@njit(cache=True)
+def support_gaps(placements, side, vertices, start, rounding, centers, boxes, obstacle_radius, margin, gaps):  # type: ignore[no-untyped-def]
+    """Within ``margin``, the larger of ``gaps[i]`` and the separation, along the three axes of the
+    obstacle's box (``boxes``, ``centers`` as :func:`sphere_gaps` reads them), of the box and the robot
+    shape's vertices ``vertices[start[i]:start[i + 1]]`` (in the frame of its joint; the shape lies
+    within ``rounding[i]`` of their hull): a separating axis, a lower bound on the pair's gap. A pair
+    without vertices, or against a ground, keeps its gap."""
+    c, u, local = np.empty(3), np.empty(3), np.empty(3)
+    for i in range(gaps.shape[0]):
+        if gaps[i] > margin or start[i] == start[i + 1] or not np.isfinite(obstacle_radius[i]):
+            continue
+        X, Y = placements[side[i, 0]], placements[side[i, 1]]
+        for a in range(3):  # the box's centre in the world
+            c[a] = (
+                Y[3, a] + Y[0, a] * centers[i, 1, 0] + Y[1, a] * centers[i, 1, 1] + Y[2, a] * centers[i, 1, 2]
+            )
+        separation = -np.inf
+        for b in range(3):
+            axis = boxes[i, 1 + b]
+            for a in range(3):  # the box's axis b in the world, then in the robot joint's frame
+                u[a] = Y[0, a] * axis[0] + Y[1, a] * axis[1] + Y[2, a] * axis[2]
+            offset = (
+                X[3, 0] * u[0] + X[3, 1] * u[1] + X[3, 2] * u[2] - (c[0] * u[0] + c[1] * u[1] + c[2] * u[2])
+            )
+            for j in range(3):
+                local[j] = X[j, 0] * u[0] + X[j, 1] * u[1] + X[j, 2] * u[2]
+            low, high = np.inf, -np.inf
+            for v in range(start[i], start[i + 1]):
+                height = vertices[v, 0] * local[0] + vertices[v, 1] * local[1] + vertices[v, 2] * local[2]
+                low, high = min(low, height), max(high, height)
+            half = boxes[i, 0, b]
+            separation = max(separation, low + offset - half, -half - (high + offset))
+        gaps[i] = max(gaps[i], separation - rounding[i])

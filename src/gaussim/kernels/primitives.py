@@ -27,15 +27,12 @@ import numpy as np
 from numba import njit
 
 from ..linalg import dot
-from .pairs import ASK_COAL, FAR, FOUND, PATCH_MIN_EXTENT, PATCH_TOLERANCE, order, place
+from .pairs import ASK_COAL, DECISION, FAR, FOUND, PATCH_MIN_EXTENT, PATCH_TOLERANCE, order, place
 
 SPHERE, CAPSULE, BOX = 0, 1, 2  # a side's shape, in the order a pair's routine takes them
 # coal counts a pair as touching within this of the margin (CollisionRequest's
 # collision_distance_threshold, Eigen's dummy precision) [m].
 COAL_THRESHOLD = 1e-12
-# A support-set, clipping or patch-width test this close to its threshold, where coal's round-off may
-# decide it the other way, is coal's [m].
-DECISION = 1e-9
 # Centres, or a capsule's segment and a box, closer than this leave the normal to coal [m].
 COINCIDENT = 1e-9
 # coal's closed form takes two capsules' segments for parallel below a * e - b^2 = EPSILON (its
