@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 from collections.abc import Iterator
 
 import coal
@@ -13,7 +14,7 @@ import gaussim
 from gaussim.bench.cases import two_boxes
 from gaussim.collision import PATCH_MIN_EXTENT, PATCH_TOLERANCE, ContactDetector, driver
 from gaussim.collision.ground import GroundHulls, touching
-from gaussim.collision.narrow import NarrowPhase
+from gaussim.collision.narrow import BoundingSpheres, NarrowPhase
 from gaussim.collision.primitives import PrimitivePairs
 
 from .conftest import at_height, run
@@ -246,6 +247,7 @@ def test_the_broad_phase_bounds_every_gap_and_sends_only_near_pairs_to_coal(monk
     )
     detector = ContactDetector(scene, margin)
     (narrow,) = [r for r in detector.routines if isinstance(r, NarrowPhase)]
+    spheres_only = BoundingSpheres(narrow.pairs)  # the spheres and the box, without the vertices
     robot, rng = scene.robot, np.random.default_rng(4)
     model, data, geometry_data = robot.model, robot.model.createData(), robot.collision_model.createData()
     collide, seen = NarrowPhase.collide, []
@@ -268,8 +270,8 @@ def test_the_broad_phase_bounds_every_gap_and_sends_only_near_pairs_to_coal(monk
         pin.updateGeometryPlacements(model, data, robot.collision_model, geometry_data, q)
         seen.clear()
         detector.detect(data)
-        apart = narrow.spheres.gaps(data, margin)
-        for pair, gap in zip(narrow.pairs, apart):
+        apart, plain = narrow.spheres.gaps(data, margin), spheres_only.gaps(data, margin)
+        for pair, gap, sphere_gap in zip(narrow.pairs, apart, plain):
             if pair.obstacle_radius == np.inf:  # the ground: coal's half-space test
                 assert gap == -np.inf and pair.name in seen
                 continue
@@ -283,12 +285,14 @@ def test_the_broad_phase_bounds_every_gap_and_sends_only_near_pairs_to_coal(monk
             other_center, other_radius = _sphere(other_shape, placement)
             spheres = np.linalg.norm(center - other_center) - radius - other_radius
             to_box = _to_box(center, radius, other_shape, placement)
-            if spheres > margin:
-                assert gap == pytest.approx(spheres, abs=1e-12)
-            else:  # at least the box's (a sphere inside the box: the kernel's is -radius), or the vertices'
-                assert gap >= (max(spheres, to_box) if to_box > 0.0 else min(spheres, 0.0)) - 1e-9
+            if spheres > margin or to_box <= 0.0:  # a sphere inside the box: the kernel's is -radius
+                ok = sphere_gap == pytest.approx(spheres, abs=1e-12)
+                assert ok or (spheres <= margin and sphere_gap <= 0.0)
+            else:
+                assert sphere_gap == pytest.approx(max(spheres, to_box), abs=1e-9)
                 boxed += to_box > spheres
-                tightened += gap > max(spheres, to_box) + 1e-9
+            assert gap >= sphere_gap and (spheres <= margin or gap == sphere_gap)  # the vertices': within
+            tightened += gap > sphere_gap
             result = coal.DistanceResult()
             distance = coal.distance(
                 pair.shape,
@@ -438,7 +442,6 @@ def test_the_travel_bound_holds_for_every_pair_of_a_world(solo12):
     dense bound max_k dt sum_i levers[k, i] |v_i| over all coordinates, and no pair's bounding spheres
     close by more than it in a step of random motion, nor their gaps to the obstacles' boxes."""
     from gaussim.collision.margin import _pair_levers
-    from gaussim.collision.narrow import BoundingSpheres
 
     boxes = {f"box{k}": gaussim.FreeBody.box(f"box{k}", (0.1, 0.2, 0.3), mass=1.0) for k in range(3)}
     scene = gaussim.Scene(bodies={"solo": solo12, **boxes}, ground=gaussim.Ground())
@@ -621,13 +624,14 @@ def test_the_acceleration_scheme_keeps_every_point_the_margin_finds(solo12):
 
 def test_the_kernels_read_the_joint_placements_where_pinocchio_keeps_them(solo12, monkeypatch):
     """JointPlacements is a read-only view of data.oMi's memory: after every kinematics pass on that data
-    it holds Pinocchio's placements (each joint's rotation columns, then its translation). Where a
-    Pinocchio lays them out otherwise it copies them: a pile settling (boxes, balls and capsules on each
-    other, a fixed box and the ground) runs the same through the copies, bit for bit."""
+    it holds Pinocchio's placements (each joint's rotation columns, then its translation), and it keeps
+    that data alive; a data of a smaller model is refused. Where a Pinocchio lays them out otherwise it
+    copies them: a pile settling (boxes, balls and capsules on each other, a fixed box and the ground)
+    runs the same through the copies, bit for bit."""
     from gaussim.bench.scenes import SCENES
     from gaussim.collision import pairs
 
-    placements = pairs.JointPlacements()
+    placements = pairs.JointPlacements(solo12.model.njoints)
     for data in _random_poses(solo12, 5, seed=11):
         view = placements(data)
         assert not view.flags.writeable and view.shape == (solo12.model.njoints, 4, 3)
@@ -638,6 +642,16 @@ def test_the_kernels_read_the_joint_placements_where_pinocchio_keeps_them(solo12
             solo12.model, data, pin.randomConfiguration(solo12.model, -np.ones(19), np.ones(19))
         )
         np.testing.assert_array_equal(view[5, 3], data.oMi[5].translation)  # the same view follows the pass
+    # the view holds its data: a view kept after the placements moved to another data still reads it
+    kept, held = view, pairs.copied(data.oMi)
+    del data, view, M
+    placements(solo12.model.createData())
+    gc.collect()
+    _ = [np.full(4000, 7.0) for _ in range(300)]  # memory a freed data would have gone to
+    np.testing.assert_array_equal(kept, held)
+    # a data of a model with fewer joints than the pairs read is refused, not read out of bounds
+    with pytest.raises(ValueError, match="joint placements"):
+        placements(gaussim.load_robot("ur5").model.createData())
 
     def trajectory() -> np.ndarray:
         setup = SCENES["bin_pile"].build()
@@ -650,7 +664,7 @@ def test_the_kernels_read_the_joint_placements_where_pinocchio_keeps_them(solo12
         return np.array(qs)
 
     viewed = trajectory()
-    monkeypatch.setattr(pairs, "_view", lambda oMi: None)
+    monkeypatch.setattr(pairs, "_view", lambda data: None)
     np.testing.assert_array_equal(trajectory(), viewed)
 
 

@@ -32,7 +32,7 @@ class CompiledPairs:
         self.owner = np.array(index, dtype=np.int64)
         self.pairs = [pairs[k] for k in index]
         self.spheres = BoundingSpheres(self.pairs)
-        self.coal = NarrowPhase(pairs, index)
+        self.coal = NarrowPhase(pairs, index, supports=False)  # its collide alone
         # each side's shape in the frame of its joint (a fixed obstacle's joint is the world's, 0)
         self.local_rotation = np.array(
             [[p.local.rotation, _other_placement(p).rotation] for p in self.pairs]

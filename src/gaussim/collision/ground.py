@@ -81,10 +81,8 @@ class GroundHulls:
     def __init__(self, pairs: list[Pair], index: list[int]) -> None:
         self.index = np.array(index, dtype=int)
         self.pairs = [pairs[k] for k in index]
-        self.placements, self.joints = (
-            JointPlacements(),
-            np.array([p.joint for p in self.pairs], dtype=np.int64),
-        )
+        self.joints = np.array([pair.joint for pair in self.pairs], dtype=np.int64)
+        self.placements = JointPlacements(int(self.joints.max(initial=0)) + 1)
         self.hulls = _hulls(self.pairs)
         # twice the farthest vertex from the mean, at least each hull's diameter (all pairs of a mesh's
         # thousands of vertices, padded to the largest hull, took gigabytes: b1_z1, centauro)

@@ -22,9 +22,11 @@ class NarrowPhase:
     Args:
         pairs: the declared pairs of the scene.
         index: which of them this routine answers.
+        supports: whether its broad phase bounds pairs with a box by their vertices (see
+            :class:`BoundingSpheres`; not for a compiled family's pairs, which it only collides).
     """
 
-    def __init__(self, pairs: list[Pair], index: list[int]) -> None:
+    def __init__(self, pairs: list[Pair], index: list[int], supports: bool = True) -> None:
         self.index = index
         self.pairs = [pairs[k] for k in index]
         self.request = _request(coal.GJKVariant.DefaultGJK)
@@ -36,7 +38,7 @@ class NarrowPhase:
         self.patch_request.setPatchTolerance(PATCH_TOLERANCE)
         self.result = coal.CollisionResult()
         self.patch_result = coal.ContactPatchResult(self.patch_request)
-        self.spheres = BoundingSpheres(self.pairs, supports=True)
+        self.spheres = BoundingSpheres(self.pairs, supports)
 
     def detect(self, data: pin.Data, margin: float, turns: np.ndarray) -> tuple[list[Piece], float]:
         """The contacts of the pairs within ``margin`` [m] at the placements held in ``data``, and a
@@ -143,7 +145,7 @@ class BoundingSpheres:
     def __init__(self, pairs: list[Pair], supports: bool = False) -> None:
         # the joints of each pair's two sides, whose placements are read
         self.side = np.array([[p.joint, p.other_joint] for p in pairs], dtype=np.int64).reshape(-1, 2)
-        self.placements = JointPlacements()
+        self.placements = JointPlacements(int(self.side.max(initial=0)) + 1)
         self.centers = np.array([[p.center, p.obstacle_center] for p in pairs]).reshape(-1, 2, 3)
         self.radius = np.array([p.radius for p in pairs])
         self.obstacle_radius = np.array([p.obstacle_radius for p in pairs])

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import ctypes
-
 import coal
 import numpy as np
 import pinocchio as pin
@@ -90,20 +88,30 @@ class JointPlacements:
     """Every joint's placement in the world as one read-only array (njoints, 4, 3), the kernels' input
     (:mod:`gaussim.kernels.pairs`): row j holds the columns of joint j's rotation, then its translation.
 
-    Pinocchio keeps ``data.oMi`` as consecutive SE3s, each its column-major rotation then its translation:
-    the array is a view of that memory, which follows every kinematics pass on that data without a copy
-    (made once per data, after its layout is checked). Where a build of Pinocchio lays them out otherwise,
-    each call copies them instead.
+    Pinocchio keeps ``data.oMi`` as consecutive SE3s, each its column-major rotation then its translation
+    (sized with the model, never moved): the array is a view of that memory, which follows every
+    kinematics pass on that data without a copy (made once per data, after its layout is checked; the
+    view holds the data alive). Where a build of Pinocchio lays them out otherwise, each call copies them.
+
+    Args:
+        joints: how many joints the kernels read (1 + the largest index they read): a data of a model
+            with fewer is refused.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, joints: int) -> None:
+        self.joints = joints
         self._data: pin.Data | None = None
         self._view: np.ndarray | None = None
 
     def __call__(self, data: pin.Data) -> np.ndarray:
         """The placements held in ``data``."""
         if self._data is not data:
-            self._data, self._view = data, _view(data.oMi)  # the data keeps the memory the view reads alive
+            if len(data.oMi) < self.joints:  # the kernels index the array unchecked
+                raise ValueError(
+                    f"the data has {len(data.oMi)} joint placements, the contact pairs read {self.joints}: "
+                    "a data of another model"
+                )
+            self._data, self._view = data, _view(data)
         return self._view if self._view is not None else copied(data.oMi)
 
 
@@ -114,9 +122,25 @@ def copied(oMi: pin.StdVec_SE3) -> np.ndarray:
     return placements
 
 
-def _view(oMi: pin.StdVec_SE3) -> np.ndarray | None:
-    """A read-only view of ``oMi``'s memory as :class:`JointPlacements` gives it, or None where the
+class _Memory:
+    """The memory of ``data.oMi`` as numpy reads it (``__array_interface__``): an array made from it
+    keeps this, and so the data, alive."""
+
+    def __init__(self, data: pin.Data, start: int) -> None:
+        self.data = data
+        count = len(data.oMi)
+        self.__array_interface__ = {
+            "shape": (count, 4, 3),
+            "typestr": "<f8",
+            "data": (start, True),
+            "version": 3,
+        }
+
+
+def _view(data: pin.Data) -> np.ndarray | None:
+    """A read-only view of ``data.oMi``'s memory as :class:`JointPlacements` gives it, or None where the
     placements do not lie there as such."""
+    oMi = data.oMi
     start = oMi[0].rotation.__array_interface__["data"][0]
     step = 12 * 8  # bytes: a rotation's 9 doubles, then a translation's 3
     for j, M in enumerate(oMi):
@@ -128,10 +152,8 @@ def _view(oMi: pin.StdVec_SE3) -> np.ndarray | None:
             or translation.strides != (8,)
         ):
             return None
-    memory = (ctypes.c_double * (12 * len(oMi))).from_address(start)
-    view = np.ctypeslib.as_array(memory).reshape(-1, 4, 3)
-    view.flags.writeable = False
-    return view if np.array_equal(view, copied(oMi)) else None
+    view = np.asarray(_Memory(data, start))
+    return view if not view.flags.writeable and np.array_equal(view, copied(oMi)) else None
 
 
 def vertices(shape: coal.CollisionGeometry) -> tuple[np.ndarray, list[list[int]]]:

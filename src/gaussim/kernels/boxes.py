@@ -8,9 +8,12 @@ minimum translation of two polytopes is along one of those axes). When that axis
 the boxes' support sets along it (their vertices within PATCH_TOLERANCE of their support planes)
 clipped to each other are coal's contact patch; when the incident points reach that separation it
 is also their distance. A corner over the other box's face is a patch of one point, coal's witness
-point: the corner, or its foot on the robot's face. Pairs that touch edge to edge, on a patch of more
-points narrower than PATCH_MIN_EXTENT (one point, which coal's witness decides), with a vertex within
-DECISION of the patch's tolerance, or apart at a distance the patch does not reach go to coal.
+point: the corner, or its foot on the robot's face. When an edge axis separates them most, two edges
+touch at the closest points of their lines, coal's witness points, with coal's patch of the two edges
+(its rule for two segments, :func:`gaussim.kernels.primitives._patch`). Pairs on a patch of more
+points narrower than PATCH_MIN_EXTENT (one point, which coal's witness decides), on 3 corners of a face
+(coal orders their clipped points otherwise where two round to the same 0.1 mm), with a test within
+DECISION of its threshold, or apart at a distance the patch does not reach go to coal.
 """
 
 from __future__ import annotations
@@ -153,11 +156,11 @@ def _box_box(R, p, half, margin, normal, points):  # type: ignore[no-untyped-def
 @njit(cache=True)
 def _edge_edge(R, p, T, half, a, b, d, lower, normal, points):  # type: ignore[no-untyped-def]
     """Box 0's edge along its axis ``a`` against box 1's along its axis ``b``, whose axis separates the
-    boxes least (by ``lower``): returns (answer, gap, number of points) as :func:`_box_box`. The edges
-    are each box's support edge along the normal n (their cross product, from box 1 towards box 0);
-    coal's witness points are the closest points of their lines, when each lies inside its edge by
-    DECISION and the lines are not nearly parallel; its patch is the primitives' (coal's support sets
-    of the two boxes along n: edges, or a face within PATCH_TOLERANCE)."""
+    boxes most (by ``lower``: their least overlap): returns (answer, gap, number of points) as
+    :func:`_box_box`. The edges are each box's support edge along the normal n (their cross product,
+    from box 1 towards box 0); coal's witness points are the closest points of their lines, when each
+    lies inside its edge by DECISION and the lines are not nearly parallel; its patch is the
+    primitives' (coal's support sets of the two boxes along n: edges, or a face within PATCH_TOLERANCE)."""
     n = np.empty(3)
     e, f = T[0, a], T[1, b]
     n[0], n[1], n[2] = cross(e[0], e[1], e[2], f[0], f[1], f[2])
@@ -221,8 +224,8 @@ def _extent(T, half, axis):  # type: ignore[no-untyped-def]
 @njit(cache=True)
 def _support_polygon(R, p, half, direction):  # type: ignore[no-untyped-def]
     """The box's vertices within PATCH_TOLERANCE of its support plane along ``direction``, in order
-    around the face (or 3 of its corners), edge or vertex they make, shape (k, 3); empty (0, 3) when
-    they make none of those (a box thinner than the tolerance) or a vertex is within DECISION of the
+    around the face, edge or vertex they make, shape (k, 3); empty (0, 3) when they make none of those
+    (a box thinner than the tolerance, 3 corners of a face) or a vertex is within DECISION of the
     tolerance."""
     signs = np.empty((8, 3))
     corners = np.empty((8, 3))
@@ -246,22 +249,20 @@ def _support_polygon(R, p, half, direction):  # type: ignore[no-untyped-def]
     k = chosen.shape[0]
     if k == 1 or k == 2:
         return corners[chosen].copy()
-    if k > 4:
+    if k != 4:
         return np.empty((0, 3))
-    fixed = -1  # 3 or 4 corners: of one face (a corner and two of its neighbours share a face)
+    fixed = -1
     for a in range(3):
         if np.all(signs[chosen, a] == signs[chosen[0], a]):
             fixed = a
     if fixed < 0:
         return np.empty((0, 3))
     a, b = (fixed + 1) % 3, (fixed + 2) % 3
-    polygon = np.empty((k, 3))
-    j = 0
-    for sa, sb in ((-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)):  # around the face
+    polygon = np.empty((4, 3))
+    for j, (sa, sb) in enumerate(((-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0))):
         for v in chosen:
             if signs[v, a] == sa and signs[v, b] == sb:
                 polygon[j] = corners[v]
-                j += 1
     return polygon
 
 
