@@ -303,7 +303,7 @@ def test_the_broad_phase_bounds_every_gap_and_sends_only_near_pairs_to_coal(monk
                 result,
             )
             if distance > 0:
-                assert gap <= distance + 1e-12
+                assert gap <= distance + AGREEMENT  # the vertices bound it tightly: coal rounds otherwise
                 compared += 1
             assert (pair.name in seen) == (gap <= margin)
             near += gap <= margin

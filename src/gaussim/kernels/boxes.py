@@ -23,7 +23,7 @@ from numba import njit
 
 from ..linalg import cross, dot
 from .pairs import ASK_COAL, DECISION, FAR, FOUND, PATCH_MIN_EXTENT, PATCH_TOLERANCE, order, place
-from .primitives import BOX, NEAR_PARALLEL, _box_support, _patch
+from .primitives import BOX, NEAR_PARALLEL, _box_support, _touching
 
 # An edge-edge axis is taken over a face's normal only when it separates the boxes by this much
 # more: nearly parallel faces have edge axes that agree with the face's to round-off [m].
@@ -191,22 +191,11 @@ def _edge_edge(R, p, T, half, a, b, d, lower, normal, points):  # type: ignore[n
         > 6
     ):
         return ASK_COAL, lower, 0  # a face on each side (or a test within DECISION): not an edge's patch
-    count = _patch(BOXES, half, R, p, towards, witness, points)
+    count = _touching(BOXES, half, R, p, towards, witness, points)
     if count < 0:
         return ASK_COAL, lower, 0
     normal[:] = n
-    gap = dot(n, r) + s * dot(n, e) - t * dot(n, f)
-    if count == 2:
-        extent = 0.0
-        for j in range(3):
-            extent = max(extent, abs(points[0, j] - points[1, j]))
-        if abs(extent - PATCH_MIN_EXTENT) <= DECISION:
-            return ASK_COAL, lower, 0
-        if extent > PATCH_MIN_EXTENT:
-            order(points, 2, R[0], p[0])
-            return FOUND, gap, 2
-    points[0] = witness
-    return FOUND, gap, 1
+    return FOUND, dot(n, r) + s * dot(n, e) - t * dot(n, f), count
 
 
 @njit(cache=True)

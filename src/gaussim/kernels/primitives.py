@@ -95,22 +95,31 @@ def _pair(kind, dims, R, p, margin, normal, points):  # type: ignore[no-untyped-
     for j in range(3):
         towards[j] = n[j] if a == 0 else -n[j]
         normal[j] = -towards[j]
+    count = _touching(kind, dims, R, p, towards, witness, points)
+    if count < 0 or (count == 1 and not unique):
+        return ASK_COAL, 0.0, 0
+    return FOUND, distance, count
+
+
+@njit(cache=True)
+def _touching(kind, dims, R, p, towards, witness, points):  # type: ignore[no-untyped-def]
+    """How many points a touching pair touches at, written into ``points``: 2, coal's patch
+    (:func:`_patch`) in the robot's order, when it spans more than PATCH_MIN_EXTENT; else 1, the robot's
+    ``witness`` point (coal's one point); -1 when coal is to answer (a test within DECISION)."""
     count = _patch(kind, dims, R, p, towards, witness, points)
     if count < 0:
-        return ASK_COAL, 0.0, 0
+        return -1
     if count == 2:
         extent = 0.0
         for j in range(3):
             extent = max(extent, abs(points[0, j] - points[1, j]))
         if abs(extent - PATCH_MIN_EXTENT) <= DECISION:
-            return ASK_COAL, 0.0, 0
+            return -1
         if extent > PATCH_MIN_EXTENT:
             order(points, 2, R[0], p[0])
-            return FOUND, distance, 2
-    if not unique:
-        return ASK_COAL, 0.0, 0
+            return 2
     points[0] = witness
-    return FOUND, distance, 1
+    return 1
 
 
 @njit(cache=True)
