@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 import gaussim
-from gaussim.assembly import GaussProblem
+from gaussim.assembly import GaussProblem, assemble
+from gaussim.constraints.base import ConstraintModule, Context, Rows
 from gaussim.solver import KKT_RTOL, GaussSolver, Status, kkt_residual
 from gaussim.solver.active_set import ACTIVE_SET_FLOOR, active_set_candidate
 from gaussim.solver.certificate import kkt_residuals
@@ -400,6 +401,63 @@ def test_daqp_solves_a_problem_whose_bounds_moved_on_the_factors_it_holds(monkey
     difference = second.x - _tight_proxqp(shifted)
     assert np.sqrt(difference @ problem.H @ difference) < 1e-8
     assert np.abs(second.x - first.x).max() > 1e-4  # the shift moved the answer
+
+
+class _Given(ConstraintModule):
+    """A module whose rows a test hands to assemble."""
+
+    name = "given"
+
+    def rows(self, ctx: Context) -> None:
+        return None
+
+
+def test_a_pass_that_moves_bounds_alone_keeps_the_stacked_rows_and_daqps_factors(monkeypatch):
+    """A friction pass poses the same J arrays with new bounds: assembly keeps the last pass's
+    stacked rows and its key, and DAQP updates the bounds of the factors it holds without comparing
+    H and the rows (one setup, ProxQP's x of the shifted problem). New J arrays, or a new g under
+    the same key, are set up again."""
+    from gaussim.solver import dual
+
+    saved = _saved_problem("pile_wrong_sign_multiplier_full_rank.npz")
+    module, half = _Given(), len(saved.l) // 2
+
+    def parts(C: np.ndarray, l: np.ndarray) -> list:  # two blocks: assembly stacks them
+        return [
+            (module, Rows(C[:half], l[:half], False, list)),
+            (module, Rows(C[half:], l[half:], False, list)),
+        ]
+
+    first = assemble(saved.H, saved.g, parts(saved.C, saved.l))
+    blocks = [rows for _, rows, _ in first.blocks]
+    moved = [(module, Rows(rows.J, rows.bound + 1e-3, False, list)) for rows in blocks]
+    shifted = assemble(saved.H, saved.g, moved, first)
+    assert shifted.C is first.C and shifted.rows_key is first.rows_key
+    np.testing.assert_array_equal(shifted.l, saved.l + 1e-3)
+    anew = assemble(saved.H, saved.g, parts(saved.C.copy(), saved.l), first)
+    assert anew.C is not first.C and anew.rows_key is not first.rows_key
+
+    setups = []
+    setup = dual.DualActiveSet._setup
+    monkeypatch.setattr(
+        dual.DualActiveSet, "_setup", lambda self, *args: setups.append(1) or setup(self, *args)
+    )
+    compared = []
+    same = dual._same
+    monkeypatch.setattr(dual, "_same", lambda *args: compared.append(1) or same(*args))
+    solver = GaussSolver(gaussim.Options())
+    solver.solve(first)
+    second = solver.solve(shifted)
+    assert second.certificate.status is Status.DUAL_ACTIVE_SET_SOLVED
+    assert len(setups) == 1 and not compared
+    difference = second.x - _tight_proxqp(shifted)
+    assert np.sqrt(difference @ saved.H @ difference) < 1e-8
+    pushed = GaussProblem(saved.H, saved.g * (1 + 1e-3), shifted.A, shifted.b, shifted.C, shifted.l, [])
+    pushed.rows_key = shifted.rows_key
+    third = solver.solve(pushed)
+    assert len(setups) == 2
+    difference = third.x - _tight_proxqp(pushed)
+    assert np.sqrt(difference @ saved.H @ difference) < 1e-8
 
 
 def test_daqp_starts_a_new_problem_from_its_last_working_set():

@@ -7,7 +7,7 @@ with g = -(M v + dt F) (velocity level), -M v (impulse level) or -F (acceleratio
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cache
 
 import numpy as np
@@ -29,6 +29,9 @@ class GaussProblem:
         applied: the generalized force the modules apply outside the QP (in g), shape (nv,), or None.
         source: for an island's problem (:meth:`island`), the problem it was cut from and its
             equality and inequality rows there (the row names are the source's).
+        rows_key: stands for the values of H, A and C: a problem with the same key has the same
+            ones (its g, b and l may differ: a friction pass's bounds), so a solver that holds
+            factors of them need not compare them.
     """
 
     H: np.ndarray
@@ -40,6 +43,7 @@ class GaussProblem:
     blocks: list[tuple[ConstraintModule, Rows, slice]]
     applied: np.ndarray | None = None
     source: tuple[GaussProblem, np.ndarray, np.ndarray] | None = None
+    rows_key: object = field(default_factory=object, repr=False, compare=False)
 
     def labels(self, equality: bool) -> list[str]:
         """Row names of the equality or inequality rows, in order."""
@@ -56,9 +60,17 @@ class GaussProblem:
         return GaussProblem(H, g, A, b, C, l, [], None, (self, eq, ineq))
 
 
-def assemble(H: np.ndarray, g: np.ndarray, parts: list[tuple[ConstraintModule, Rows]]) -> GaussProblem:
+def assemble(
+    H: np.ndarray,
+    g: np.ndarray,
+    parts: list[tuple[ConstraintModule, Rows]],
+    previous: GaussProblem | None = None,
+) -> GaussProblem:
     """Stack rows: equalities into (A, b), inequalities into (C, l), remembering where each block's
-    multipliers go; a force a module applies outside the QP enters the linear term g."""
+    multipliers go; a force a module applies outside the QP enters the linear term g. ``previous``:
+    the last problem of the same solve (same H), whose stacked rows are kept when every block's J is
+    the same array as there (a friction pass that moved bounds alone; :class:`Rows` are not modified
+    once returned)."""
     equalities: list[tuple[ConstraintModule, Rows]] = []
     inequalities: list[tuple[ConstraintModule, Rows]] = []
     for part in parts:  # one pass: this runs every QP
@@ -70,17 +82,38 @@ def assemble(H: np.ndarray, g: np.ndarray, parts: list[tuple[ConstraintModule, R
         if rows.force is not None:
             g = g - rows.force
             applied = rows.force if applied is None else applied + rows.force
-    A, b = _stack(equalities, len(g))
-    C, l = _stack(inequalities, len(g))
-    return GaussProblem(H, g, A, b, C, l, blocks, applied)
+    b, l = _bounds(equalities), _bounds(inequalities)
+    if previous is not None and _same_rows(previous, blocks, H):
+        return GaussProblem(H, g, previous.A, b, previous.C, l, blocks, applied, None, previous.rows_key)
+    return GaussProblem(H, g, _stack(equalities, len(g)), b, _stack(inequalities, len(g)), l, blocks, applied)
 
 
-def _stack(chosen: list[tuple[ConstraintModule, Rows]], nv: int) -> tuple[np.ndarray, np.ndarray]:
+def _same_rows(previous: GaussProblem, blocks: list, H: np.ndarray) -> bool:
+    """Whether ``blocks`` hold, in order, the very J arrays of ``previous``'s blocks, over its H."""
+    return (
+        previous.H is H
+        and len(blocks) == len(previous.blocks)
+        and all(
+            new[1].J is old[1].J and new[1].equality == old[1].equality
+            for new, old in zip(blocks, previous.blocks)
+        )
+    )
+
+
+def _bounds(chosen: list[tuple[ConstraintModule, Rows]]) -> np.ndarray:
     if len(chosen) == 1:
-        return chosen[0][1].J, chosen[0][1].bound
+        return chosen[0][1].bound
     if not chosen:
-        return _none(nv)
-    return np.vstack([rows.J for _, rows in chosen]), np.concatenate([rows.bound for _, rows in chosen])
+        return _none(0)[1]
+    return np.concatenate([rows.bound for _, rows in chosen])
+
+
+def _stack(chosen: list[tuple[ConstraintModule, Rows]], nv: int) -> np.ndarray:
+    if len(chosen) == 1:
+        return chosen[0][1].J
+    if not chosen:
+        return _none(nv)[0]
+    return np.vstack([rows.J for _, rows in chosen])
 
 
 @cache

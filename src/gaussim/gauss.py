@@ -73,13 +73,14 @@ class GaussStage:
         """min 1/2 x^T M x + g^T x over the rows ``parts`` (posed from ``ctx`` when None), the rows of
         a module posed again while its fixed-point iteration asks for it."""
         mark, passes = report.mark, self.options.friction_iterations
+        problem = None  # the last pass's, whose stacked rows a pass that moved bounds alone keeps
         for k in range(passes):
             mark("")
             parts = self.rows(ctx) if parts is None else parts
             if not parts:
                 mark("assembly")
                 return ctx.x_free
-            problem = assemble(M, g, parts)
+            problem = assemble(M, g, parts, problem)
             mark("assembly")
             x, lam, certificates = self.solvers[ctx.level].solve(problem, ctx.x_free)
             mark("solve")

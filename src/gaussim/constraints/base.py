@@ -32,6 +32,9 @@ T = TypeVar("T")
 class Rows(Generic[T]):
     """Rows of one module, and the module's own record of them (``data``, of the module's type T).
 
+    Neither the module nor anyone else modifies the arrays once returned: a later pass of the step
+    that returns the same J array (new bounds alone) keeps the rows the solver has stacked and factored.
+
     Attributes:
         J: row Jacobians, shape (m, nv).
         bound: right-hand sides, shape (m,).

@@ -35,6 +35,7 @@ class DualActiveSet:
         self.eps_abs, self.tolerance = eps_abs, tolerance
         self._model: Any = None  # daqp.Model
         self._held: tuple[np.ndarray, ...] = ()  # copies of the model's H, g and rows
+        self._key: object = None  # the rows_key of the problem they are
         self._multipliers: np.ndarray | None = None  # the last solution's: DAQP's working set
         self._split = (0, 0)  # its equality and inequality rows
 
@@ -64,7 +65,7 @@ class DualActiveSet:
     ) -> tuple[int, Any, Any]:
         """(exitflag, x, info) of DAQP on ``p``: on the held factors when only the bounds changed,
         else from the last working set, else from a cold start."""
-        if self._model is not None and _same(self._held, (p.H, p.g, rows)):
+        if self._model is not None and self._holds(p, rows):
             self._model.update(bupper=upper, blower=lower)
             x, _, flag, info = self._model.solve()
             if flag == _OPTIMAL:
@@ -74,6 +75,13 @@ class DualActiveSet:
             if flag == _OPTIMAL:
                 return flag, x, info
         return self._setup(p, rows, upper, lower, None)
+
+    def _holds(self, p: GaussProblem, rows: np.ndarray) -> bool:
+        """Whether the workspace holds ``p``'s H, g and ``rows`` (the key of the problem it was set up
+        for spares comparing H and the rows)."""
+        if p.rows_key is self._key:
+            return bool(np.array_equal(self._held[1], p.g))
+        return _same(self._held, (p.H, p.g, rows))
 
     def _setup(
         self, p: GaussProblem, rows: np.ndarray, upper: np.ndarray, lower: np.ndarray, start: Any
@@ -91,7 +99,7 @@ class DualActiveSet:
         if flag < 0:  # rows DAQP finds inconsistent as they stand (dependent equalities that conflict)
             return flag, None, None
         x, _, flag, info = model.solve()
-        self._model, self._held = model, held
+        self._model, self._held, self._key = model, held, p.rows_key
         return flag, x, info
 
 
