@@ -554,3 +554,38 @@ def test_the_secant_step_matches_its_plain_statement():
     np.testing.assert_allclose(following, used + scale[:, None] * residual, rtol=1e-12, atol=1e-15)
     first, (moved, _) = _secant(used, mapped, None)  # the first pass: the plain step
     np.testing.assert_allclose(first, mapped, rtol=1e-12, atol=1e-15)
+
+
+@pytest.mark.parametrize("velocity", [(1.0, 0.3, 0.0), (0.5, 0.2, 5.0)])
+def test_the_newton_step_on_the_shifts_takes_fewer_passes_to_the_same_motion(box, monkeypatch, velocity):
+    """A box sliding on its four corners at 1 m/s (and at 0.5 m/s spinning at 5 rad/s about the vertical),
+    mu = 0.5, for 300 steps: the sliding corners' Newton step on their shifts (coupled through the box)
+    makes fewer QPs than the secant alone (NEWTON_UP_TO = 0), 509 against 718 and 486 against 645 when
+    measured. Sliding straight, the passes reach the secant's fixed point: the same motion to 1e-9.
+    Spinning, the box stays on the ground as with the secant (no pass left far from the fixed point
+    drops the shift, which would lift it at mu |u_t|) and comes to rest within 3 mm of where the
+    secant's does (its four corners' normal forces are not unique, nor then the friction's turn)."""
+    from gaussim.constraints import contact
+
+    def slide(newton: bool) -> tuple[int, np.ndarray, int]:
+        monkeypatch.setattr(contact, "NEWTON_UP_TO", 64 if newton else 0)
+        sim = gaussim.Simulator(gaussim.Scene(box, ground=gaussim.Ground(friction=0.5)))
+        vx, vy, spin = velocity
+        state = sim.reset(at_height(box, HALF_HEIGHT + 1e-4), np.array([vx, vy, 0, 0, 0, spin]))
+        qps, relaxed, path = 0, 0, []
+        for _ in range(300):
+            state = sim.step(state)
+            qps += len(sim.last_step.certificates)
+            relaxed += sim.last_step.friction_relaxed
+            path.append(np.concatenate([state.q, state.v]))
+        return qps, np.array(path), relaxed
+
+    qps, path, relaxed = slide(True)
+    secant_qps, secant_path, _ = slide(False)
+    assert qps < 0.8 * secant_qps, (qps, secant_qps)
+    assert relaxed == 0 and path[:, 2].max() < HALF_HEIGHT + 2e-4  # on the ground
+    assert np.abs(path[-1, 7:]).max() < 1e-5  # at rest
+    if velocity[2] == 0.0:
+        np.testing.assert_allclose(path, secant_path, rtol=0, atol=1e-9)
+    else:
+        assert np.abs(path[-1, :2] - secant_path[-1, :2]).max() < 3e-3

@@ -492,3 +492,68 @@ def test_daqp_answers_the_check_refuses_or_inputs_it_refuses_go_to_proxqp(monkey
     refused = GaussSolver(gaussim.Options()).solve(problem)
     assert refused.certificate.status is Status.SOLVED
     assert refused.lambda_in == pytest.approx([9.81e-3, 0.0], abs=1e-7)
+
+
+def test_the_bound_response_is_the_derivative_of_daqps_solution():
+    """bound_response's R[i, j] = V[i] . dx, dx the move of the solution when group j's active bounds
+    rise by 1, against DAQP's solutions (Arnström et al.'s solver, not gaussim's) of the problem with
+    those bounds raised by 1e-7: on 12 coordinates, 2 equality rows and 30 inequality rows, one of
+    them a copy of an active row (dependent: left out of the factorization, its group's move
+    consistent), a group of active rows, one of a single active row, one of inactive rows (its column
+    0: they carry no force). Equality rows read only through the active set."""
+    import daqp
+
+    from gaussim.kernels.solver import ACTIVE_SET_FLOOR as FLOOR
+    from gaussim.kernels.solver import bound_response
+
+    rng = np.random.default_rng(5)
+    n, n_eq, n_in = 12, 2, 30
+    B = rng.normal(size=(n, n))
+    H, g = B @ B.T + n * np.eye(n), rng.normal(size=n) * 10
+    A, C, inside = rng.normal(size=(n_eq, n)), rng.normal(size=(n_in, n)), rng.normal(size=n)
+    b, l = A @ inside, C @ inside - rng.uniform(0.0, 1.0, n_in)  # feasible: inside meets every row
+
+    def solved(lower: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        sense = np.r_[np.full(n_eq, 5), np.zeros(len(lower))].astype(np.int32)  # 5: equality
+        upper = np.r_[b, np.full(len(lower), 1e30)]
+        x, _, flag, info = daqp.solve(H, g, np.vstack([A, C_]), upper, np.r_[b, lower], sense)
+        assert flag == 1
+        return np.asarray(x), -np.asarray(info["lam"])[n_eq:]
+
+    C_ = C
+    x, z = solved(l)
+    active = np.flatnonzero(z > 1e-9)
+    assert 4 <= len(active) <= n - n_eq
+    C_, l = np.vstack([C, C[active[0]]]), np.r_[l, l[active[0]]]  # a copy of an active row
+    x, z = solved(l)
+    group = np.full(n_in + 1, -1)
+    group[[active[0], n_in]] = 0  # the row and its copy: a consistent move
+    group[active[1:3]] = 1
+    group[active[3]] = 2
+    inactive = np.flatnonzero(z <= 0.0)[:3]
+    group[inactive] = 3
+    V = rng.normal(size=(4, n))
+    R = bound_response(H, A, C_, z, FLOOR, group, V)
+    step = 1e-7
+    for j in range(4):
+        moved = l.copy()
+        moved[group == j] += step
+        x_moved, z_moved = solved(moved)
+        assert np.array_equal(z_moved > 1e-9, z > 1e-9)  # the active set stays
+        np.testing.assert_allclose(R[:, j], V @ (x_moved - x) / step, rtol=1e-5, atol=1e-6)
+    assert np.all(R[:, 3] == 0.0) and np.abs(R[:, :3]).min() > 1e-3
+
+
+def test_the_independent_cholesky_leaves_out_the_rows_that_depend_on_the_ones_before():
+    """Rows 3 (= row 0 + row 1) and 5 (= 2 row 2) of W make G = W W^T singular: the factor keeps the
+    others, whose L L^T is G there, and leaves the identity's rows in place of the two."""
+    from gaussim.linalg import independent_cholesky
+
+    W = np.random.default_rng(2).normal(size=(6, 8))
+    W[3], W[5] = W[0] + W[1], 2.0 * W[2]
+    G = W @ W.T
+    L, kept = independent_cholesky(G, 1e-6)
+    assert kept.tolist() == [True, True, True, False, True, False]
+    np.testing.assert_allclose((L @ L.T)[np.ix_(kept, kept)], G[np.ix_(kept, kept)], rtol=1e-12)
+    np.testing.assert_array_equal(L[~kept], np.eye(6)[~kept])
+    np.testing.assert_array_equal(L[:, ~kept][kept], 0.0)

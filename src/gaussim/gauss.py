@@ -85,6 +85,7 @@ class GaussStage:
             x, lam, certificates = self.solvers[ctx.level].solve(problem, ctx.x_free)
             mark("solve")
             report.certificates += certificates
+            ctx.solved = (problem, lam)
             blocks = [(module, rows, lam[part]) for module, rows, part in problem.blocks]
             again = [
                 module for module, rows, multipliers in blocks if module.refine(ctx, rows, x, multipliers)

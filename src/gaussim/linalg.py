@@ -42,25 +42,48 @@ def finite(x):  # type: ignore[no-untyped-def]
     return True
 
 
-@njit(cache=True, fastmath={"reassoc", "contract"})
-def cholesky(A, shift):  # type: ignore[no-untyped-def]
-    """The lower Cholesky factor L of A + shift I (A symmetric, (n, n)), L L^T = A + shift I; None
-    when that is not positive definite."""
+@njit(cache=True, fastmath={"reassoc", "contract"}, inline="always")
+def _factor(A, shift, tolerance, drop):  # type: ignore[no-untyped-def]
+    """(L, kept, done): the Cholesky factor of A + shift I on the rows whose pivot exceeds
+    ``tolerance`` times their diagonal; another row stops it (done False) or, with ``drop``, is left
+    out (kept False, its row of L the identity's and no other row reading it)."""
     n = A.shape[0]
-    L = np.zeros((n, n))
+    L, kept = np.zeros((n, n)), np.ones(n, np.bool_)
     for j in range(n):
         pivot = A[j, j] + shift
         for p in range(j):
             pivot -= L[j, p] * L[j, p]
-        if not pivot > 0.0:  # NaN fails too
-            return None
+        if not pivot > tolerance * A[j, j]:  # NaN fails too
+            if not drop:
+                return L, kept, False
+            L[j, :j] = 0.0
+            L[j, j], kept[j] = 1.0, False
+            continue
         L[j, j] = diagonal = np.sqrt(pivot)
         for i in range(j + 1, n):
             total = A[i, j]
             for p in range(j):
                 total -= L[i, p] * L[j, p]
             L[i, j] = total / diagonal
-    return L
+    return L, kept, True
+
+
+@njit(cache=True)
+def cholesky(A, shift):  # type: ignore[no-untyped-def]
+    """The lower Cholesky factor L of A + shift I (A symmetric, (n, n)), L L^T = A + shift I; None
+    when that is not positive definite."""
+    L, _, done = _factor(A, shift, 0.0, False)
+    return L if done else None
+
+
+@njit(cache=True)
+def independent_cholesky(A, tolerance):  # type: ignore[no-untyped-def]
+    """(L, kept): the Cholesky factor of A (symmetric positive semidefinite, (n, n)) on the rows kept
+    in order, each row i left out (kept[i] False) whose pivot is at most ``tolerance`` times A[i, i]
+    (a row dependent on the ones before); a left-out row of L is the identity's, and no other row
+    reads it, so a solve with L leaves its entry as given."""
+    L, kept, _ = _factor(A, 0.0, tolerance, True)
+    return L, kept
 
 
 @njit(cache=True, fastmath={"reassoc", "contract"})
@@ -85,6 +108,35 @@ def backward(L, y):  # type: ignore[no-untyped-def]
             total -= L[j, i] * y[j]
         y[i] = total / L[i, i]
     return y
+
+
+@njit(cache=True)
+def solve(A, b):  # type: ignore[no-untyped-def]
+    """A^-1 b for a square A (n, n) by Gaussian elimination with partial pivoting, in place of A and b;
+    None when a pivot is 0 (A singular) or not finite."""
+    n = A.shape[0]
+    for j in range(n):
+        pivot = j
+        for i in range(j + 1, n):
+            if abs(A[i, j]) > abs(A[pivot, j]):
+                pivot = i
+        if not abs(A[pivot, j]) > 0.0:  # NaN fails too
+            return None
+        if pivot != j:
+            for k in range(n):
+                A[j, k], A[pivot, k] = A[pivot, k], A[j, k]
+            b[j], b[pivot] = b[pivot], b[j]
+        for i in range(j + 1, n):
+            factor = A[i, j] / A[j, j]
+            for k in range(j, n):
+                A[i, k] -= factor * A[j, k]
+            b[i] -= factor * b[j]
+    for i in range(n - 1, -1, -1):
+        total = b[i]
+        for k in range(i + 1, n):
+            total -= A[i, k] * b[k]
+        b[i] = total / A[i, i]
+    return b
 
 
 @njit(cache=True)

@@ -15,7 +15,7 @@ from __future__ import annotations
 import abc
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Generic, Literal, TypeVar
+from typing import TYPE_CHECKING, Any, Generic, Literal, TypeVar
 
 import numpy as np
 import pinocchio as pin
@@ -23,6 +23,9 @@ import pinocchio as pin
 from ..collision import Contacts
 from ..kernels.contact import bound_of
 from ..options import Options
+
+if TYPE_CHECKING:
+    from ..assembly import GaussProblem
 
 Level = Literal["velocity", "impulse", "acceleration"]
 T = TypeVar("T")
@@ -79,6 +82,9 @@ class Context:
         lagged: each module's record of its fixed-point iteration (:meth:`ConstraintModule.refine`),
             carried between the QPs of one solve, keyed by ``id(module)`` (the contact module's is a
             :class:`~gaussim.constraints.contact.FrictionIterate`); empty at a solve's first QP.
+        solved: the QP of the solve's last pass and its multipliers [lambda_eq; lambda_in], set
+            before the modules refine (a fixed-point iteration may read how the solution responds to
+            its rows' bounds), or None.
     """
 
     model: pin.Model
@@ -90,6 +96,7 @@ class Context:
     options: Options
     level: Level
     lagged: dict[int, Any] = field(default_factory=dict)
+    solved: tuple[GaussProblem, np.ndarray] | None = None
 
 
 @dataclass

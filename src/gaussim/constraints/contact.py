@@ -14,13 +14,15 @@ solution (a lagged slip lets a decelerating contact sink at mu (|u_t| - |u_t+|),
 lift off at as much; each pass divides that error by about 1 + 1/mu^2) until the bounds' error is
 below SLIP_TOLERANCE[mode]: mu times the change of |u_t+| (all the shift reads), less the slack the
 contact's rows leave (a bound that moves within its row's slack leaves the solution where it is).
-Each contact's step is scaled by the secant of its last two passes (:func:`_secant`: a contact
-switching between sticking and sliding no longer cycles), and passes that stall (:func:`_stalled`)
-within RELAX_TOLERANCE stop. When the passes of ``Options.friction_iterations`` do not come within
-RELAX_TOLERANCE of that fixed point (measured: mu = 1000, where a block sank through the ground under
-a tiny normal force whose friction relaxed the shifted bound), the last QP drops the shift: the
-plain relaxation, which may lift a sliding contact at mu |u_t+| but never lets it sink; the step's
-report says so (``StepReport.friction_relaxed``).
+Each contact's step is scaled by the secant of its last two passes (:func:`_secant`: a contact switching
+between sticking and sliding no longer cycles), or, for the sliding contacts that hold a row active in a
+QP of at most NEWTON_UP_TO coordinates, is a Newton step on all their shifts at once (the solution's
+response to their bounds couples them), and passes that stall (:func:`_stalled`) within RELAX_TOLERANCE
+stop. When the passes of ``Options.friction_iterations`` do not come within RELAX_TOLERANCE of that
+fixed point (measured: mu = 1000, where a block sank through the ground under a tiny normal force whose
+friction relaxed the shifted bound), the last QP drops the shift: the plain relaxation, which may lift a
+sliding contact at mu |u_t+| but never lets it sink; the step's report says so
+(``StepReport.friction_relaxed``).
 d_1 is turned against the tangential velocity the contact would have without friction, so a
 sliding or pulled contact sees the full cone, not a facet of the pyramid ("pyramid" mode keeps a
 fixed basis and no shift). With mu = 0 a contact is the single row n^T J x >= b.
@@ -40,9 +42,9 @@ All contacts of a step are handled at once, as arrays; the module's :class:`Fric
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
-from functools import cached_property
+from functools import cached_property, partial
 from typing import Any
 
 import coal
@@ -57,7 +59,8 @@ from ..dynamics import (
     point_jacobians,
     point_placements,
 )
-from ..kernels.contact import pyramids, secant_moves, shifted_bounds, slips, unpacked
+from ..kernels.contact import newton_moves, pyramids, secant_moves, shifted_bounds, slips, unpacked
+from ..kernels.solver import ACTIVE_SET_FLOOR
 from .base import LEVELS, ConstraintModule, Context, Rows, is_active
 
 # Fixed-point iterations on the slip stop when the shifted bounds' error is below this [m/s].
@@ -71,6 +74,12 @@ NORMAL_FORCE_TOLERANCE = 1e-8
 STALL_RATIO = 0.5
 # The range of the secant's scaling of each contact's slip residual (:func:`_secant`).
 SECANT_SCALES = (0.2, 2.0)
+# Up to this many coordinates, the contacts that slide with a row active take a Newton step on their
+# shifts (:func:`_secant`): its dense factorization of the active rows costs less than the passes it saves.
+NEWTON_UP_TO = 64
+# A contact takes the Newton step where it scales the contact's residual within this range, else the
+# secant's (where the passes' active set changes, the Newton step can point away from the residual).
+NEWTON_SCALES = (0.2, 5.0)
 # Passes the Anderson mixing of those iterations combines.
 ANDERSON_MEMORY = 5
 
@@ -418,7 +427,7 @@ class ContactModule(ConstraintModule[ContactBatch]):
                     return True
                 if residual <= RELAX_TOLERANCE and _stalled(lagged.residuals):
                     return changed  # near it, and no nearer with more passes: this solution stands
-                lagged.slip, lagged.secant = _secant(b.slip, slip, lagged.secant)
+                lagged.slip, lagged.secant = _secant(b.slip, slip, lagged.secant, _newton(ctx, rows))
                 changed = True
         return changed
 
@@ -478,8 +487,27 @@ def _stalled(residuals: list[float]) -> bool:
     return len(residuals) >= 3 and residuals[-1] > STALL_RATIO * residuals[-3]
 
 
+def _newton(ctx: Context, rows: Rows[ContactBatch]) -> Callable[..., bool] | None:
+    """:func:`~gaussim.kernels.contact.newton_moves` on the QP ``rows`` were solved in (``ctx.solved``),
+    to call with (used, mapped, scales, moved); None: no QP at hand, or one of more than NEWTON_UP_TO
+    coordinates."""
+    if ctx.solved is None or ctx.solved[0].H.shape[0] > NEWTON_UP_TO:
+        return None
+    problem, multipliers = ctx.solved
+    n_eq = len(problem.b)
+    first = next(part.start for _, block, part in problem.blocks if block is rows) - n_eq
+    b = rows.data
+    z, mu = multipliers[n_eq:], b.contacts.friction
+    return partial(
+        newton_moves, problem.H, problem.A, problem.C, z, ACTIVE_SET_FLOOR, first, b.starts, b.packed, mu
+    )
+
+
 def _secant(
-    used: np.ndarray, mapped: np.ndarray, last: tuple[np.ndarray, np.ndarray] | None
+    used: np.ndarray,
+    mapped: np.ndarray,
+    last: tuple[np.ndarray, np.ndarray] | None,
+    newton: Callable[..., bool] | None = None,
 ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
     """(the next lagged slips, what the next pass's secant reads) of the De Saxce iteration
     s -> F(s), from the slips ``used`` by this pass's QP, the slips ``mapped`` of its solution, and
@@ -491,10 +519,16 @@ def _secant(
     sliding, each pass undoing the last) halves the step, 0.5 (a slide's pull on its normal row)
     doubles it, where plain passes repeat or halve the error. The cap keeps the coupling between
     contacts, which each one's secant does not see, from overshooting (in the bin of
-    examples/bin_pile.py, a cap of 3 or 4 took more passes than 2)."""
+    examples/bin_pile.py, a cap of 3 or 4 took more passes than 2).
+
+    ``newton`` (:func:`_newton`, on the QP of this pass) adds that coupling: the contacts that slide
+    with a row active take its Newton step, which reaches the fixed point of all of them in one pass
+    while the QP's active set stays."""
     moved, residual = np.empty_like(used), np.empty_like(used)
     move, previous = (_NO_MOVE, _NO_MOVE) if last is None else last
     secant_moves(used, mapped, move, previous, SECANT_SCALES, moved, residual)
+    if newton is not None:
+        newton(used, mapped, NEWTON_SCALES, moved)
     return used + moved, (moved, residual)
 
 

@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, vectorize
 
-from ..linalg import cross, dot
+from ..linalg import cross, dot, solve
 from .dynamics import point_jacobians_into, support_dot
+from .solver import bound_response
 
 
 @vectorize(["float64(int64, float64, float64, float64, float64, float64, boolean)"], cache=True)
@@ -263,6 +264,78 @@ def secant_moves(used, mapped, move, previous, scales, moved, residual):  # type
                 scale = min(max(1.0 / max(1.0 - slope, 1e-12), low), high)
         residual[i, 0], residual[i, 1], residual[i, 2] = r0, r1, r2
         moved[i, 0], moved[i, 1], moved[i, 2] = scale * r0, scale * r1, scale * r2
+
+
+@njit(cache=True)
+def newton_moves(H, A, C, z, floor, first, starts, packed, mu, used, mapped, scales, moved):  # type: ignore[no-untyped-def]
+    """Replaces in ``moved`` (m, 3) the step of each contact that slides at the solution (its slip
+    ``mapped``, from the slips ``used``) and holds a row active (its multiplier in ``z`` above
+    ``floor`` times the largest) by a Newton step on the De Saxce fixed point of those contacts'
+    shifts sigma = mu |slip| (see :func:`gaussim.constraints.contact._secant`): with their rows kept
+    active, sigma_i maps to mu_i t_i^T J_i x(sigma), t_i the slip's direction, whose Jacobian is
+    -mu_i R with R of :func:`~gaussim.kernels.solver.bound_response` (a contact's rows read
+    x >= b - sigma_i), so the step solves (I + diag(mu) R) d = F(sigma) - sigma. A contact takes its
+    d_i where that scales its residual within ``scales``, else keeps its ``moved`` (where the passes'
+    active set changes, which the Jacobian does not see, d_i can point away from the residual). The
+    problem (H, A, C) is the QP's; contact i's rows are rows first + starts[i] to first + starts[i + 1]
+    of C; ``packed`` is :func:`pyramids`'. False, ``moved`` untouched, when H is not positive definite
+    or I + diag(mu) R is singular."""
+    m, nv = len(mu), H.shape[0]
+    J = unpacked(packed, m, nv)[0]
+    largest = 0.0
+    for value in z:
+        largest = max(largest, value)
+    least = max(floor * largest, 0.0)
+    chosen, group = np.empty(m, np.int64), np.full(len(z), -1)
+    k = 0
+    for i in range(m):
+        speed = np.sqrt(dot(mapped[i], mapped[i]))
+        if starts[i + 1] - starts[i] == 1 or not speed > SLIP_SPEED:
+            continue
+        rows = range(first + starts[i], first + starts[i + 1])
+        held = False
+        for r in rows:
+            held |= z[r] > least
+        if held:
+            for r in rows:
+                group[r] = k
+            chosen[k], k = i, k + 1
+    if k == 0:
+        return True
+    V = np.zeros((k, nv))  # t_i^T J_i
+    for j in range(k):
+        i = chosen[j]
+        speed = np.sqrt(dot(mapped[i], mapped[i]))
+        for a in range(3):
+            direction = mapped[i, a] / speed
+            for c in range(nv):
+                V[j, c] += direction * J[i, a, c]
+    R = bound_response(H, A, C, z, floor, group, V)
+    if R.shape[0] == 0:
+        return False
+    residual = np.empty(k)
+    for j in range(k):
+        i = chosen[j]
+        residual[j] = mu[i] * (
+            _shift_speed(np.sqrt(dot(mapped[i], mapped[i]))) - _shift_speed(np.sqrt(dot(used[i], used[i])))
+        )
+        for c in range(k):
+            R[j, c] *= mu[i]
+        R[j, j] += 1.0
+    step = solve(R, residual.copy())
+    if step is None:
+        return False
+    low, high = scales
+    for j in range(k):
+        i = chosen[j]
+        scale = step[j] / residual[j] if residual[j] != 0.0 else 1.0
+        if not low <= scale <= high:  # the secant's step stands
+            continue
+        speed = np.sqrt(dot(mapped[i], mapped[i]))
+        target = max(_shift_speed(np.sqrt(dot(used[i], used[i]))) + scale * residual[j] / mu[i], 0.0)
+        for a in range(3):
+            moved[i, a] = mapped[i, a] / speed * target - used[i, a]
+    return True
 
 
 @njit(cache=True)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..linalg import backward, cholesky, dot, forward, matvec
+from ..linalg import backward, cholesky, dot, forward, independent_cholesky, matvec
 
 
 @njit(cache=True)
@@ -50,6 +50,12 @@ def kkt_residuals(H, g, A, b, C, l, x, y, z):  # type: ignore[no-untyped-def]
         return np.nan, np.nan, np.nan, np.nan, np.nan
     return worst, relative, primal, dual, abs(gap)
 
+
+# In ProxQP's answer, an inequality row is active when its multiplier exceeds this fraction of the
+# largest one: ProxQP leaves multipliers of 1e-172 on inactive rows, which would make them equalities.
+# (The last solution keeps every positive multiplier's row: with this floor there, Talos with 16
+# friction facets met a QP that neither ProxQP nor its active set solves.)
+ACTIVE_SET_FLOOR = 1e-12
 
 # Rounds of iterative refinement of the active-set solve: each divides the error of a multiplier
 # direction of curvature c by 1 + c / (ACTIVE_SET_SHIFT max diag G).
@@ -169,6 +175,62 @@ def _solve_on(L, h, A, b, C, l, working, x_out, multipliers_out):  # type: ignor
     for i in range(k - n_eq):
         multipliers_out[n_eq + rows[i]] = lam[n_eq + i]
     return True
+
+
+# The least ratio of a Cholesky pivot of the active rows' Delassus matrix to its diagonal for which
+# :func:`bound_response` takes them as independent.
+INDEPENDENT = 1e-6
+
+
+@njit(cache=True, fastmath={"reassoc", "contract"})
+def bound_response(H, A, C, z, floor, group, V):  # type: ignore[no-untyped-def]
+    """R (k, k), k = len(V): R[i, j] = V[i] . dx, dx the change of the solution x of the Gauss
+    problem (H, rows A x = b and C x >= l) when the bounds of group j's rows (``group``: the group of
+    each inequality row, -1 for none) that the solution holds active rise by 1. The active rows K (the
+    equalities and the inequalities with a multiplier ``z`` above ``floor`` times the largest, and
+    > 0) stay active: dx = H^-1 K^T G^-1 e_j, G = K H^-1 K^T, on the rows of K independent of the
+    ones before (a row whose Cholesky pivot of G is at most INDEPENDENT times its diagonal is left
+    out: a sticking contact's fourth pyramid row, a flat box's fourth corner; a move of the kept
+    rows' bounds moves x as it would with the left-out rows, when their move is consistent). An
+    empty R when H is not positive definite."""
+    n_eq, nv, k = A.shape[0], H.shape[0], V.shape[0]
+    largest = 0.0
+    for value in z:
+        largest = max(largest, value)
+    least = max(floor * largest, 0.0)
+    count = n_eq
+    for value in z:
+        count += value > least
+    K, owner = np.empty((count, nv)), np.full(count, -1)
+    for j in range(nv):
+        for i in range(n_eq):
+            K[i, j] = A[i, j]
+    t = n_eq
+    for i in range(len(z)):
+        if z[i] > least:
+            for j in range(nv):
+                K[t, j] = C[i, j]
+            owner[t] = group[i]
+            t += 1
+    L = cholesky(H, 0.0)
+    if L is None:
+        return np.empty((0, 0))
+    W = forward(L, K)  # the rows of K L^-T
+    G = np.empty((count, count))
+    for i in range(count):
+        for j in range(i + 1):
+            G[i, j] = G[j, i] = dot(W[i], W[j])
+    LG, kept = independent_cholesky(G, INDEPENDENT)
+    P = forward(L, V.copy())  # the rows of V L^-T
+    R, q = np.zeros((k, k)), np.empty((1, count))
+    for i in range(k):  # row i of V H^-1 K^T G^-1, summed over each group's rows
+        for t in range(count):
+            q[0, t] = dot(P[i], W[t]) if kept[t] else 0.0
+        row = backward(LG, forward(LG, q)[0])
+        for t in range(count):
+            if owner[t] >= 0:
+                R[i, owner[t]] += row[t]
+    return R
 
 
 @njit(cache=True)

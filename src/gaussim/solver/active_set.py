@@ -14,15 +14,9 @@ a few rows, which those steps find at the cost of a linear solve each instead of
 
 from __future__ import annotations
 
-from ..kernels.solver import active_set_candidate
+from ..kernels.solver import ACTIVE_SET_FLOOR, active_set_candidate
 
 __all__ = ["ACTIVE_SET_FLOOR", "ACTIVE_SET_UP_TO", "active_set_candidate"]
-
-# In ProxQP's answer, an inequality row is active when its multiplier exceeds this fraction of the
-# largest one: ProxQP leaves multipliers of 1e-172 on inactive rows, which would make them equalities.
-# (The last solution keeps every positive multiplier's row: with this floor there, Talos with 16
-# friction facets met a QP that neither ProxQP nor its active set solves.)
-ACTIVE_SET_FLOOR = 1e-12
 
 # Above this many coordinates, with DAQP at hand, the last solution itself is checked but its active set
 # is not solved on: the dense factorizations of H and of the rows' Delassus matrix cost more than DAQP
