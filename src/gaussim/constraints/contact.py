@@ -489,18 +489,16 @@ def _stalled(residuals: list[float]) -> bool:
 
 def _newton(ctx: Context, rows: Rows[ContactBatch]) -> Callable[..., bool] | None:
     """:func:`~gaussim.kernels.contact.newton_moves` on the QP ``rows`` were solved in (``ctx.solved``),
-    to call with (used, mapped, scales, moved); None: no QP at hand, or one of more than NEWTON_UP_TO
-    coordinates."""
+    to call with (used, mapped, scales, moved) (its arrays read-only whoever made them: one compiled
+    signature); None: no QP at hand, or one of more than NEWTON_UP_TO coordinates."""
     if ctx.solved is None or ctx.solved[0].H.shape[0] > NEWTON_UP_TO:
         return None
     problem, multipliers = ctx.solved
     n_eq = len(problem.b)
     first = next(part.start for _, block, part in problem.blocks if block is rows) - n_eq
     b = rows.data
-    z, mu = multipliers[n_eq:], b.contacts.friction
-    return partial(
-        newton_moves, problem.H, problem.A, problem.C, z, ACTIVE_SET_FLOOR, first, b.starts, b.packed, mu
-    )
+    H, A, C, mu = (_read_only(a) for a in (problem.H, problem.A, problem.C, b.contacts.friction))
+    return partial(newton_moves, H, A, C, multipliers[n_eq:], ACTIVE_SET_FLOOR, first, b.starts, b.packed, mu)
 
 
 def _secant(

@@ -67,7 +67,7 @@ SIGNATURES = {
         for v, x in (("f1", "f1"), ("f1r", "f1"), ("f1r", "f1r"))
     ],
     "contact.secant_moves": ["f2 f2 f2 f2 f*2 f2 f2"],
-    "contact.newton_moves": [f"f2 f2r f2 f1 f i i1 f1 {mu} f2 f2 f*2 f2" for mu in ("f1", "f1r")],
+    "contact.newton_moves": ["f2r f2r f2r f1 f i i1 f1 f1r f2 f2 f*2 f2"],
     "contact.shifted_bounds": [f"f1 i1 {mu} f2 f2 f1" for mu in ("f1", "f1r")],
     "contact.slips": [
         f"f1 i1 f1 f2 {mu} f2 f1 {joints} {joints} i1 i1" for joints, mu in (("i1", "f1"), ("i1r", "f1r"))
