@@ -161,6 +161,17 @@ def test_readme_keeps_the_ci_test_command() -> None:
     assert command in readme
 
 
+def test_ci_fails_when_the_test_command_fails_before_its_tests() -> None:
+    """Under set -e a failure before the last && of a list passes (an install out of disk space ran no
+    test and CI passed): the check after the README's command stops the run then, not otherwise."""
+    ci = (ROOT / ".ci" / "run").read_text().splitlines()
+    at = ci.index("# The README's test command, verbatim:") + 1
+    check = ci[at + 1 : ci.index("# House style: lint and types (pyproject.toml configures both).")]
+    for command, status in (("true && false && true", 1), ("true && true && true", 0)):
+        script = "\n".join(["set -euo pipefail", command, *check, "exit 0"])
+        assert subprocess.run(["bash", "-c", script], capture_output=True).returncode == status, command
+
+
 def test_roles_hook() -> None:
     """The site's hook shows the docstrings' Sphinx roles as code (``~`` shortening the path)."""
     spec = importlib.util.spec_from_file_location("docs_hooks", ROOT / "docs" / "hooks.py")
