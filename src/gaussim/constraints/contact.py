@@ -75,7 +75,8 @@ STALL_RATIO = 0.5
 # The range of the secant's scaling of each contact's slip residual (:func:`_secant`).
 SECANT_SCALES = (0.2, 2.0)
 # Up to this many coordinates, the contacts that slide with a row active take a Newton step on their
-# shifts (:func:`_secant`): its dense factorization of the active rows costs less than the passes it saves.
+# shifts (:func:`_secant`); above, the dense factorization of the active rows costs more than a pass
+# (at 35 to 49 it costs about what the passes it saves do: docs/step-cost.md).
 NEWTON_UP_TO = 64
 # A contact takes the Newton step where it scales the contact's residual within this range, else the
 # secant's (where the passes' active set changes, the Newton step can point away from the residual).

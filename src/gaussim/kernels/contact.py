@@ -7,7 +7,7 @@ from numba import njit, vectorize
 
 from ..linalg import cross, dot, solve
 from .dynamics import point_jacobians_into, support_dot
-from .solver import bound_response
+from .solver import active_floor, bound_response
 
 
 @vectorize(["float64(int64, float64, float64, float64, float64, float64, boolean)"], cache=True)
@@ -282,10 +282,7 @@ def newton_moves(H, A, C, z, floor, first, starts, packed, mu, used, mapped, sca
     or I + diag(mu) R is singular."""
     m, nv = len(mu), H.shape[0]
     J = unpacked(packed, m, nv)[0]
-    largest = 0.0
-    for value in z:
-        largest = max(largest, value)
-    least = max(floor * largest, 0.0)
+    least = active_floor(z, floor)
     chosen, group = np.empty(m, np.int64), np.full(len(z), -1)
     k = 0
     for i in range(m):

@@ -71,6 +71,34 @@ ACTIVE_SET_ITERATIONS = 3
 ACTIVE_SET_SHIFT = 1e-12
 
 
+@njit(cache=True)
+def active_floor(z, floor):  # type: ignore[no-untyped-def]
+    """The multiplier an active inequality row's exceeds: ``floor`` times the largest of ``z``, and 0."""
+    largest = 0.0
+    for value in z:
+        largest = max(largest, value)
+    return max(floor * largest, 0.0)
+
+
+@njit(cache=True, fastmath={"reassoc", "contract"})
+def _delassus(L, A, C, chosen):  # type: ignore[no-untyped-def]
+    """(the rows K: the equalities A, then the inequalities C whose ``chosen`` is True, in order; the
+    index in C of each of those; W = K L^-T; G = W W^T, the rows' Delassus matrix for H = L L^T)."""
+    n_eq, nv = A.shape[0], L.shape[0]
+    rows = np.flatnonzero(chosen)
+    k = n_eq + len(rows)
+    K = np.empty((k, nv))
+    for i in range(k):
+        for j in range(nv):
+            K[i, j] = A[i, j] if i < n_eq else C[rows[i - n_eq], j]
+    W = forward(L, K)
+    G = np.empty((k, k))
+    for i in range(k):
+        for j in range(i + 1):
+            G[i, j] = G[j, i] = dot(W[i], W[j])
+    return rows, W, G
+
+
 @njit(cache=True, fastmath={"reassoc", "contract"})
 def active_set_candidate(H, g, A, b, C, l, x, multipliers, tolerance, floor, x_out, multipliers_out):  # type: ignore[no-untyped-def]
     """(how, the residuals of :func:`kkt_residuals`) for the first candidate built from a solution
@@ -94,10 +122,7 @@ def active_set_candidate(H, g, A, b, C, l, x, multipliers, tolerance, floor, x_o
     residuals = kkt_residuals(H, g, A, b, C, l, x, multipliers[:n_eq], multipliers[n_eq:])
     if residuals[1] <= tolerance:
         return 1, residuals
-    largest = 0.0  # an active row's multiplier exceeds floor times the largest (and 0)
-    for i in range(n_eq, len(multipliers)):
-        largest = max(largest, multipliers[i])
-    least = max(floor * largest, 0.0)
+    least = active_floor(multipliers[n_eq:], floor)
     working = np.empty(len(l), np.bool_)
     for i in range(len(l)):
         working[i] = multipliers[n_eq + i] > least
@@ -131,24 +156,11 @@ def _solve_on(L, h, A, b, C, l, working, x_out, multipliers_out):  # type: ignor
     as equalities, solved into ``x_out`` and ``multipliers_out`` (0 off the working set); False when
     the shifted G is not positive definite."""
     n_eq, nv = len(b), len(h)
-    k = n_eq
-    rows = np.empty(len(l), np.int64)
-    for i in range(len(l)):
-        if working[i]:
-            rows[k - n_eq] = i
-            k += 1
-    K, r = np.empty((k, nv)), np.empty(k)
+    rows, W, G = _delassus(L, A, C, working)
+    k = n_eq + len(rows)
+    rhs, largest = np.empty(k), 0.0
     for i in range(k):
-        row = i if i < n_eq else rows[i - n_eq]
-        for j in range(nv):
-            K[i, j] = A[row, j] if i < n_eq else C[row, j]
-        r[i] = b[row] if i < n_eq else l[row]
-    W = forward(L, K)  # the rows of K L^-T, (k, nv)
-    G, rhs, largest = np.empty((k, k)), r, 0.0
-    for i in range(k):
-        for j in range(i + 1):
-            G[i, j] = G[j, i] = dot(W[i], W[j])
-        rhs[i] += dot(W[i], h)
+        rhs[i] = (b[i] if i < n_eq else l[rows[i - n_eq]]) + dot(W[i], h)
         largest = max(largest, G[i, i])
     LG = cholesky(G, ACTIVE_SET_SHIFT * largest)
     if LG is None:
@@ -193,33 +205,19 @@ def bound_response(H, A, C, z, floor, group, V):  # type: ignore[no-untyped-def]
     out: a sticking contact's fourth pyramid row, a flat box's fourth corner; a move of the kept
     rows' bounds moves x as it would with the left-out rows, when their move is consistent). An
     empty R when H is not positive definite."""
-    n_eq, nv, k = A.shape[0], H.shape[0], V.shape[0]
-    largest = 0.0
-    for value in z:
-        largest = max(largest, value)
-    least = max(floor * largest, 0.0)
-    count = n_eq
-    for value in z:
-        count += value > least
-    K, owner = np.empty((count, nv)), np.full(count, -1)
-    for j in range(nv):
-        for i in range(n_eq):
-            K[i, j] = A[i, j]
-    t = n_eq
-    for i in range(len(z)):
-        if z[i] > least:
-            for j in range(nv):
-                K[t, j] = C[i, j]
-            owner[t] = group[i]
-            t += 1
+    n_eq, k = A.shape[0], V.shape[0]
     L = cholesky(H, 0.0)
     if L is None:
         return np.empty((0, 0))
-    W = forward(L, K)  # the rows of K L^-T
-    G = np.empty((count, count))
-    for i in range(count):
-        for j in range(i + 1):
-            G[i, j] = G[j, i] = dot(W[i], W[j])
+    active = np.empty(len(z), np.bool_)
+    least = active_floor(z, floor)
+    for i in range(len(z)):
+        active[i] = z[i] > least
+    rows, W, G = _delassus(L, A, C, active)
+    count = n_eq + len(rows)
+    owner = np.full(count, -1)
+    for t in range(len(rows)):
+        owner[n_eq + t] = group[rows[t]]
     LG, kept = independent_cholesky(G, INDEPENDENT)
     P = forward(L, V.copy())  # the rows of V L^-T
     R, q = np.zeros((k, k)), np.empty((1, count))
