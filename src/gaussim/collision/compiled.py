@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from ..kernels.pairs import ASK_COAL, FOUND
+from ..kernels.pairs import gathered, nearby
 from .contacts import Piece, one_pair
 from .narrow import BoundingSpheres, NarrowPhase
 from .pairs import Pair
@@ -37,6 +37,14 @@ class CompiledPairs:
         self.local_rotation = np.array(
             [[p.local.rotation, _other_placement(p).rotation] for p in self.pairs]
         ).reshape(-1, 2, 3, 3)
+        count = len(index)  # what the kernel fills, for the pairs it is handed: at most all of them
+        self._buffers = (
+            np.empty(count, np.int64),
+            np.empty(count),
+            np.empty((count, 3)),
+            np.empty((count, self.max_points, 3)),
+            np.empty(count, np.int64),
+        )
         self.local_translation = np.array(
             [[p.local.translation, _other_placement(p).translation] for p in self.pairs]
         ).reshape(-1, 2, 3)
@@ -44,37 +52,20 @@ class CompiledPairs:
     def detect(self, data: pin.Data, margin: float, turns: np.ndarray) -> tuple[list[Piece], float]:
         """The contacts of the pairs within ``margin`` [m] at the placements held in ``data``, and a
         lower bound on every pair's gap [m] (``turns`` unused: these patches keep PATCH_TOLERANCE)."""
-        apart = self.spheres.gaps(data, margin)
-        far = apart > margin
-        clearance = float(apart[far].min(initial=np.inf))
-        near = np.flatnonzero(~far)
+        near, clearance = nearby(self.spheres.gaps(data, margin), margin)
         if not len(near):
             return [], clearance
-        count = len(near)
-        answer, gaps = np.empty(count, np.int64), np.empty(count)
-        normals, points = np.empty((count, 3)), np.empty((count, self.max_points, 3))
-        sizes = np.empty(count, np.int64)
+        answer, gaps, normals, points, sizes = self._buffers
         self._kernel(self.spheres.placements(data), near, margin, answer, gaps, normals, points, sizes)
-        clearance = float(gaps[answer != ASK_COAL].min(initial=clearance))
-        pieces: list[Piece] = []
-        found = np.flatnonzero(answer == FOUND)
-        if len(found):  # one piece for all of them: a piece per pair costs more than the kernel
-            counts = sizes[found]
-            chosen = np.arange(self.max_points) < counts[:, None]
-            pieces.append(
-                (
-                    np.repeat(self.owner[near[found]], counts),
-                    points[found][chosen],
-                    np.repeat(normals[found], counts, axis=0),
-                    np.repeat(gaps[found], counts),
-                )
-            )
+        # one piece for all the points found: a piece per pair costs more than the kernel
+        found, asked, clearance = gathered(self.owner, near, answer, gaps, normals, points, sizes, clearance)
+        pieces: list[Piece] = [found] if len(found[0]) else []
         self.coal.use_margin(margin)
-        for k in np.flatnonzero(answer == ASK_COAL).tolist():
-            hit, least = self.coal.collide(self.pairs[near[k]], data)
+        for i in asked.tolist():
+            hit, least = self.coal.collide(self.pairs[i], data)
             clearance = min(clearance, least)
             if hit is not None:
-                pieces.append(one_pair(self.index[near[k]], *hit))
+                pieces.append(one_pair(self.index[i], *hit))
         return pieces, clearance
 
     def _kernel(

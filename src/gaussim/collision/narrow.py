@@ -7,7 +7,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..exceptions import ContactError
-from ..kernels.pairs import sphere_gaps, support_gaps
+from ..kernels.pairs import nearby, sphere_gaps, support_gaps
 from ..linalg import finite
 from .contacts import PATCH_MIN_EXTENT, PATCH_TOLERANCE, Piece, one_pair
 from .pairs import JointPlacements, Pair, vertices
@@ -44,11 +44,9 @@ class NarrowPhase:
         """The contacts of the pairs within ``margin`` [m] at the placements held in ``data``, and a
         lower bound on every pair's gap [m] (``turns`` unused: these patches keep PATCH_TOLERANCE)."""
         self.use_margin(margin)
-        apart = self.spheres.gaps(data, margin)
-        far = apart > margin
-        clearance = float(apart[far].min(initial=np.inf))
+        near, clearance = nearby(self.spheres.gaps(data, margin), margin)
         pieces: list[Piece] = []
-        for i in np.flatnonzero(~far).tolist():
+        for i in near.tolist():
             hit, least = self.collide(self.pairs[i], data)
             clearance = min(clearance, least)
             if hit is not None:

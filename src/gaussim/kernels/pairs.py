@@ -81,6 +81,54 @@ def sphere_gaps(placements, side, centers, radius, obstacle_radius, boxes, margi
 
 
 @njit(cache=True)
+def nearby(apart, margin):  # type: ignore[no-untyped-def]
+    """The pairs within ``margin`` (their gaps ``apart`` (P,) at most it), ascending, and the least gap
+    of the others (inf when none is farther)."""
+    near = np.empty(apart.shape[0], np.int64)
+    count, least = 0, np.inf
+    for i in range(apart.shape[0]):
+        if apart[i] > margin:
+            least = min(least, apart[i])
+        else:  # NaN too: the narrow phase decides
+            near[count] = i
+            count += 1
+    return near[:count], least
+
+
+@njit(cache=True)
+def gathered(owner, near, answer, gaps, normals, points, sizes, least):  # type: ignore[no-untyped-def]
+    """What a pair family's kernel answered for the pairs ``near`` (:func:`nearby`; ``answer``,
+    ``gaps``, ``normals``, ``points``, ``sizes`` as its kernel fills them): the points found as one
+    piece (the declared pair ``owner`` of each, its point, normal and gap; pair by pair in their order),
+    the pairs (indices into ``near``'s array) asked of coal, and the least of ``least`` and the gaps of
+    the pairs answered."""
+    total, asked = 0, 0
+    for k in range(near.shape[0]):
+        if answer[k] == FOUND:
+            total += sizes[k]
+        elif answer[k] == ASK_COAL:
+            asked += 1
+    pairs, found = np.empty(total, np.int64), np.empty((total, 3))
+    towards, apart = np.empty((total, 3)), np.empty(total)
+    coal = np.empty(asked, np.int64)
+    out, asked = 0, 0
+    for k in range(near.shape[0]):
+        if answer[k] == ASK_COAL:
+            coal[asked] = near[k]
+            asked += 1
+            continue
+        least = min(least, gaps[k])
+        if answer[k] != FOUND:
+            continue
+        for j in range(sizes[k]):
+            pairs[out], apart[out] = owner[near[k]], gaps[k]
+            for a in range(3):
+                found[out, a], towards[out, a] = points[k, j, a], normals[k, a]
+            out += 1
+    return (pairs, found, towards, apart), coal, least
+
+
+@njit(cache=True)
 def order(points, count, R, p):  # type: ignore[no-untyped-def]
     """Sorts the first ``count`` points by their coordinates on the robot's geometry (at R, p), rounded
     to 0.1 mm, x first (the order of :meth:`gaussim.collision.narrow.NarrowPhase._patch`)."""
