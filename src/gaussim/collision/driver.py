@@ -11,7 +11,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..dynamics import Supports, joint_jacobians
-from ..kernels.collision import closing
+from ..kernels.collision import closing, in_pair_order
 from ..scene import Scene
 from .boxes import BoxPairs
 from .contacts import NO_CONTACTS, NOTHING_FOUND, Contacts, Piece
@@ -181,8 +181,8 @@ class ContactDetector:
         if len(pieces) == 1:
             return pieces[0]
         owner, points, normals, gaps = (np.concatenate([p[i] for p in pieces]) for i in range(4))
-        order = np.argsort(owner, kind="stable")  # the declared order of the pairs
-        return owner[order], points[order], normals[order], gaps[order]
+        in_pair_order(owner, points, normals, gaps)
+        return owner, points, normals, gaps
 
     def contacts(self, found: Piece) -> Contacts:
         """The :class:`Contacts` of the points ``found`` (:meth:`find`)."""

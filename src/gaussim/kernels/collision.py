@@ -229,6 +229,23 @@ def _extent(low, high):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
+def in_pair_order(pairs, points, normals, gaps):  # type: ignore[no-untyped-def]
+    """Sorts the contact points of several routines (their pieces concatenated: the declared pair of
+    each, its point, normal and gap) by declared pair, in place and stably: a pair's points keep their
+    order (a no-op when they are in order, as they are when the routines' pairs do not interleave)."""
+    for i in range(1, pairs.shape[0]):
+        if pairs[i] < pairs[i - 1]:
+            break
+    else:
+        return
+    order = np.argsort(pairs, kind="mergesort")
+    pairs[:] = pairs[order]
+    points[:] = points[order]
+    normals[:] = normals[order]
+    gaps[:] = gaps[order]
+
+
+@njit(cache=True)
 def travel(starts, coordinates, levers, v, x, dt, x_scale, each):  # type: ignore[no-untyped-def]
     """The farthest a pair can close in a step: max_k dt sum_i levers[k, i] (|v_i| + x_scale |x_i|),
     the levers in CSR form (row starts, coordinates, values; see MarginSchedule.levers); each pair's

@@ -59,6 +59,7 @@ SIGNATURES = {
     "boxes.box_pairs": ["f3r i2 f4 f3 f3 b1 i1 f i1 f1 f2 f3 i1"],
     "primitives.primitive_pairs": ["f3r i2 f4 f3 i2 f3 i1 f i1 f1 f2 f3 i1"],
     "cylinders.ground_cylinders": ["f3r i2 f4 f3 f2 f2 i1 f i1 f1 f2 f3 i1"],
+    "collision.in_pair_order": ["i1 f2 f2 f1"],
     "collision.travel": ["i1 i1 f1 f1r f1 f f f1"],
     "collision.closing": [f"f2F f2 i1 i1 i1 i1 f2 f2 f1 {v} f1 f f f1" for v in ("f1r", "f1")],
     "contact.unpacked": ["f1 i i"],
