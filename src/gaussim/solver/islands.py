@@ -113,6 +113,8 @@ class IslandSolver:
 def _row_joints(p: GaussProblem) -> np.ndarray:
     """The two joints each row of [A; C] reads, shape (rows, 2), where its module says (-1: scan the
     row)."""
+    if len(p.blocks) == 1 and p.blocks[0][1].joints is not None:  # the contacts alone: their own array
+        return p.blocks[0][1].joints
     read = np.full((len(p.b) + len(p.l), 2), -1, dtype=np.int64)
     for _, rows, part in p.blocks:
         if rows.joints is not None:
