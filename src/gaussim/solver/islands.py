@@ -93,7 +93,7 @@ class IslandSolver:
         trees, tree_start = members(island_of_tree, n)
         for i in range(n):
             c, r = cols[col_start[i] : col_start[i + 1]], rows[row_start[i] : row_start[i + 1]]
-            eq, ineq = r[r < n_eq], r[r >= n_eq] - n_eq
+            eq, ineq = (r[r < n_eq], r[r >= n_eq] - n_eq) if n_eq else (r[:0], r)  # [:0]: no equality
             key = tuple(trees[tree_start[i] : tree_start[i + 1]].tolist())
             solution = self._solver(key).solve(p.island(c, eq, ineq), x_free[c])
             x[c] = solution.x
@@ -103,8 +103,11 @@ class IslandSolver:
 
     def _solver(self, key: tuple[int, ...] | None) -> GaussSolver:
         """The solver of the island of trees ``key`` (None: the whole problem), last used first."""
-        solver = self._solvers.pop(key, None) or GaussSolver(self.options)
-        self._solvers[key] = solver
+        solver = self._solvers.get(key)
+        if solver is not None:
+            self._solvers.move_to_end(key)
+            return solver
+        solver = self._solvers[key] = GaussSolver(self.options)
         if len(self._solvers) > KEPT_SOLVERS:
             self._solvers.popitem(last=False)
         return solver

@@ -71,14 +71,16 @@ class GaussSolver:
     def solve(self, problem: GaussProblem, x_free: np.ndarray | None = None) -> Solution:
         """Solve the Gauss problem, whose unconstrained minimum is ``x_free`` when given; raise
         :class:`SolverError` as ``Options.on_failure`` says."""
-        solution = self._solve(problem, x_free)
+        dims = (len(problem.g), len(problem.b), len(problem.l))
+        solution = self._solve(problem, x_free, dims)
         self._last = solution.x, solution.multipliers  # where the next solve starts (see _warm)
-        self._solved = _sides(problem)[0]
+        self._solved = dims
         return solution
 
-    def _solve(self, problem: GaussProblem, x_free: np.ndarray | None) -> Solution:
+    def _solve(
+        self, problem: GaussProblem, x_free: np.ndarray | None, dims: tuple[int, int, int]
+    ) -> Solution:
         p = problem
-        dims, equalities, inequalities = _sides(p)
         if dims == self._solved:
             warm = self._warm(problem, *self._last, 0.0, dims[0] <= ACTIVE_SET_UP_TO or self._dual is None)
             if warm is not None:
@@ -90,6 +92,7 @@ class GaussSolver:
             dual = self._dual.solve(problem)
             if dual is not None:
                 return dual
+        _, equalities, inequalities = _sides(p)
         if dims != self._dims:
             self._fresh(p, dims, equalities, inequalities)
             solution = self._run(problem)
