@@ -233,7 +233,8 @@ def pyramid_rows(
     iterate: tuple[np.ndarray, np.ndarray, np.ndarray],
     cone: tuple[np.ndarray, np.ndarray, bool],
 ) -> tuple[np.ndarray, ...]:
-    """Every contact's rows at ``ctx``'s level (:func:`~gaussim.kernels.contact.pyramids`): (rows
+    """Every contact's rows at ``ctx``'s level (:func:`~gaussim.kernels.contact.pyramids`, whose
+    compiled signature takes ``drift`` and ``iterate`` read-only, whoever made them): (rows
     (R, nv), bound (R,), the packed buffer :class:`ContactBatch` reads, starts (m + 1,), the two
     joints each row reads (R, 2), sliding contacts or None, their friction's generalized force or
     None).
@@ -250,8 +251,6 @@ def pyramid_rows(
     rows, bound = np.empty((most, nv)), np.empty(most)
     packed, starts = np.empty(3 * m * nv + 3 * most + 6 * m), np.empty(m + 1, np.int64)
     read = np.empty((most, 2), np.int64)
-    # read-only views whoever made them: one compiled signature (numba types writability)
-    drift, iterate = _read_only(drift), tuple(_read_only(a) for a in iterate)  # type: ignore[assignment]
     total, sliding, force = pyramids(
         joint_jacobians,
         *supports,
@@ -335,12 +334,13 @@ class ContactModule(ConstraintModule[ContactBatch]):
                 contacts = contacts.select(keep)
         m = len(contacts)
         no_slip, no_stops, no_force, no_drift = self._blank(m)
-        drift = _drifts(ctx, contacts, self.radii) if level == "acceleration" else no_drift
+        # read-only, as the blanks are: one compiled signature (numba types writability)
+        drift = _read_only(_drifts(ctx, contacts, self.radii)) if level == "acceleration" else no_drift
         cone = (self.cos, self.sin, self.mode == "pyramid")
         iterate = (
-            no_slip if lagged.slip is None else lagged.slip,
-            no_stops if lagged.stops is None else lagged.stops,
-            no_force if lagged.normal is None else lagged.normal,
+            no_slip if lagged.slip is None else _read_only(lagged.slip),
+            no_stops if lagged.stops is None else _read_only(lagged.stops),
+            no_force if lagged.normal is None else _read_only(lagged.normal),
         )
         rows, bound, packed, starts, read, sliding, force = pyramid_rows(
             self._jacobians(ctx.data), self.supports, contacts, ctx, drift, iterate, cone
