@@ -8,7 +8,10 @@ from scipy.sparse.csgraph import connected_components
 import gaussim
 from gaussim import FreeBody, pose
 from gaussim.assembly import GaussProblem
+from gaussim.kernels.solver import warm_islands
 from gaussim.solver import GaussSolver, kkt_residual
+from gaussim.solver import islands as island_module
+from gaussim.solver.certificate import Status
 from gaussim.solver.islands import IslandSolver, islands, members, trees
 
 # Two runs of the same physics through different but equal models agree to this [m, m/s]: round-off
@@ -72,12 +75,9 @@ def _world(n):
     return gaussim.Scene(bodies=bodies, ground=gaussim.Ground()).robot.model
 
 
-def test_the_islands_solution_is_the_whole_problems():
-    """Three free bodies, rows on two of them (one row joins body 0 and body 2): the islands' x and
-    multipliers solve the whole QP (gaussim's KKT check on it) and equal ProxQP's on the whole."""
-    model = _world(4)
-    assert trees(model).tolist() == [0] * 6 + [1] * 6 + [2] * 6 + [3] * 6
-    rng = np.random.default_rng(3)
+def _islands_problem(rng, shift=0.5):
+    """Four free bodies' Gauss problem, rows on three of them (one joins body 0 and body 2, an
+    equality holds body 1): the rows C x >= C x_free + ``shift``, so all active for a shift > 0."""
     blocks = []
     for _ in range(4):
         root = rng.normal(size=(6, 6))
@@ -91,11 +91,18 @@ def test_the_islands_solution_is_the_whole_problems():
     C[0:3, 0:6] = rng.normal(size=(3, 6))
     C[3, 0:6], C[3, 12:18] = rng.normal(size=6), rng.normal(size=6)
     C[4:7, 6:12] = rng.normal(size=(3, 6))
-    l = C @ x_free + 0.5  # every row violated by the free motion: all active
+    l = C @ x_free + shift
     A, b = np.zeros((1, 24)), np.zeros(1)
     A[0, 7] = 1.0
-    problem = GaussProblem(H, g, A, b, C, l, [])
+    return GaussProblem(H, g, A, b, C, l, []), x_free
 
+
+def test_the_islands_solution_is_the_whole_problems():
+    """Three free bodies, rows on two of them (one row joins body 0 and body 2): the islands' x and
+    multipliers solve the whole QP (gaussim's KKT check on it) and equal ProxQP's on the whole."""
+    model = _world(4)
+    assert trees(model).tolist() == [0] * 6 + [1] * 6 + [2] * 6 + [3] * 6
+    problem, x_free = _islands_problem(np.random.default_rng(3))
     x, multipliers, certificates = IslandSolver(model, gaussim.Options()).solve(problem, x_free)
     assert len(certificates) == 2 and all(c.converged for c in certificates)
     assert kkt_residual(problem, x, multipliers[:1], multipliers[1:]) < 1e-8
@@ -103,6 +110,38 @@ def test_the_islands_solution_is_the_whole_problems():
     whole = GaussSolver(gaussim.Options()).solve(problem)
     np.testing.assert_allclose(x, whole.x, atol=1e-7)
     np.testing.assert_allclose(multipliers, whole.multipliers, atol=1e-6)
+
+
+@pytest.mark.parametrize("refused", [False, True])
+def test_each_island_starts_from_its_own_last_solution(refused, monkeypatch):
+    """The islands solved again: the same problem from each one's last solution, bounds moved a
+    little on its active set (twice: the second time from the first's answer), every row let go.
+    Each answer is the whole problem's (DAQP's, on the whole), multipliers in their rows; where the
+    compiled pass over the islands certifies no candidate (``refused``: made to say so), each
+    island's own solver solves it (and does not try it again)."""
+    if refused:
+
+        def refuses(*args):  # the pass as made, then every island refused
+            warm_islands(*args)
+            args[-4][:] = 0
+
+        monkeypatch.setattr(island_module, "warm_islands", refuses)
+    model = _world(4)
+    solver = IslandSolver(model, gaussim.Options())
+    problem, x_free = _islands_problem(np.random.default_rng(3))
+    solver.solve(problem, x_free)
+    last, active = Status.PREVIOUS_SOLUTION_CERTIFIED, Status.ACTIVE_SET_CERTIFIED
+    warm = [last, active, last, active]  # the moved problem again: its own last solution
+    for move, status in zip((0.0, 0.01, 0.01, -2.0), warm, strict=True):
+        moved = GaussProblem(problem.H, problem.g, problem.A, problem.b, problem.C, problem.l + move, [])
+        x, multipliers, certificates = solver.solve(moved, x_free)
+        if refused:  # DAQP's answers or the free motion, not a candidate tried again
+            assert not {c.status for c in certificates} & set(warm)
+        else:
+            assert [c.status for c in certificates] == [status] * 2
+        whole = GaussSolver(gaussim.Options()).solve(moved)
+        np.testing.assert_allclose(x, whole.x, atol=1e-7)
+        np.testing.assert_allclose(multipliers, whole.multipliers, atol=1e-6)
 
 
 def test_bodies_landing_far_apart_evolve_as_each_alone():

@@ -89,6 +89,7 @@ SIGNATURES = {
     "solver.islands": [f"{a} {c} i2 i1 f1 i1 i" for a, c in (("f2r", "f2"), ("f2", "f2"), ("f2", "f2r"))],
     "solver.members": ["i1 i"],
     "solver.cut": [f"f2 f1 {sides} i1 i1 i1" for sides in _SIDES],
+    "solver.warm_islands": [f"f2 f1 {sides} i1*6 b1 f1 f1 f i1 f2 f1 f1" for sides in _SIDES],
 }
 
 

@@ -262,6 +262,45 @@ def cut(H, g, A, b, C, l, cols, eq, ineq):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
+def warm_islands(H, g, A, b, C, l, islands, tried, last_x, last_m, tolerance, how, residuals, x, multipliers):  # type: ignore[no-untyped-def]
+    """:func:`active_set_candidate` (floor 0) on the ``tried`` islands of one problem, each from its own
+    last solution: island t's coordinates ``cols[col_start[t]:col_start[t + 1]]`` and its equality and
+    inequality rows ``eqs[eq_start[t]:...]``, ``ineqs[ineq_start[t]:...]`` (``islands``: those six
+    arrays; its problem :func:`cut` from the whole one); the tried islands' last x and multipliers
+    [eq; ineq] concatenated in island order in ``last_x`` and ``last_m``. Where a candidate is
+    certified (``how[t]`` 1 or 2, else 0; its residuals in ``residuals[t]``), its x and multipliers
+    are written over its last solution's in ``last_x`` and ``last_m``, and into ``x`` and
+    ``multipliers`` (the whole problem's: at its coordinates, and at its rows of [lambda_eq;
+    lambda_in])."""
+    cols, col_start, eqs, eq_start, ineqs, ineq_start = islands
+    n_eq = len(b)
+    x_at = m_at = 0
+    for t in range(len(tried)):
+        how[t] = 0
+        if not tried[t]:
+            continue
+        c = cols[col_start[t] : col_start[t + 1]]
+        eq, ineq = eqs[eq_start[t] : eq_start[t + 1]], ineqs[ineq_start[t] : ineq_start[t + 1]]
+        nx, nm = len(c), len(eq) + len(ineq)
+        Hi, gi, Ai, bi, Ci, li = cut(H, g, A, b, C, l, c, eq, ineq)
+        xi, mi = last_x[x_at : x_at + nx], last_m[m_at : m_at + nm]
+        x_out, m_out = np.empty(nx), np.empty(nm)
+        how[t], found = active_set_candidate(Hi, gi, Ai, bi, Ci, li, xi, mi, tolerance, 0.0, x_out, m_out)
+        for j in range(5):
+            residuals[t, j] = found[j]
+        if how[t] == 2:
+            xi[:], mi[:] = x_out, m_out
+        if how[t]:
+            for k in range(nx):
+                x[c[k]] = xi[k]
+            for k in range(len(eq)):
+                multipliers[eq[k]] = mi[k]
+            for k in range(len(ineq)):
+                multipliers[n_eq + ineq[k]] = mi[len(eq) + k]
+        x_at, m_at = x_at + nx, m_at + nm
+
+
+@njit(cache=True)
 def _root(parent, t):  # type: ignore[no-untyped-def]
     while parent[t] != t:
         parent[t] = parent[parent[t]]

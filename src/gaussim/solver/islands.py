@@ -15,10 +15,10 @@ import numpy as np
 import pinocchio as pin
 
 from ..assembly import GaussProblem
-from ..kernels.solver import islands, members
+from ..kernels.solver import islands, members, warm_islands
 from ..options import Options
 from .certificate import Certificate
-from .proxqp import GaussSolver
+from .proxqp import GaussSolver, warm_certificate
 
 # How many islands' solvers (QP objects and last solutions) are kept for warm starts: islands form and
 # split as bodies touch and part.
@@ -85,20 +85,51 @@ class IslandSolver:
         island_of_row: np.ndarray,
         n: int,
     ) -> tuple[np.ndarray, np.ndarray, tuple[Certificate, ...]]:
-        """:meth:`solve` island by island."""
+        """:meth:`solve` island by island: the islands whose last solution or its active set solves
+        their problem in one compiled pass (:func:`~gaussim.kernels.solver.warm_islands`), the others
+        each by its solver."""
         x, multipliers = x_free.copy(), np.zeros(len(p.b) + len(p.l))
-        n_eq, certificates = len(p.b), []
-        cols, col_start = members(island_of_tree[self.tree], n)
-        rows, row_start = members(island_of_row, n)
+        n_eq = len(p.b)
+        parts = (
+            *members(island_of_tree[self.tree], n),
+            *members(island_of_row[:n_eq], n),
+            *members(island_of_row[n_eq:], n),
+        )
+        cols, col_start, eqs, eq_start, ineqs, ineq_start = parts
         trees, tree_start = members(island_of_tree, n)
+        solvers, lasts = [], []
         for i in range(n):
-            c, r = cols[col_start[i] : col_start[i + 1]], rows[row_start[i] : row_start[i + 1]]
-            eq, ineq = (r[r < n_eq], r[r >= n_eq] - n_eq) if n_eq else (r[:0], r)  # [:0]: no equality
-            key = tuple(trees[tree_start[i] : tree_start[i + 1]].tolist())
-            solution = self._solver(key).solve(p.island(c, eq, ineq), x_free[c])
-            x[c] = solution.x
-            multipliers[r] = solution.multipliers
-            certificates.append(solution.certificate)
+            solver = self._solver(tuple(trees[tree_start[i] : tree_start[i + 1]].tolist()))
+            dims = (
+                int(col_start[i + 1] - col_start[i]),
+                int(eq_start[i + 1] - eq_start[i]),
+                int(ineq_start[i + 1] - ineq_start[i]),
+            )
+            solvers.append((solver, dims))
+            lasts.append(solver.last(dims))
+        tried = np.array([last is not None for last in lasts])
+        how, residuals = np.zeros(n, np.int64), np.empty((n, 5))
+        if tried.any():
+            last_x = np.concatenate([last[0] for last in lasts if last is not None])
+            last_m = np.concatenate([last[1] for last in lasts if last is not None])
+            problem = (p.H, p.g, p.A, p.b, p.C, p.l)
+            warm_islands(
+                *problem, parts, tried, last_x, last_m, self.options.eps_abs, how, residuals, x, multipliers
+            )
+        certificates, x_at, m_at = [], 0, 0
+        for i, (solver, (nx, ne, ni)) in enumerate(solvers):
+            if how[i]:
+                solver.keep(last_x[x_at : x_at + nx], last_m[m_at : m_at + ne + ni], (nx, ne, ni))
+                certificates.append(warm_certificate(int(how[i]), residuals[i].tolist()))
+            else:
+                c = cols[col_start[i] : col_start[i + 1]]
+                eq, ineq = eqs[eq_start[i] : eq_start[i + 1]], ineqs[ineq_start[i] : ineq_start[i + 1]]
+                solution = solver.solve(p.island(c, eq, ineq), x_free[c], warm=not tried[i])
+                x[c] = solution.x
+                multipliers[eq], multipliers[n_eq + ineq] = solution.lambda_eq, solution.lambda_in
+                certificates.append(solution.certificate)
+            if tried[i]:
+                x_at, m_at = x_at + nx, m_at + ne + ni
         return x, multipliers, tuple(certificates)
 
     def _solver(self, key: tuple[int, ...] | None) -> GaussSolver:

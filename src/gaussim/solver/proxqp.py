@@ -8,6 +8,7 @@ failure is reported (:mod:`.diagnosis`).
 from __future__ import annotations
 
 import warnings
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -68,23 +69,34 @@ class GaussSolver:
         self._dual = DualActiveSet(eps, KKT_RTOL * eps) if options.solver == "daqp" else None
         self._warned = False  # about an iterate kept by on_failure='report'
 
-    def solve(self, problem: GaussProblem, x_free: np.ndarray | None = None) -> Solution:
+    def solve(self, problem: GaussProblem, x_free: np.ndarray | None = None, warm: bool = True) -> Solution:
         """Solve the Gauss problem, whose unconstrained minimum is ``x_free`` when given; raise
-        :class:`SolverError` as ``Options.on_failure`` says."""
+        :class:`SolverError` as ``Options.on_failure`` says. ``warm`` False: the last solution's
+        candidates (:meth:`_warm`) were tried already (:meth:`last`)."""
         dims = (len(problem.g), len(problem.b), len(problem.l))
-        solution = self._solve(problem, x_free, dims)
-        self._last = solution.x, solution.multipliers  # where the next solve starts (see _warm)
-        self._solved = dims
+        solution = self._solve(problem, x_free, dims, warm)
+        self.keep(solution.x, solution.multipliers, dims)
         return solution
 
+    def last(self, dims: tuple[int, int, int]) -> tuple[np.ndarray, np.ndarray] | None:
+        """The last solution (x, multipliers) when the last problem had the sizes ``dims`` and its
+        active set is solved on (see :meth:`_warm` and ACTIVE_SET_UP_TO), else None."""
+        if dims != self._solved or (dims[0] > ACTIVE_SET_UP_TO and self._dual is not None):
+            return None
+        return self._last
+
+    def keep(self, x: np.ndarray, multipliers: np.ndarray, dims: tuple[int, int, int]) -> None:
+        """Start the next solve from the solution (x, multipliers) of a problem of sizes ``dims``."""
+        self._last, self._solved = (x, multipliers), dims
+
     def _solve(
-        self, problem: GaussProblem, x_free: np.ndarray | None, dims: tuple[int, int, int]
+        self, problem: GaussProblem, x_free: np.ndarray | None, dims: tuple[int, int, int], warm: bool = True
     ) -> Solution:
         p = problem
-        if dims == self._solved:
-            warm = self._warm(problem, *self._last, 0.0, dims[0] <= ACTIVE_SET_UP_TO or self._dual is None)
-            if warm is not None:
-                return warm
+        if warm and dims == self._solved:
+            last = self._warm(problem, *self._last, 0.0, dims[0] <= ACTIVE_SET_UP_TO or self._dual is None)
+            if last is not None:
+                return last
         free = None if x_free is None else _free_motion(problem, x_free, self.options.eps_abs)
         if free is not None:
             return free
@@ -186,8 +198,9 @@ class GaussSolver:
             return None
         if how == 2:  # the next call writes into the same buffers: the solution gets copies
             x, multipliers = candidate[0].copy(), candidate[1].copy()
-        certificate = Certificate(_FROM_LAST[how], 0, primal, dual, gap, residual, relative)
-        return Solution(x, multipliers, len(p.b), certificate)
+        return Solution(
+            x, multipliers, len(p.b), warm_certificate(how, (residual, relative, primal, dual, gap))
+        )
 
     def _remultiplied(self, problem: GaussProblem, solution: Solution) -> Solution | None:
         """``solution``'s x with multipliers of gaussim's making, when the KKT check certifies them as
@@ -321,6 +334,13 @@ def _free_motion(problem: GaussProblem, x_free: np.ndarray, tolerance: float) ->
     ``tolerance``; else None."""
     none = np.zeros(len(problem.b) + len(problem.l))
     return checked(problem, x_free.copy(), none, Status.FREE_MOTION_CERTIFIED, tolerance)
+
+
+def warm_certificate(how: int, residuals: Sequence[float]) -> Certificate:
+    """The certificate of a candidate of active_set_candidate (its ``how``, 1 or 2, and ``residuals``:
+    the residual, the relative one, the primal and dual residuals and the gap)."""
+    residual, relative, primal, dual, gap = residuals
+    return Certificate(_FROM_LAST[how], 0, primal, dual, gap, residual, relative)
 
 
 def _sides(p: GaussProblem) -> tuple[tuple[int, int, int], tuple, tuple]:
