@@ -58,35 +58,51 @@ def box_pairs(
     by their place on it, as :class:`gaussim.collision.narrow.NarrowPhase` orders them)."""
     R = np.empty((2, 3, 3))
     p = np.empty((2, 3))
+    work = _workspace()
     for k in range(near.shape[0]):
         i = near[k]
         place(placements, side, local_rotation, local_translation, i, R, p)
         if thin[i]:
             answer[k] = ASK_COAL
             continue
-        answer[k], gaps[k], sizes[k] = _box_box(R, p, half[i], margin, normals[k], points[k])
+        answer[k], gaps[k], sizes[k] = _box_box(R, p, half[i], margin, normals[k], points[k], work)
 
 
 @njit(cache=True)
-def _box_box(R, p, half, margin, normal, points):  # type: ignore[no-untyped-def]
+def _workspace():  # type: ignore[no-untyped-def]
+    """The buffers :func:`_box_box` works in, allocated once per call of :func:`box_pairs` (a pair's
+    test allocating its own took most of its time): (T, the two boxes' axes as rows (2, 3, 3); vectors
+    (4, 3): d, an axis, n, the reference face's centre; the signs of a box's corners (8, 3) and their
+    buffers (8, 3), (8,), (8,) int; the clipped polygon, in two buffers (2, 16, 3), and its vertices'
+    margins (16,))."""
+    signs = np.empty((8, 3))
+    for v in range(8):
+        for a in range(3):
+            signs[v, a] = 1.0 if (v >> (2 - a)) & 1 else -1.0
+    corners = (signs, np.empty((8, 3)), np.empty(8), np.empty(8, np.int64))
+    return np.empty((2, 3, 3)), np.empty((4, 3)), corners, np.empty((2, 16, 3)), np.empty(16)
+
+
+@njit(cache=True)
+def _box_box(R, p, half, margin, normal, points, work):  # type: ignore[no-untyped-def]
     """Boxes 0 (the robot's) and 1 at (R[s] (columns: axes), p[s]), half sides ``half[s]``: returns
     (answer, gap, number of points), the normal and points written into ``normal`` (3,) and
-    ``points`` (MAX_POINTS, 3)."""
-    d = p[0] - p[1]
-    T = np.empty((2, 3, 3))  # T[s, a]: axis a of box s (contiguous)
-    T[0], T[1] = R[0].T, R[1].T
+    ``points`` (MAX_POINTS, 3); ``work``: :func:`_workspace`."""
+    T, vectors, corners, clipped, inside = work
+    d, axis, n, centre = vectors[0], vectors[1], vectors[2], vectors[3]
+    for a in range(3):
+        d[a] = p[0, a] - p[1, a]
+    T[0], T[1] = R[0].T, R[1].T  # T[s, a]: axis a of box s (contiguous)
     best, axis_box, axis_index = -np.inf, -1, -1
     for s in range(2):
         for a in range(3):
-            axis = T[s, a]
-            separation = abs(dot(d, axis)) - _reach(T, half, axis)
+            separation = abs(dot(d, T[s, a])) - _reach(T, half, T[s, a])
             if separation > best:
                 best, axis_box, axis_index = separation, s, a
     if best > margin:  # a face axis separates them: the edge axes need not be tried
         return FAR, best, 0
     edge_best = edge_next = -np.inf  # the largest edge separation, and the next one
     edges = (-1, -1)
-    axis = np.empty(3)
     for a in range(3):
         for b in range(3):
             e, f = T[0, a], T[1, b]
@@ -94,7 +110,8 @@ def _box_box(R, p, half, margin, normal, points):  # type: ignore[no-untyped-def
             length = np.sqrt(dot(axis, axis))
             if length < 1e-6:  # parallel edges: their axis is a face's
                 continue
-            axis /= length
+            for j in range(3):
+                axis[j] /= length
             separation = abs(dot(d, axis)) - _reach(T, half, axis)
             if separation > edge_best:
                 edge_best, edge_next, edges = separation, edge_best, (a, b)
@@ -107,50 +124,62 @@ def _box_box(R, p, half, margin, normal, points):  # type: ignore[no-untyped-def
         if edge_best - edge_next <= DECISION:
             return ASK_COAL, lower, 0  # two edge axes about as good: coal's EPA picks one
         return _edge_edge(R, p, T, half, edges[0], edges[1], d, lower, normal, points)
-    n = T[axis_box, axis_index].copy()
-    if dot(d, n) < 0:
-        n = -n  # from box 1 towards box 0
+    flip = -1.0 if dot(d, T[axis_box, axis_index]) < 0 else 1.0
+    for j in range(3):
+        n[j] = flip * T[axis_box, axis_index, j]  # from box 1 towards box 0
     robot_support = dot(n, p[0]) - _extent(T[0], half[0], n)
     other_support = dot(n, p[1]) + _extent(T[1], half[1], n)
     gap = robot_support - other_support
     # the reference face (of the axis' box, facing the other) and the other box's support set
     ref = axis_box
     inc = 1 - ref
-    towards = -n if ref == 0 else n  # the reference face's outward normal
-    centre = p[ref] + half[ref][axis_index] * towards
+    out = -1.0 if ref == 0 else 1.0  # the reference face's outward normal: out n
+    for j in range(3):
+        centre[j] = p[ref, j] + half[ref][axis_index] * (out * n[j])
     u, w = T[ref, (axis_index + 1) % 3], T[ref, (axis_index + 2) % 3]
     hu, hw = half[ref][(axis_index + 1) % 3], half[ref][(axis_index + 2) % 3]
-    polygon = _support_polygon(R[inc], p[inc], half[inc], -towards)
-    if polygon.shape[0] == 0:
+    size = _support_polygon(R[inc], p[inc], half[inc], -out, n, corners, clipped[0])
+    if size == 0:
         return ASK_COAL, lower, 0
-    clipped = _clip(polygon, centre, u, hu, w, hw)
-    if clipped.shape[0] == 0:
+    at, count = _clip(clipped, size, centre, u, hu, w, hw, inside)
+    if count == 0:
         return ASK_COAL, lower, 0
+    polygon = clipped[at]
     # each clipped point is a point of the incident box over the reference face: the nearest is at
     # the boxes' distance when it reaches the separation
     reached = np.inf
-    for j in range(clipped.shape[0]):
-        reached = min(reached, dot(clipped[j] - centre, towards))
+    for j in range(count):
+        along = 0.0
+        for a in range(3):
+            along += (polygon[j, a] - centre[a]) * (out * n[a])
+        reached = min(reached, along)
     if gap > 0 and reached - gap > REACHED:
         return ASK_COAL, lower, 0
-    count = 0
-    for j in range(clipped.shape[0]):  # onto the robot's support plane, without repeats
-        x = clipped[j] + n * (robot_support - dot(n, clipped[j]))
+    kept = 0
+    for j in range(count):  # onto the robot's support plane, without repeats
+        lift = robot_support - dot(n, polygon[j])
         repeated = False
-        for m in range(count):
-            if np.sqrt(np.sum((points[m] - x) ** 2)) <= SAME_POINT:
+        for m in range(kept):
+            squared = 0.0
+            for a in range(3):
+                squared += (points[m, a] - (polygon[j, a] + n[a] * lift)) ** 2
+            if np.sqrt(squared) <= SAME_POINT:
                 repeated = True
         if not repeated:
-            points[count] = x
-            count += 1
-    low, high = points[0].copy(), points[0].copy()
-    for j in range(count):
-        low, high = np.minimum(low, points[j]), np.maximum(high, points[j])
-    if (high - low).max() <= PATCH_MIN_EXTENT and polygon.shape[0] > 1:
+            for a in range(3):
+                points[kept, a] = polygon[j, a] + n[a] * lift
+            kept += 1
+    widest = 0.0
+    for a in range(3):
+        low = high = points[0, a]
+        for j in range(kept):
+            low, high = min(low, points[j, a]), max(high, points[j, a])
+        widest = max(widest, high - low)
+    if widest <= PATCH_MIN_EXTENT and size > 1:
         return ASK_COAL, lower, 0  # one point, which coal's witness decides
-    order(points, count, R[0], p[0])
+    order(points, kept, R[0], p[0])
     normal[:] = n
-    return FOUND, gap, count
+    return FOUND, gap, kept
 
 
 @njit(cache=True)
@@ -211,73 +240,81 @@ def _extent(T, half, axis):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def _support_polygon(R, p, half, direction):  # type: ignore[no-untyped-def]
-    """The box's vertices within PATCH_TOLERANCE of its support plane along ``direction``, in order
-    around the face, edge or vertex they make, shape (k, 3); empty (0, 3) when they make none of those
-    (a box thinner than the tolerance, 3 corners of a face) or a vertex is within DECISION of the
-    tolerance."""
-    signs = np.empty((8, 3))
-    corners = np.empty((8, 3))
-    heights = np.empty(8)
+def _support_polygon(R, p, half, sign, n, corners, polygon):  # type: ignore[no-untyped-def]
+    """The number k of the box's vertices within PATCH_TOLERANCE of its support plane along
+    ``sign`` n, written into ``polygon[:k]`` in order around the face, edge or vertex they make; 0
+    when they make none of those (a box thinner than the tolerance, 3 corners of a face) or a vertex
+    is within DECISION of the tolerance. ``corners``: the corners' signs and buffers (see
+    :func:`_workspace`)."""
+    signs, points, heights, chosen = corners
     for v in range(8):
         for a in range(3):
-            signs[v, a] = 1.0 if (v >> (2 - a)) & 1 else -1.0
-        for a in range(3):
-            corners[v, a] = (
+            points[v, a] = (
                 p[a]
                 + R[a, 0] * signs[v, 0] * half[0]
                 + R[a, 1] * signs[v, 1] * half[1]
                 + R[a, 2] * signs[v, 2] * half[2]
             )
-        heights[v] = dot(corners[v], direction)
+        heights[v] = (
+            points[v, 0] * (sign * n[0]) + points[v, 1] * (sign * n[1]) + points[v, 2] * (sign * n[2])
+        )
     top = heights.max()
-    for v in range(8):  # a vertex coal's round-off may count in or out: coal's
-        if abs(heights[v] - (top - PATCH_TOLERANCE)) <= DECISION:
-            return np.empty((0, 3))
-    chosen = np.flatnonzero(heights >= top - PATCH_TOLERANCE)
-    k = chosen.shape[0]
+    k = 0
+    for v in range(8):
+        if abs(heights[v] - (top - PATCH_TOLERANCE)) <= DECISION:  # coal's round-off may count it in or out
+            return 0
+        if heights[v] >= top - PATCH_TOLERANCE:
+            chosen[k] = v
+            k += 1
     if k == 1 or k == 2:
-        return corners[chosen].copy()
+        for j in range(k):
+            polygon[j] = points[chosen[j]]
+        return k
     if k != 4:
-        return np.empty((0, 3))
+        return 0
     fixed = -1
     for a in range(3):
-        if np.all(signs[chosen, a] == signs[chosen[0], a]):
+        same = True
+        for j in range(1, 4):
+            same = same and signs[chosen[j], a] == signs[chosen[0], a]
+        if same:
             fixed = a
     if fixed < 0:
-        return np.empty((0, 3))
+        return 0
     a, b = (fixed + 1) % 3, (fixed + 2) % 3
-    polygon = np.empty((4, 3))
     for j, (sa, sb) in enumerate(((-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0))):
-        for v in chosen:
+        for t in range(4):
+            v = chosen[t]
             if signs[v, a] == sa and signs[v, b] == sb:
-                polygon[j] = corners[v]
-    return polygon
+                polygon[j] = points[v]
+    return 4
 
 
 @njit(cache=True)
-def _clip(polygon, centre, u, hu, w, hw):  # type: ignore[no-untyped-def]
-    """The part of a polygon (k, 3) (a segment when k = 2, a point when k = 1) over the rectangle
-    centred at ``centre`` with half sides ``hu``, ``hw`` along unit ``u``, ``w``; points keep their
-    place (they are only cut along the rectangle's sides)."""
-    current = polygon.copy()
+def _clip(polygons, k, centre, u, hu, w, hw, inside):  # type: ignore[no-untyped-def]
+    """The part of the polygon ``polygons[0, :k]`` (a segment when k = 2, a point when k = 1) over the
+    rectangle centred at ``centre`` with half sides ``hu``, ``hw`` along unit ``u``, ``w``: (which of
+    the two buffers ``polygons`` holds it, its number of points); points keep their place (they are
+    only cut along the rectangle's sides)."""
+    at = 0
     for axis, bound in ((u, hu), (w, hw)):
         for sign in (1.0, -1.0):
-            current = _cut(current, centre, sign * axis, bound)
-            if current.shape[0] == 0:
-                return current
-    return current
+            k = _cut(polygons[at], k, centre, sign, axis, bound, inside, polygons[1 - at])
+            at = 1 - at
+            if k == 0:
+                return at, 0
+    return at, k
 
 
 @njit(cache=True)
-def _cut(polygon, centre, axis, bound):  # type: ignore[no-untyped-def]
-    """The part of ``polygon`` (k, 3) where (x - centre) . axis <= bound (Sutherland-Hodgman; a
-    segment or a point when k is 2 or 1)."""
-    k = polygon.shape[0]
-    inside = np.empty(k)
+def _cut(polygon, k, centre, sign, axis, bound, inside, out):  # type: ignore[no-untyped-def]
+    """The part of ``polygon[:k]`` where (x - centre) . (sign axis) <= bound (Sutherland-Hodgman; a
+    segment or a point when k is 2 or 1), written into ``out``: returns its number of points."""
     for j in range(k):
-        inside[j] = bound - dot(polygon[j] - centre, axis)
-    out = np.empty((2 * k, 3))
+        along = 0.0
+        for a in range(3):
+            along += (polygon[j, a] - centre[a]) * (sign * axis[a])
+        inside[j] = bound - along
     count = 0
     if k <= 2:
         for j in range(k):
@@ -286,14 +323,13 @@ def _cut(polygon, centre, axis, bound):  # type: ignore[no-untyped-def]
                 count += 1
         if k == 2 and inside[0] * inside[1] < 0:
             t = inside[0] / (inside[0] - inside[1])
-            crossing = polygon[0] + t * (polygon[1] - polygon[0])
-            if inside[0] >= 0:
-                out[1] = crossing
-            else:
+            if inside[0] < 0:
                 out[1] = out[0]
-                out[0] = crossing
+            crossing = 1 if inside[0] >= 0 else 0
+            for a in range(3):
+                out[crossing, a] = polygon[0, a] + t * (polygon[1, a] - polygon[0, a])
             count = 2
-        return out[:count].copy()
+        return count
     for j in range(k):
         nxt = (j + 1) % k
         if inside[j] >= 0:
@@ -301,6 +337,7 @@ def _cut(polygon, centre, axis, bound):  # type: ignore[no-untyped-def]
             count += 1
         if inside[j] * inside[nxt] < 0:
             t = inside[j] / (inside[j] - inside[nxt])
-            out[count] = polygon[j] + t * (polygon[nxt] - polygon[j])
+            for a in range(3):
+                out[count, a] = polygon[j, a] + t * (polygon[nxt, a] - polygon[j, a])
             count += 1
-    return out[:count].copy()
+    return count
