@@ -92,11 +92,15 @@ def _box_box(R, p, half, margin, normal, points, work):  # type: ignore[no-untyp
     d, axis, n, centre = vectors[0], vectors[1], vectors[2], vectors[3]
     for a in range(3):
         d[a] = p[0, a] - p[1, a]
-    T[0], T[1] = R[0].T, R[1].T  # T[s, a]: axis a of box s (contiguous)
+    for s in range(2):  # T[s, a]: axis a of box s (contiguous)
+        for a in range(3):
+            for j in range(3):
+                T[s, a, j] = R[s, j, a]
     best, axis_box, axis_index = -np.inf, -1, -1
     for s in range(2):
         for a in range(3):
-            separation = abs(dot(d, T[s, a])) - _reach(T, half, T[s, a])
+            t0, t1, t2 = T[s, a, 0], T[s, a, 1], T[s, a, 2]
+            separation = abs(d[0] * t0 + d[1] * t1 + d[2] * t2) - _reach(T, half, t0, t1, t2)
             if separation > best:
                 best, axis_box, axis_index = separation, s, a
     if best > margin:  # a face axis separates them: the edge axes need not be tried
@@ -105,14 +109,16 @@ def _box_box(R, p, half, margin, normal, points, work):  # type: ignore[no-untyp
     edges = (-1, -1)
     for a in range(3):
         for b in range(3):
-            e, f = T[0, a], T[1, b]
-            axis[0], axis[1], axis[2] = cross(e[0], e[1], e[2], f[0], f[1], f[2])
-            length = np.sqrt(dot(axis, axis))
+            axis[0], axis[1], axis[2] = cross(
+                T[0, a, 0], T[0, a, 1], T[0, a, 2], T[1, b, 0], T[1, b, 1], T[1, b, 2]
+            )
+            length = np.sqrt(axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2])
             if length < 1e-6:  # parallel edges: their axis is a face's
                 continue
             for j in range(3):
                 axis[j] /= length
-            separation = abs(dot(d, axis)) - _reach(T, half, axis)
+            t0, t1, t2 = axis[0], axis[1], axis[2]
+            separation = abs(d[0] * t0 + d[1] * t1 + d[2] * t2) - _reach(T, half, t0, t1, t2)
             if separation > edge_best:
                 edge_best, edge_next, edges = separation, edge_best, (a, b)
             else:
@@ -127,8 +133,8 @@ def _box_box(R, p, half, margin, normal, points, work):  # type: ignore[no-untyp
     flip = -1.0 if dot(d, T[axis_box, axis_index]) < 0 else 1.0
     for j in range(3):
         n[j] = flip * T[axis_box, axis_index, j]  # from box 1 towards box 0
-    robot_support = dot(n, p[0]) - _extent(T[0], half[0], n)
-    other_support = dot(n, p[1]) + _extent(T[1], half[1], n)
+    robot_support = dot(n, p[0]) - _extent(T, 0, half, n[0], n[1], n[2])
+    other_support = dot(n, p[1]) + _extent(T, 1, half, n[0], n[1], n[2])
     gap = robot_support - other_support
     # the reference face (of the axis' box, facing the other) and the other box's support set
     ref = axis_box
@@ -227,16 +233,22 @@ def _edge_edge(R, p, T, half, a, b, d, lower, normal, points):  # type: ignore[n
     return FOUND, dot(n, r) + s * dot(n, e) - t * dot(n, f), count
 
 
-@njit(cache=True)
-def _reach(T, half, axis):  # type: ignore[no-untyped-def]
-    """The sum of both boxes' half extents along unit ``axis`` (their axes as rows ``T[s]``)."""
-    return _extent(T[0], half[0], axis) + _extent(T[1], half[1], axis)
+@njit(cache=True, inline="always")
+def _reach(T, half, a0, a1, a2):  # type: ignore[no-untyped-def]
+    """The sum of both boxes' half extents (``half[s]``) along the unit axis (a0, a1, a2) (their axes
+    as rows ``T[s]``)."""
+    return _extent(T, 0, half, a0, a1, a2) + _extent(T, 1, half, a0, a1, a2)
 
 
-@njit(cache=True)
-def _extent(T, half, axis):  # type: ignore[no-untyped-def]
-    """A box's half extent along unit ``axis`` (its axes as rows of ``T``)."""
-    return half[0] * abs(dot(T[0], axis)) + half[1] * abs(dot(T[1], axis)) + half[2] * abs(dot(T[2], axis))
+@njit(cache=True, inline="always")
+def _extent(T, s, half, a0, a1, a2):  # type: ignore[no-untyped-def]
+    """Box s's half extent along the unit axis (a0, a1, a2) (its axes as rows of ``T[s]``, its half
+    sides ``half[s]``): components, not views of the arrays, which cost more than the arithmetic."""
+    return (
+        half[s, 0] * abs(T[s, 0, 0] * a0 + T[s, 0, 1] * a1 + T[s, 0, 2] * a2)
+        + half[s, 1] * abs(T[s, 1, 0] * a0 + T[s, 1, 1] * a1 + T[s, 1, 2] * a2)
+        + half[s, 2] * abs(T[s, 2, 0] * a0 + T[s, 2, 1] * a1 + T[s, 2, 2] * a2)
+    )
 
 
 @njit(cache=True)
@@ -268,7 +280,8 @@ def _support_polygon(R, p, half, sign, n, corners, polygon):  # type: ignore[no-
             k += 1
     if k == 1 or k == 2:
         for j in range(k):
-            polygon[j] = points[chosen[j]]
+            for a in range(3):
+                polygon[j, a] = points[chosen[j], a]
         return k
     if k != 4:
         return 0
@@ -286,7 +299,8 @@ def _support_polygon(R, p, half, sign, n, corners, polygon):  # type: ignore[no-
         for t in range(4):
             v = chosen[t]
             if signs[v, a] == sa and signs[v, b] == sb:
-                polygon[j] = points[v]
+                for c in range(3):
+                    polygon[j, c] = points[v, c]
     return 4
 
 
@@ -319,12 +333,14 @@ def _cut(polygon, k, centre, sign, axis, bound, inside, out):  # type: ignore[no
     if k <= 2:
         for j in range(k):
             if inside[j] >= 0:
-                out[count] = polygon[j]
+                for a in range(3):
+                    out[count, a] = polygon[j, a]
                 count += 1
         if k == 2 and inside[0] * inside[1] < 0:
             t = inside[0] / (inside[0] - inside[1])
             if inside[0] < 0:
-                out[1] = out[0]
+                for a in range(3):
+                    out[1, a] = out[0, a]
             crossing = 1 if inside[0] >= 0 else 0
             for a in range(3):
                 out[crossing, a] = polygon[0, a] + t * (polygon[1, a] - polygon[0, a])
@@ -333,7 +349,8 @@ def _cut(polygon, k, centre, sign, axis, bound, inside, out):  # type: ignore[no
     for j in range(k):
         nxt = (j + 1) % k
         if inside[j] >= 0:
-            out[count] = polygon[j]
+            for a in range(3):
+                out[count, a] = polygon[j, a]
             count += 1
         if inside[j] * inside[nxt] < 0:
             t = inside[j] / (inside[j] - inside[nxt])
