@@ -37,6 +37,9 @@ class CompiledPairs:
         self.local_rotation = np.array(
             [[p.local.rotation, _other_placement(p).rotation] for p in self.pairs]
         ).reshape(-1, 2, 3, 3)
+        self.local_translation = np.array(
+            [[p.local.translation, _other_placement(p).translation] for p in self.pairs]
+        ).reshape(-1, 2, 3)
         count = len(index)  # what the kernel fills, for the pairs it is handed: at most all of them
         self._buffers = (
             np.empty(count, np.int64),
@@ -45,9 +48,6 @@ class CompiledPairs:
             np.empty((count, self.max_points, 3)),
             np.empty(count, np.int64),
         )
-        self.local_translation = np.array(
-            [[p.local.translation, _other_placement(p).translation] for p in self.pairs]
-        ).reshape(-1, 2, 3)
 
     def detect(self, data: pin.Data, margin: float, turns: np.ndarray) -> tuple[list[Piece], float]:
         """The contacts of the pairs within ``margin`` [m] at the placements held in ``data``, and a

@@ -81,9 +81,14 @@ class GaussSolver:
     def last(self, dims: tuple[int, int, int]) -> tuple[np.ndarray, np.ndarray] | None:
         """The last solution (x, multipliers) when the last problem had the sizes ``dims`` and its
         active set is solved on (see :meth:`_warm` and ACTIVE_SET_UP_TO), else None."""
-        if dims != self._solved or (dims[0] > ACTIVE_SET_UP_TO and self._dual is not None):
+        if dims != self._solved or not self._on_active_set(dims[0]):
             return None
         return self._last
+
+    def _on_active_set(self, n: int) -> bool:
+        """Whether a problem of ``n`` coordinates is solved on its last active set (see
+        ACTIVE_SET_UP_TO), not only checked at its last solution."""
+        return n <= ACTIVE_SET_UP_TO or self._dual is None
 
     def keep(self, x: np.ndarray, multipliers: np.ndarray, dims: tuple[int, int, int]) -> None:
         """Start the next solve from the solution (x, multipliers) of a problem of sizes ``dims``."""
@@ -94,7 +99,7 @@ class GaussSolver:
     ) -> Solution:
         p = problem
         if warm and dims == self._solved:
-            last = self._warm(problem, *self._last, 0.0, dims[0] <= ACTIVE_SET_UP_TO or self._dual is None)
+            last = self._warm(problem, *self._last, 0.0, self._on_active_set(dims[0]))
             if last is not None:
                 return last
         free = None if x_free is None else _free_motion(problem, x_free, self.options.eps_abs)
@@ -191,16 +196,14 @@ class GaussSolver:
         candidate = self._candidate
         if len(candidate[0]) != len(x) or len(candidate[1]) != len(multipliers):
             candidate = self._candidate = np.empty_like(x), np.empty_like(multipliers)
-        how, (residual, relative, primal, dual, gap) = active_set_candidate(
+        how, residuals = active_set_candidate(
             p.H, p.g, p.A, p.b, p.C, p.l, x, multipliers, self.options.eps_abs, floor, *candidate
         )
         if not how:
             return None
         if how == 2:  # the next call writes into the same buffers: the solution gets copies
             x, multipliers = candidate[0].copy(), candidate[1].copy()
-        return Solution(
-            x, multipliers, len(p.b), warm_certificate(how, (residual, relative, primal, dual, gap))
-        )
+        return Solution(x, multipliers, len(p.b), warm_certificate(how, residuals))
 
     def _remultiplied(self, problem: GaussProblem, solution: Solution) -> Solution | None:
         """``solution``'s x with multipliers of gaussim's making, when the KKT check certifies them as
