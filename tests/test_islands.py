@@ -144,6 +144,50 @@ def test_each_island_starts_from_its_own_last_solution(refused, monkeypatch):
         np.testing.assert_allclose(multipliers, whole.multipliers, atol=1e-6)
 
 
+def test_a_kept_split_serves_only_the_same_islands_all_answered_by_the_pass(monkeypatch):
+    """Splits whose islands the compiled pass answers all are kept for the next split of the same
+    islands. Two problems of the same sizes and different islands (one row joins bodies 0 and 2, or
+    bodies 1 and 3) in turn, each again; then a problem whose body 1 island the pass is made to
+    refuse (its solver answers) and that problem again, which starts from its solver's answer, not
+    from the kept split's: every answer is the whole problem's, and each island's status says where
+    it came from."""
+    refuse = [False]
+
+    def passes(*args):  # the pass as made; then, told to, body 1's island (the last) refused
+        last_x, last_m, how = args[8], args[9], args[11]
+        before = last_x[12:].copy(), last_m[4:].copy()
+        warm_islands(*args)
+        if refuse[0]:
+            how[1] = 0
+            last_x[12:], last_m[4:] = before
+
+    monkeypatch.setattr(island_module, "warm_islands", passes)
+    model = _world(4)
+    solver = IslandSolver(model, gaussim.Options())
+    rng = np.random.default_rng(5)
+    joined, x_free = _islands_problem(rng)
+    other = joined.C.copy()
+    other[3] = 0.0
+    other[3, 6:12], other[3, 18:24] = rng.normal(size=6), rng.normal(size=6)
+    regrouped = GaussProblem(joined.H, joined.g, joined.A, joined.b, other, other @ x_free + 0.5, [])
+    sequence = [(joined, 0.0), (joined, 0.0), (joined, 0.01), (regrouped, 0.0), (regrouped, 0.0)]
+    sequence += [(regrouped, 0.01), (joined, 0.02), (joined, 0.03), (joined, 0.03)]
+    statuses = []
+    for k, (problem, move) in enumerate(sequence):
+        refuse[0] = k == 7
+        moved = GaussProblem(problem.H, problem.g, problem.A, problem.b, problem.C, problem.l + move, [])
+        x, multipliers, certificates = solver.solve(moved, x_free)
+        statuses.append([c.status for c in certificates])
+        whole = GaussSolver(gaussim.Options()).solve(moved)
+        np.testing.assert_allclose(x, whole.x, atol=1e-7)
+        np.testing.assert_allclose(multipliers, whole.multipliers, atol=1e-6)
+    last, active = Status.PREVIOUS_SOLUTION_CERTIFIED, Status.ACTIVE_SET_CERTIFIED
+    assert statuses[1] == statuses[4] == [last, last]  # each problem again: its own last solutions
+    assert statuses[2] == statuses[5] == statuses[6] == [active, active]
+    assert statuses[7][0] == active and statuses[7][1] not in (last, active)
+    assert statuses[8] == [last, last]
+
+
 def test_bodies_landing_far_apart_evolve_as_each_alone():
     """A box tumbling onto the ground and a ball rolling, far apart in one world: one QP each (their
     islands) while both touch, and each follows its own run through the landing, the contacts and the

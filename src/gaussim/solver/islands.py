@@ -10,6 +10,7 @@ a tree that no row reads keeps its free motion (the minimum of its part of the f
 from __future__ import annotations
 
 from collections import OrderedDict
+from typing import NamedTuple
 
 import numpy as np
 import pinocchio as pin
@@ -49,6 +50,34 @@ def trees(model: pin.Model) -> np.ndarray:
     return tree
 
 
+class _Layout(NamedTuple):
+    """The islands of one split as its compiled pass reads them.
+
+    A split whose islands the pass answered all is kept for the next one: while the islands stay the
+    same (a resting pile, a robot on its feet), each solver's last solution is its slice of ``last_x``
+    and ``last_m``, which the pass updates in place, so the next split needs no lookup of its islands'
+    members, solvers and last solutions.
+
+    Attributes:
+        key: (the number of equality rows, the island of each tree and of each row as bytes).
+        parts: the coordinates, equality rows and inequality rows of each island, and where each
+            island's run starts: (cols, col_start, eqs, eq_start, ineqs, ineq_start).
+        solvers: each island's solver and sizes (coordinates, equality rows, inequality rows).
+        tried: which islands have a last solution of these sizes to start from, shape (n,).
+        last_x, last_m: the tried islands' last x and multipliers [eq; ineq], in island order.
+        how, residuals: what the pass writes per island (see warm_islands), shapes (n,), (n, 5).
+    """
+
+    key: tuple[int, bytes, bytes]
+    parts: tuple[np.ndarray, ...]
+    solvers: list[tuple[GaussSolver, tuple[int, int, int]]]
+    tried: np.ndarray
+    last_x: np.ndarray
+    last_m: np.ndarray
+    how: np.ndarray
+    residuals: np.ndarray
+
+
 class IslandSolver:
     """Solves a Gauss problem island by island (see the module's docstring)."""
 
@@ -58,6 +87,7 @@ class IslandSolver:
         self.n_trees = int(self.tree.max(initial=-1)) + 1
         self._none = np.zeros(model.nv)  # no force applied outside the QP
         self._solvers: OrderedDict[tuple[int, ...] | None, GaussSolver] = OrderedDict()
+        self._kept: _Layout | None = None  # the last split's, while each island's pass answered it
 
     def solve(
         self, problem: GaussProblem, x_free: np.ndarray
@@ -90,12 +120,61 @@ class IslandSolver:
         each by its solver."""
         x, multipliers = x_free.copy(), np.zeros(len(p.b) + len(p.l))
         n_eq = len(p.b)
+        key = (n_eq, island_of_tree.tobytes(), island_of_row.tobytes())
+        kept = self._kept
+        layout = (
+            kept
+            if kept is not None and kept.key == key
+            else self._layout(key, island_of_tree, island_of_row, n)
+        )
+        self._kept = None
+        cols, col_start, eqs, eq_start, ineqs, ineq_start = layout.parts
+        how, residuals, last_x, last_m = layout.how, layout.residuals, layout.last_x, layout.last_m
+        if layout.tried.any():
+            problem = (p.H, p.g, p.A, p.b, p.C, p.l)
+            warm_islands(
+                *problem,
+                layout.parts,
+                layout.tried,
+                last_x,
+                last_m,
+                self.options.eps_abs,
+                how,
+                residuals,
+                x,
+                multipliers,
+            )
+        certificates, x_at, m_at = [], 0, 0
+        for i, (solver, (nx, ne, ni)) in enumerate(layout.solvers):
+            if how[i]:
+                if layout is not kept:  # a kept layout's solvers hold their slices of last_x, last_m
+                    solver.keep(last_x[x_at : x_at + nx], last_m[m_at : m_at + ne + ni], (nx, ne, ni))
+                certificates.append(warm_certificate(int(how[i]), residuals[i].tolist()))
+            else:
+                c = cols[col_start[i] : col_start[i + 1]]
+                eq, ineq = eqs[eq_start[i] : eq_start[i + 1]], ineqs[ineq_start[i] : ineq_start[i + 1]]
+                solution = solver.solve(p.island(c, eq, ineq), x_free[c], warm=not layout.tried[i])
+                x[c] = solution.x
+                multipliers[eq], multipliers[n_eq + ineq] = solution.lambda_eq, solution.lambda_in
+                certificates.append(solution.certificate)
+            if layout.tried[i]:
+                x_at, m_at = x_at + nx, m_at + ne + ni
+        if how.all():  # every solver's last solution is its slice of last_x, last_m: kept for the next
+            self._kept = layout
+        return x, multipliers, tuple(certificates)
+
+    def _layout(
+        self, key: tuple[int, bytes, bytes], island_of_tree: np.ndarray, island_of_row: np.ndarray, n: int
+    ) -> _Layout:
+        """The :class:`_Layout` of the islands ``island_of_tree`` and ``island_of_row`` (see
+        :func:`~gaussim.kernels.solver.islands`), their solvers' last solutions gathered."""
+        n_eq = key[0]
         parts = (
             *members(island_of_tree[self.tree], n),
             *members(island_of_row[:n_eq], n),
             *members(island_of_row[n_eq:], n),
         )
-        cols, col_start, eqs, eq_start, ineqs, ineq_start = parts
+        _, col_start, _, eq_start, _, ineq_start = parts
         trees, tree_start = members(island_of_tree, n)
         solvers, lasts = [], []
         for i in range(n):
@@ -108,29 +187,9 @@ class IslandSolver:
             solvers.append((solver, dims))
             lasts.append(solver.last(dims))
         tried = np.array([last is not None for last in lasts])
-        how, residuals = np.zeros(n, np.int64), np.empty((n, 5))
-        if tried.any():
-            last_x = np.concatenate([last[0] for last in lasts if last is not None])
-            last_m = np.concatenate([last[1] for last in lasts if last is not None])
-            problem = (p.H, p.g, p.A, p.b, p.C, p.l)
-            warm_islands(
-                *problem, parts, tried, last_x, last_m, self.options.eps_abs, how, residuals, x, multipliers
-            )
-        certificates, x_at, m_at = [], 0, 0
-        for i, (solver, (nx, ne, ni)) in enumerate(solvers):
-            if how[i]:
-                solver.keep(last_x[x_at : x_at + nx], last_m[m_at : m_at + ne + ni], (nx, ne, ni))
-                certificates.append(warm_certificate(int(how[i]), residuals[i].tolist()))
-            else:
-                c = cols[col_start[i] : col_start[i + 1]]
-                eq, ineq = eqs[eq_start[i] : eq_start[i + 1]], ineqs[ineq_start[i] : ineq_start[i + 1]]
-                solution = solver.solve(p.island(c, eq, ineq), x_free[c], warm=not tried[i])
-                x[c] = solution.x
-                multipliers[eq], multipliers[n_eq + ineq] = solution.lambda_eq, solution.lambda_in
-                certificates.append(solution.certificate)
-            if tried[i]:
-                x_at, m_at = x_at + nx, m_at + ne + ni
-        return x, multipliers, tuple(certificates)
+        last_x = np.concatenate([last[0] for last in lasts if last is not None] or [np.zeros(0)])
+        last_m = np.concatenate([last[1] for last in lasts if last is not None] or [np.zeros(0)])
+        return _Layout(key, parts, solvers, tried, last_x, last_m, np.zeros(n, np.int64), np.empty((n, 5)))
 
     def _solver(self, key: tuple[int, ...] | None) -> GaussSolver:
         """The solver of the island of trees ``key`` (None: the whole problem), last used first."""
