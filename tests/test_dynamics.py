@@ -123,20 +123,27 @@ def test_the_stage_takes_the_order_the_last_step_needed(solo12):
         np.testing.assert_allclose(problem.M, expected.M, atol=1e-12)
 
 
-@pytest.mark.parametrize("which", ["talos", "boxes"])
+@pytest.mark.parametrize("which", ["talos", "boxes", "bodies"])
 def test_the_structured_problem_is_pinocchios_dense_one(which, monkeypatch):
-    """On M's joint structure (a branched robot with armature, a world of free boxes): the same M,
-    free motion and linear term as Pinocchio's CRBA, RNEA and dense Cholesky, at both levels."""
+    """On M's joint structure (a branched robot with armature), and on the constant M of a world of
+    free bodies (boxes with armature; bodies whose centre of mass is off their joint, with turned
+    principal axes): the same M, free motion and linear term as Pinocchio's CRBA, RNEA and dense
+    Cholesky, at both levels, at a configuration other than the one the constant M was taken at."""
+    rng = np.random.default_rng(8)
     if which == "talos":
         model = gaussim.load_robot("talos").model
     else:
         model = gaussim.Simulator(boxes(6).scene).model
-    rng = np.random.default_rng(8)
-    model.armature[:] = rng.uniform(0.0, 0.1, model.nv)
+    if which == "bodies":
+        for j in range(1, model.njoints):
+            model.inertias[j] = pin.Inertia.Random()
+    else:
+        model.armature[:] = rng.uniform(0.0, 0.1, model.nv)
     monkeypatch.setattr("gaussim.dynamics.STRUCTURED_NV", 0)
     data, reference = model.createData(), model.createData()
     structure = MassStructure.of(model, data)
     assert structure is not None
+    assert structure.constant == (which != "talos")
     q = pin.randomConfiguration(model, -np.ones(model.nq), np.ones(model.nq))
     v, tau = rng.normal(size=model.nv), rng.normal(size=model.nv)
     for acceleration in (False, True):

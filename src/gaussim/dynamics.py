@@ -11,6 +11,7 @@ import pinocchio as pin
 
 from .exceptions import InvalidState, SolverError
 from .kernels.dynamics import (
+    constant_terms,
     floating_terms,
     free_velocity,
     linear_term,
@@ -18,6 +19,7 @@ from .kernels.dynamics import (
     mirrored,
     negated_product,
     point_jacobians_into,
+    structured_factor,
     structured_product,
     structured_solve,
     structured_terms,
@@ -134,13 +136,20 @@ class MassStructure:
     tree. A model of many trees (a pile of free bodies) or a long one has mostly zeros in M, and its
     products and LDL^T factor (:func:`structured_solve`) cost O(its nonzeros).
 
+    A world of free bodies (each tree one body on a free-flyer joint) has a constant M: Pinocchio's
+    free-flyer velocity is the body's twist in its own frame, so its block of M is the body's spatial
+    inertia there, at every configuration. Its step then needs no CRBA and no factorization, only the
+    Jacobians and RNEA's b(q, v), O(nv) (``constant``).
+
     Attributes:
         parents: the coordinate before each on its branch, -1 at a root, shape (nv,) (Pinocchio's
             data.parents_fromRow).
         subtree: how many coordinates from each on move with it, itself included, shape (nv,)
             (data.nvSubtree_fromRow).
         M, U, D: M mirrored on its structure, its unit upper factor and its diagonal: buffers
-            overwritten by each step's dynamics (zero off the structure).
+            overwritten by each step's dynamics (zero off the structure); M and its factors, made once,
+            when ``constant``.
+        constant: whether M is the same at every configuration (a world of free bodies).
     """
 
     parents: np.ndarray
@@ -148,16 +157,24 @@ class MassStructure:
     M: np.ndarray
     U: np.ndarray
     D: np.ndarray
+    constant: bool = False
 
     @classmethod
     def of(cls, model: pin.Model, data: pin.Data) -> MassStructure | None:
-        """The structure of a model of STRUCTURED_NV coordinates or more, else None (dense is
-        cheaper)."""
+        """The structure of a world of free bodies, or of a model of STRUCTURED_NV coordinates or
+        more, else None (dense is cheaper)."""
         nv = model.nv
-        if nv < STRUCTURED_NV:
-            return None
         parents = np.array(data.parents_fromRow, dtype=np.int64)
         subtree = np.array(data.nvSubtree_fromRow, dtype=np.int64)
+        free = [model.joints[j].shortname() == "JointModelFreeFlyer" for j in range(1, model.njoints)]
+        if nv and all(free) and all(model.parents[j] == 0 for j in range(1, model.njoints)):
+            upper = pin.crba(model, model.createData(), pin.neutral(model), _WORLD)  # the same at any q
+            M, U, D = np.zeros((nv, nv)), np.zeros((nv, nv)), np.zeros(nv)
+            mirrored(upper, subtree, M)
+            structured_factor(M, parents, subtree, U, D)
+            return cls(parents, subtree, M, U, D, constant=True)
+        if nv < STRUCTURED_NV:
+            return None
         return cls(parents, subtree, np.zeros((nv, nv)), np.zeros((nv, nv)), np.zeros(nv))
 
 
@@ -247,8 +264,19 @@ def compute_dynamics(
     if len(tau) != model.nv:  # the kernel reads nv entries
         raise InvalidState(f"tau must have shape ({model.nv},), got {np.shape(tau)}")
     bases = FloatingBases.of(model) if bases is None else bases
+    base_args = (bases.velocity, bases.inertias, bases.rigid)
     h = 0.0 if acceleration else dt
-    f, g = np.empty(len(v)), np.empty(len(v))  # filled by the kernels
+    f, g, x_free = np.empty(len(v)), np.empty(len(v)), np.empty(len(v))  # filled by the kernels
+    if structure is not None and structure.constant:  # data.oMi and data.J (WORLD), b, then one kernel
+        pin.computeJointJacobians(model, data, q)
+        nle = pin.nonLinearEffects(model, data, q, v)
+        parts = (structure.M, structure.U, structure.D, structure.parents, structure.subtree)
+        negated = constant_terms(*parts, v, tau, nle, dt, acceleration, *base_args, x_free)
+        if negated is None:
+            raise InvalidState.non_finite("tau", tau)
+        if acceleration:  # the drifts of the bases' velocity coordinates, as below
+            pin.forwardKinematics(model, data, q, v, bases.frame_acceleration(v))
+        return Dynamics(structure.M, negated, x_free)
     if structure is None:
         # a copy of data.M; the WORLD convention also fills data.oMi, data.J
         M = pin.crba(model, data, q, _WORLD)
@@ -266,10 +294,9 @@ def compute_dynamics(
         pin.cholesky.decompose(model, data)
         x_free = pin.cholesky.solve(model, data, f)
     else:
-        x_free = np.empty(len(v))
         structured_solve(M, structure.parents, structure.subtree, f, structure.U, structure.D, x_free)
     if len(bases):
-        floating_terms(v, x_free, dt, acceleration, bases.velocity, bases.inertias, bases.rigid)
+        floating_terms(v, x_free, dt, acceleration, *base_args)
         g = _negated(M, x_free, structure)
     return Dynamics(M, g, x_free)
 
@@ -286,6 +313,9 @@ def gauss_problem(
     convention) and g = -M x_free; with a ``structure``, M is its buffer."""
     if structure is None:
         M = pin.crba(model, data, q, _WORLD)  # a copy of data.M
+    elif structure.constant:  # the Jacobians alone
+        pin.computeJointJacobians(model, data, q)
+        M = structure.M
     else:
         pin.computeAllTerms(model, data, q, np.zeros(model.nv))  # its CRBA without the O(nv^2) mirror
         M = structure.M

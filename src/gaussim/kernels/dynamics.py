@@ -137,6 +137,20 @@ def structured_terms(upper, subtree, v, tau, nle, dt, M, f):  # type: ignore[no-
 
 
 @njit(cache=True)
+def constant_terms(M, U, D, parents, subtree, v, tau, nle, dt, acceleration, bases, inertias, rigid, x):  # type: ignore[no-untyped-def]
+    """The free motion x (nv,) and the linear term g = -M x (returned; None when tau is not finite) of
+    a constant M on its structure and factors U, D (:func:`structured_factor`): f as
+    :func:`structured_terms`, x = M^-1 f, the floating ``bases`` posed as :func:`floating_terms`
+    poses them, in one call."""
+    f = np.empty(len(v))
+    if not structured_terms(M, subtree, v, tau, nle, 0.0 if acceleration else dt, M, f):
+        return None
+    factored_solve(U, D, parents, subtree, f, x)
+    floating_terms(v, x, dt, acceleration, bases, inertias, rigid)
+    return -structured_product(M, subtree, x)
+
+
+@njit(cache=True)
 def structured_product(M, subtree, x):  # type: ignore[no-untyped-def]
     """M x for M on its joint structure (see :func:`structured_terms`): O(its nonzeros)."""
     y = np.zeros(len(x))
@@ -153,8 +167,15 @@ def structured_solve(M, parents, subtree, f, U, D, x):  # type: ignore[no-untype
     """x = M^-1 f by M = U D U^T, U unit upper triangular with M's sparsity (Featherstone's LTDL, in
     Pinocchio's cholesky::decompose order; ``parents[i]``: the coordinate moving coordinate i's joint
     before it, -1 at a root, Pinocchio's parents_fromRow); ``U`` (nv, nv) and ``D`` (nv,) are
-    overwritten on the structure only."""
-    nv = len(f)
+    overwritten on the structure only (:func:`structured_factor`, then :func:`factored_solve`)."""
+    structured_factor(M, parents, subtree, U, D)
+    factored_solve(U, D, parents, subtree, f, x)
+
+
+@njit(cache=True)
+def structured_factor(M, parents, subtree, U, D):  # type: ignore[no-untyped-def]
+    """M = U D U^T on M's structure, into ``U`` and ``D`` (see :func:`structured_solve`)."""
+    nv = len(D)
     for j in range(nv - 1, -1, -1):
         end = j + subtree[j]
         D[j] = M[j, j]
@@ -167,6 +188,12 @@ def structured_solve(M, parents, subtree, f, U, D, x):  # type: ignore[no-untype
                 total -= U[i, k] * D[k] * U[j, k]
             U[i, j] = total / D[j]
             i = parents[i]
+
+
+@njit(cache=True)
+def factored_solve(U, D, parents, subtree, f, x):  # type: ignore[no-untyped-def]
+    """x = M^-1 f on the factors M = U D U^T of :func:`structured_factor`."""
+    nv = len(f)
     for j in range(nv):
         x[j] = f[j]
     for j in range(nv - 1, -1, -1):  # U y = f

@@ -40,12 +40,19 @@ SIGNATURES = {
     "dynamics.unloaded": ["f2 f1 i1 b1"],
     "dynamics.loaded": ["i2 f1 i1 b1"],
     # M's joint structure: the scenes of many bodies (STRUCTURED_NV coordinates or more)
-    "dynamics.mirrored": ["f2F i1 f2"],
+    "dynamics.mirrored": ["f2F i1 f2", "f2 i1 f2"],
     "dynamics.structured_terms": [
-        f"f2F i1 {v} {tau} f1 f f2 f1" for v in ("f1", "f1r") for tau in ("f1", "f1r")
+        f"{upper} i1 {v} {tau} f1 f f2 f1"
+        for upper in ("f2F", "f2")
+        for v in ("f1", "f1r")
+        for tau in ("f1", "f1r")
     ],
     "dynamics.structured_product": ["f2 i1 f1", "f2 i1 f1r"],
     "dynamics.structured_solve": ["f2 i1 i1 f1 f2 f1 f1"],
+    "dynamics.structured_factor": ["f2 i1 i1 f2 f1"],
+    "dynamics.constant_terms": [
+        f"f2 f2 f1 i1 i1 {v} {tau} f1 f b i1 f3 b1 f1" for v in ("f1", "f1r") for tau in ("f1", "f1r")
+    ],
     "integrator.displacement": ["f1 f f1"],
     "integrator.midpoint_turns": ["f1r f1 f i1 b1 f1"],
     "integrator.move_bases": ["f1r f1 f1 f i1 i1"],
