@@ -11,6 +11,7 @@ import pinocchio as pin
 
 from .exceptions import InvalidState, SolverError
 from .kernels.dynamics import (
+    armed,
     constant_terms,
     floating_terms,
     free_velocity,
@@ -19,7 +20,6 @@ from .kernels.dynamics import (
     mirrored,
     negated_product,
     point_jacobians_into,
-    structured_factor,
     structured_product,
     structured_solve,
     structured_terms,
@@ -147,9 +147,10 @@ class MassStructure:
         subtree: how many coordinates from each on move with it, itself included, shape (nv,)
             (data.nvSubtree_fromRow).
         M, U, D: M mirrored on its structure, its unit upper factor and its diagonal: buffers
-            overwritten by each step's dynamics (zero off the structure); M and its factors, made once,
-            when ``constant``.
-        constant: whether M is the same at every configuration (a world of free bodies).
+            overwritten by each step's dynamics (zero off the structure); when constant, M and its
+            factors, made again only when the model's armature changes (an implicit damping, see
+            :mod:`.actuation`).
+        held: when M is constant, (the armature M holds, M's diagonal without it), else None.
     """
 
     parents: np.ndarray
@@ -157,7 +158,18 @@ class MassStructure:
     M: np.ndarray
     U: np.ndarray
     D: np.ndarray
-    constant: bool = False
+    held: tuple[np.ndarray, np.ndarray] | None = None
+
+    @property
+    def constant(self) -> bool:
+        """Whether M is the same at every configuration (a world of free bodies)."""
+        return self.held is not None
+
+    def armature(self, model: pin.Model) -> tuple[np.ndarray, ...]:
+        """What :func:`~gaussim.kernels.dynamics.armed` reads of a constant M: (the model's armature,
+        the one M holds, M's diagonal without it)."""
+        assert self.held is not None
+        return (model.armature, *self.held)
 
     @classmethod
     def of(cls, model: pin.Model, data: pin.Data) -> MassStructure | None:
@@ -168,11 +180,15 @@ class MassStructure:
         subtree = np.array(data.nvSubtree_fromRow, dtype=np.int64)
         free = [model.joints[j].shortname() == "JointModelFreeFlyer" for j in range(1, model.njoints)]
         if nv and all(free) and all(model.parents[j] == 0 for j in range(1, model.njoints)):
+            armature = model.armature.copy()
+            model.armature = np.zeros(nv)
             upper = pin.crba(model, model.createData(), pin.neutral(model), _WORLD)  # the same at any q
-            M, U, D = np.zeros((nv, nv)), np.zeros((nv, nv)), np.zeros(nv)
+            model.armature = armature
+            M = np.zeros((nv, nv))
             mirrored(upper, subtree, M)
-            structured_factor(M, parents, subtree, U, D)
-            return cls(parents, subtree, M, U, D, constant=True)
+            # the armature M holds: none yet, so the first step puts the model's in and factors M
+            held = (np.full(nv, np.nan), np.diag(M).copy())
+            return cls(parents, subtree, M, np.zeros((nv, nv)), np.zeros(nv), held)
         if nv < STRUCTURED_NV:
             return None
         return cls(parents, subtree, np.zeros((nv, nv)), np.zeros((nv, nv)), np.zeros(nv))
@@ -271,7 +287,9 @@ def compute_dynamics(
         pin.computeJointJacobians(model, data, q)
         nle = pin.nonLinearEffects(model, data, q, v)
         parts = (structure.M, structure.U, structure.D, structure.parents, structure.subtree)
-        negated = constant_terms(*parts, v, tau, nle, dt, acceleration, *base_args, x_free)
+        negated = constant_terms(
+            *parts, structure.armature(model), v, tau, nle, dt, acceleration, *base_args, x_free
+        )
         if negated is None:
             raise InvalidState.non_finite("tau", tau)
         if acceleration:  # the drifts of the bases' velocity coordinates, as below
@@ -316,6 +334,14 @@ def gauss_problem(
     elif structure.constant:  # the Jacobians alone
         pin.computeJointJacobians(model, data, q)
         M = structure.M
+        armed(
+            M,
+            structure.U,
+            structure.D,
+            structure.parents,
+            structure.subtree,
+            structure.armature(model),
+        )
     else:
         pin.computeAllTerms(model, data, q, np.zeros(model.nv))  # its CRBA without the O(nv^2) mirror
         M = structure.M

@@ -137,11 +137,28 @@ def structured_terms(upper, subtree, v, tau, nle, dt, M, f):  # type: ignore[no-
 
 
 @njit(cache=True)
-def constant_terms(M, U, D, parents, subtree, v, tau, nle, dt, acceleration, bases, inertias, rigid, x):  # type: ignore[no-untyped-def]
+def armed(M, U, D, parents, subtree, armature):  # type: ignore[no-untyped-def]
+    """A constant M and its factors U, D (:func:`structured_factor`) with the model's armature:
+    ``armature`` = (the model's, the one M holds, M's diagonal without it); where the model's differs
+    (an implicit damping came or went), M's diagonal takes it and M is factored again."""
+    now, held, bare = armature
+    changed = False
+    for i in range(len(now)):
+        if now[i] != held[i]:
+            held[i], M[i, i], changed = now[i], bare[i] + now[i], True
+    if changed:
+        structured_factor(M, parents, subtree, U, D)
+
+
+@njit(cache=True)
+def constant_terms(
+    M, U, D, parents, subtree, armature, v, tau, nle, dt, acceleration, bases, inertias, rigid, x
+):  # type: ignore[no-untyped-def]
     """The free motion x (nv,) and the linear term g = -M x (returned; None when tau is not finite) of
     a constant M on its structure and factors U, D (:func:`structured_factor`): f as
     :func:`structured_terms`, x = M^-1 f, the floating ``bases`` posed as :func:`floating_terms`
-    poses them, in one call."""
+    poses them, in one call, after :func:`armed`."""
+    armed(M, U, D, parents, subtree, armature)
     f = np.empty(len(v))
     if not structured_terms(M, subtree, v, tau, nle, 0.0 if acceleration else dt, M, f):
         return None

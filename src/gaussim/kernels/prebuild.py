@@ -50,8 +50,9 @@ SIGNATURES = {
     "dynamics.structured_product": ["f2 i1 f1", "f2 i1 f1r"],
     "dynamics.structured_solve": ["f2 i1 i1 f1 f2 f1 f1"],
     "dynamics.structured_factor": ["f2 i1 i1 f2 f1"],
+    "dynamics.armed": ["f2 f2 f1 i1 i1 f1*3"],
     "dynamics.constant_terms": [
-        f"f2 f2 f1 i1 i1 {v} {tau} f1 f b i1 f3 b1 f1" for v in ("f1", "f1r") for tau in ("f1", "f1r")
+        f"f2 f2 f1 i1 i1 f1*3 {v} {tau} f1 f b i1 f3 b1 f1" for v in ("f1", "f1r") for tau in ("f1", "f1r")
     ],
     "integrator.displacement": ["f1 f f1"],
     "integrator.midpoint_turns": ["f1r f1 f i1 b1 f1"],
