@@ -123,15 +123,20 @@ def test_the_stage_takes_the_order_the_last_step_needed(solo12):
         np.testing.assert_allclose(problem.M, expected.M, atol=1e-12)
 
 
-@pytest.mark.parametrize("which", ["talos", "boxes", "bodies"])
+@pytest.mark.parametrize("which", ["talos", "arm_and_boxes", "boxes", "bodies"])
 def test_the_structured_problem_is_pinocchios_dense_one(which, monkeypatch):
-    """On M's joint structure (a branched robot with armature), and on the constant M of a world of
-    free bodies (boxes with armature; bodies whose centre of mass is off their joint, with turned
-    principal axes): the same M, free motion and linear term as Pinocchio's CRBA, RNEA and dense
-    Cholesky, at both levels, at a configuration other than the one the constant M was taken at."""
+    """On M's joint structure (a branched robot with armature; a pendulum and free boxes, several
+    trees whose M changes), and on the constant M of a world of free bodies (boxes with armature;
+    bodies whose centre of mass is off their joint, with turned principal axes): the same M, free
+    motion and linear term as Pinocchio's CRBA, RNEA and dense Cholesky, at both levels, at a
+    configuration other than the one the constant M was taken at."""
     rng = np.random.default_rng(8)
     if which == "talos":
         model = gaussim.load_robot("talos").model
+    elif which == "arm_and_boxes":
+        free = {f"b{i}": gaussim.FreeBody.box(f"b{i}", (0.1, 0.2, 0.3), mass=1.0 + i) for i in range(4)}
+        bodies = {"arm": gaussim.load_robot("pendulum"), **free}
+        model = gaussim.Simulator(gaussim.Scene(bodies=bodies, ground=gaussim.Ground())).model
     else:
         model = gaussim.Simulator(boxes(6).scene).model
     if which == "bodies":
@@ -146,7 +151,7 @@ def test_the_structured_problem_is_pinocchios_dense_one(which, monkeypatch):
     data, reference = model.createData(), model.createData()
     structure = MassStructure.of(model, data)
     assert structure is not None
-    assert structure.constant == (which != "talos")
+    assert structure.constant == (which in ("boxes", "bodies"))
     q = pin.randomConfiguration(model, -np.ones(model.nq), np.ones(model.nq))
     v, tau = rng.normal(size=model.nv), rng.normal(size=model.nv)
     for acceleration in (False, True):

@@ -29,8 +29,9 @@ from .kernels.dynamics import (
 LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 _WORLD = pin.Convention.WORLD
 _IDENTITY = np.eye(3)
-# From this many velocity coordinates the step works on M's joint structure (MassStructure): Pinocchio's
-# Python crba mirrors and copies all of M and its Cholesky copies it again, O(nv^2).
+# From this many velocity coordinates (a world of free bodies: from one) the step works on M's joint
+# structure (MassStructure): Pinocchio's Python crba mirrors and copies all of M and its Cholesky copies
+# it again, O(nv^2).
 STRUCTURED_NV = 48
 
 
@@ -41,7 +42,8 @@ class Dynamics:
         min_x 1/2 x^T M x + g^T x,   solved by   x_free = -M^-1 g.
 
     Attributes:
-        M: joint-space inertia, shape (nv, nv), symmetric positive definite (a copy of data.M).
+        M: joint-space inertia, shape (nv, nv), symmetric positive definite: a copy of data.M, or a
+            :class:`MassStructure`'s buffer, which the next step overwrites.
         g: linear term -M x_free, shape (nv,): -(M v + dt F) at the velocity level (x = v+), -F at the
             acceleration level (x = a), with F = tau - b(q, v) [N or N m].
         x_free: the unconstrained solution, shape (nv,): v + dt a_free or a_free.
@@ -139,7 +141,8 @@ class MassStructure:
     A world of free bodies (each tree one body on a free-flyer joint) has a constant M: Pinocchio's
     free-flyer velocity is the body's twist in its own frame, so its block of M is the body's spatial
     inertia there, at every configuration. Its step then needs no CRBA and no factorization, only the
-    Jacobians and RNEA's b(q, v), O(nv) (``constant``).
+    Jacobians and RNEA's b(q, v), O(nv) (``constant``). M is taken from the model's inertias when
+    the structure is made: inertias changed on the model afterwards are not read (its armature is).
 
     Attributes:
         parents: the coordinate before each on its branch, -1 at a root, shape (nv,) (Pinocchio's
@@ -178,16 +181,12 @@ class MassStructure:
         nv = model.nv
         parents = np.array(data.parents_fromRow, dtype=np.int64)
         subtree = np.array(data.nvSubtree_fromRow, dtype=np.int64)
-        free = [model.joints[j].shortname() == "JointModelFreeFlyer" for j in range(1, model.njoints)]
-        if nv and all(free) and all(model.parents[j] == 0 for j in range(1, model.njoints)):
-            armature = model.armature.copy()
-            model.armature = np.zeros(nv)
+        if nv and len(FloatingBases.of(model)) == model.njoints - 1:  # every joint a free body's
             upper = pin.crba(model, model.createData(), pin.neutral(model), _WORLD)  # the same at any q
-            model.armature = armature
             M = np.zeros((nv, nv))
             mirrored(upper, subtree, M)
             # the armature M holds: none yet, so the first step puts the model's in and factors M
-            held = (np.full(nv, np.nan), np.diag(M).copy())
+            held = (np.full(nv, np.nan), np.diag(M) - model.armature)
             return cls(parents, subtree, M, np.zeros((nv, nv)), np.zeros(nv), held)
         if nv < STRUCTURED_NV:
             return None
@@ -199,7 +198,8 @@ class DynamicsStage:
     it, its Gauss problem.
 
     Two orders give the same numbers at different costs: a step that poses a QP is cheapest as
-    CRBA + RNEA + Cholesky (:func:`compute_dynamics`), free flight as ABA alone (:meth:`free_motion`).
+    CRBA + RNEA + Cholesky (:func:`compute_dynamics`; RNEA alone for a constant M), free flight as ABA
+    alone (:meth:`free_motion`).
     Each step takes the order the previous one needed; the acceleration scheme always poses its
     problem.
     """
@@ -266,11 +266,11 @@ def compute_dynamics(
     bases: FloatingBases | None = None,
     structure: MassStructure | None = None,
 ) -> Dynamics:
-    """M, joint placements and Jacobians (one CRBA pass), b (RNEA), and the free Gauss problem of the
-    velocity level or, with ``acceleration``, of the acceleration level, for a time step ``dt`` [s];
-    at the acceleration level, the spatial accelerations at zero acceleration of the problem's
-    coordinates that its constraint terms Jdot v read (see :func:`point_drifts`). Frame placements
-    are left to the modules that use frames.
+    """M, joint placements and Jacobians (one CRBA pass, none for a constant M), b (RNEA), and the free
+    Gauss problem of the velocity level or, with ``acceleration``, of the acceleration level, for a
+    time step ``dt`` [s]; at the acceleration level, the spatial accelerations at zero acceleration of
+    the problem's coordinates that its constraint terms Jdot v read (see :func:`point_drifts`). Frame
+    placements are left to the modules that use frames.
 
     ``tau`` (nv,) are the joint torques; raises :class:`InvalidState` when they are not finite
     (checked here, in the kernel that reads them). The ``bases`` (default: the model's) are posed as
@@ -282,36 +282,37 @@ def compute_dynamics(
     bases = FloatingBases.of(model) if bases is None else bases
     base_args = (bases.velocity, bases.inertias, bases.rigid)
     h = 0.0 if acceleration else dt
-    f, g, x_free = np.empty(len(v)), np.empty(len(v)), np.empty(len(v))  # filled by the kernels
-    if structure is not None and structure.constant:  # data.oMi and data.J (WORLD), b, then one kernel
+    constant = structure is not None and structure.constant
+    if constant:  # data.oMi and data.J (WORLD), b, then one kernel
+        assert structure is not None
         pin.computeJointJacobians(model, data, q)
         nle = pin.nonLinearEffects(model, data, q, v)
         parts = (structure.M, structure.U, structure.D, structure.parents, structure.subtree)
-        negated = constant_terms(
+        x_free = np.empty(len(v))
+        g = constant_terms(
             *parts, structure.armature(model), v, tau, nle, dt, acceleration, *base_args, x_free
         )
-        if negated is None:
-            raise InvalidState.non_finite("tau", tau)
-        if acceleration:  # the drifts of the bases' velocity coordinates, as below
-            pin.forwardKinematics(model, data, q, v, bases.frame_acceleration(v))
-        return Dynamics(structure.M, negated, x_free)
-    if structure is None:
+        M, finite = structure.M, g is not None
+    elif structure is None:
         # a copy of data.M; the WORLD convention also fills data.oMi, data.J
-        M = pin.crba(model, data, q, _WORLD)
+        M, f, g = pin.crba(model, data, q, _WORLD), np.empty(len(v)), np.empty(len(v))
         finite = linear_term(M, v, tau, pin.nonLinearEffects(model, data, q, v), h, f, g)
     else:  # M's upper triangle, b, data.oMi and data.J (WORLD), O(nv)
         pin.computeAllTerms(model, data, q, v)
-        M = structure.M
+        M, f = structure.M, np.empty(len(v))
         finite = structured_terms(data.M, structure.subtree, v, tau, data.nle, h, M, f)
-        np.negative(f, out=g)
+        g = -f
     if not finite:
         raise InvalidState.non_finite("tau", tau)
     if acceleration:  # the drifts of the bases' velocity coordinates: the frame's turn is part of them
         pin.forwardKinematics(model, data, q, v, bases.frame_acceleration(v))
+    if constant:
+        return Dynamics(M, g, x_free)
     if structure is None:
         pin.cholesky.decompose(model, data)
         x_free = pin.cholesky.solve(model, data, f)
     else:
+        x_free = np.empty(len(v))
         structured_solve(M, structure.parents, structure.subtree, f, structure.U, structure.D, x_free)
     if len(bases):
         floating_terms(v, x_free, dt, acceleration, *base_args)
@@ -327,8 +328,9 @@ def gauss_problem(
     structure: MassStructure | None = None,
 ) -> Dynamics:
     """The free Gauss problem of the velocity level from its free motion x_free (ABA's, see
-    :meth:`DynamicsStage.free_motion`): M and the joint Jacobians data.J (one CRBA pass, WORLD
-    convention) and g = -M x_free; with a ``structure``, M is its buffer."""
+    :meth:`DynamicsStage.free_motion`): M and the joint Jacobians data.J (one CRBA pass, or the
+    Jacobians alone for a constant M; WORLD convention) and g = -M x_free; with a ``structure``, M is
+    its buffer."""
     if structure is None:
         M = pin.crba(model, data, q, _WORLD)  # a copy of data.M
     elif structure.constant:  # the Jacobians alone
@@ -405,7 +407,7 @@ def point_jacobians(
 
     Row i maps v to the velocity of the point ``points[i]`` (world frame, (m, 3)) of the body of
     ``joints[i]`` minus that of the same point moving with ``other_joints[i]`` (0, the world, for a
-    fixed obstacle). Read from the joint Jacobians in data.J (WORLD frame, from computeAllTerms):
+    fixed obstacle). Read from the joint Jacobians in data.J (WORLD frame, filled with M):
     the point moves at v_O + w x p over the columns of the joint's ancestors (``supports``), and the
     ancestors the two bodies share cancel.
     """

@@ -2,7 +2,7 @@
 
 velocity scheme (default), the discrete Gauss principle (Moreau-Jean time stepping):
     v+ = argmin 1/2 (w - v_free)^T M (w - v_free)  over the velocity-level rows,  v_free = v + dt a_free
-    (M from CRBA only when a module can produce rows; else v+ = v_free)
+    (M posed only when a module can produce rows; else v+ = v_free)
 
 acceleration scheme, the paper's:
     if v is not admissible (an impact): v = argmin 1/2 (w - v)^T M (w - v) over the impulse-level rows
@@ -43,7 +43,7 @@ class VelocityScheme:
         if not (len(contacts.gap) or self.always):  # nothing can restrict the motion: no problem to pose
             return x_free
         report.mark("")
-        dyn = self.dynamics.problem()  # its CRBA, when the free motion skipped it, timed as dynamics
+        dyn = self.dynamics.problem()  # its M, when the free motion skipped it, timed as dynamics
         report.mark("dynamics")
         return self.gauss.minimise("velocity", state.q, state.v, dyn, contacts, report, 1 / self.dt)
 

@@ -123,12 +123,19 @@ def mirrored(upper, subtree, M):  # type: ignore[no-untyped-def]
 @njit(cache=True)
 def structured_terms(upper, subtree, v, tau, nle, dt, M, f):  # type: ignore[no-untyped-def]
     """:func:`linear_term` on M's joint structure: M :func:`mirrored` from ``upper`` and
-    f = M v + dt F (F at dt = 0); False when tau is not finite."""
+    :func:`momentum_terms`."""
+    mirrored(upper, subtree, M)
+    return momentum_terms(M, subtree, v, tau, nle, dt, f)
+
+
+@njit(cache=True)
+def momentum_terms(M, subtree, v, tau, nle, dt, f):  # type: ignore[no-untyped-def]
+    """f = M v + dt F (F at dt = 0), F = tau - nle, on M's joint structure; False when tau is not
+    finite."""
     for i in range(len(nle)):
         if not np.isfinite(tau[i]):
             return False
         f[i] = tau[i] - nle[i]
-    mirrored(upper, subtree, M)
     if dt > 0:
         Mv = structured_product(M, subtree, v)
         for i in range(len(f)):
@@ -156,11 +163,11 @@ def constant_terms(
 ):  # type: ignore[no-untyped-def]
     """The free motion x (nv,) and the linear term g = -M x (returned; None when tau is not finite) of
     a constant M on its structure and factors U, D (:func:`structured_factor`): f as
-    :func:`structured_terms`, x = M^-1 f, the floating ``bases`` posed as :func:`floating_terms`
+    :func:`momentum_terms`, x = M^-1 f, the floating ``bases`` posed as :func:`floating_terms`
     poses them, in one call, after :func:`armed`."""
     armed(M, U, D, parents, subtree, armature)
     f = np.empty(len(v))
-    if not structured_terms(M, subtree, v, tau, nle, 0.0 if acceleration else dt, M, f):
+    if not momentum_terms(M, subtree, v, tau, nle, 0.0 if acceleration else dt, f):
         return None
     factored_solve(U, D, parents, subtree, f, x)
     floating_terms(v, x, dt, acceleration, bases, inertias, rigid)

@@ -39,13 +39,10 @@ SIGNATURES = {
     "dynamics.point_jacobians_into": ["f3 f2F f2 i1 i1 i1r i1r f2", "f3 f2F f2 i1 i1 i1 i1 f2"],
     "dynamics.unloaded": ["f2 f1 i1 b1"],
     "dynamics.loaded": ["i2 f1 i1 b1"],
-    # M's joint structure: the scenes of many bodies (STRUCTURED_NV coordinates or more)
+    # M's joint structure: scenes of many coordinates (STRUCTURED_NV or more) and worlds of free bodies
     "dynamics.mirrored": ["f2F i1 f2", "f2 i1 f2"],
     "dynamics.structured_terms": [
-        f"{upper} i1 {v} {tau} f1 f f2 f1"
-        for upper in ("f2F", "f2")
-        for v in ("f1", "f1r")
-        for tau in ("f1", "f1r")
+        f"f2F i1 {v} {tau} f1 f f2 f1" for v in ("f1", "f1r") for tau in ("f1", "f1r")
     ],
     "dynamics.structured_product": ["f2 i1 f1", "f2 i1 f1r"],
     "dynamics.structured_solve": ["f2 i1 i1 f1 f2 f1 f1"],

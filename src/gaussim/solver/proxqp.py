@@ -91,7 +91,8 @@ class GaussSolver:
         return n <= ACTIVE_SET_UP_TO or self._dual is None
 
     def keep(self, x: np.ndarray, multipliers: np.ndarray, dims: tuple[int, int, int]) -> None:
-        """Start the next solve from the solution (x, multipliers) of a problem of sizes ``dims``."""
+        """Start the next solve from the solution (x, multipliers) of a problem of sizes ``dims`` (arrays
+        the caller may go on updating in place: an :class:`~.islands.IslandSolver`'s kept layout)."""
         self._last, self._solved = (x, multipliers), dims
 
     def _solve(
