@@ -336,14 +336,7 @@ def gauss_problem(
     elif structure.constant:  # the Jacobians alone
         pin.computeJointJacobians(model, data, q)
         M = structure.M
-        armed(
-            M,
-            structure.U,
-            structure.D,
-            structure.parents,
-            structure.subtree,
-            structure.armature(model),
-        )
+        armed(M, structure.U, structure.D, structure.parents, structure.subtree, structure.armature(model))
     else:
         pin.computeAllTerms(model, data, q, np.zeros(model.nv))  # its CRBA without the O(nv^2) mirror
         M = structure.M
