@@ -589,3 +589,27 @@ def test_the_newton_step_on_the_shifts_takes_fewer_passes_to_the_same_motion(box
         np.testing.assert_allclose(path, secant_path, rtol=0, atol=1e-9)
     else:
         assert np.abs(path[-1, :2] - secant_path[-1, :2]).max() < 3e-3
+
+
+@pytest.mark.parametrize("scheme", SCHEMES)
+def test_a_resting_contacts_rows_do_not_turn_with_the_round_off_of_its_slip(box, scheme):
+    """A box resting flat, its velocity a round-off's (1e-9 m/s along the ground, in three
+    directions): its four contacts pose the same rows whatever the direction, so that a resting pile's
+    QP stays the same from step to step and its last solution answers the next. A slow slip (half the
+    speed below which a contact sticks) turns the friction pyramid with it: the rows then differ with
+    its direction."""
+    from gaussim.kernels.contact import SLIP_SPEED
+
+    scene = gaussim.Scene(box, ground=gaussim.Ground(friction=0.5))
+    sim = gaussim.Simulator(scene, gaussim.Options(scheme=scheme, dt=1e-3))
+    q = at_height(box, HALF_HEIGHT)
+    for speed, same in ((1e-9, True), (0.5 * SLIP_SPEED, False)):
+        rows = []
+        for angle in (0.3, 2.0, 4.0):
+            v = np.zeros(6)
+            v[:2] = speed * np.cos(angle), speed * np.sin(angle)
+            sim.step(sim.reset(q, v))
+            (_, posed, _), *_ = sim.last_step.blocks
+            assert posed.J.shape[0] == 16  # four corners, four facets each: sticking
+            rows.append(posed.J)
+        assert all(np.array_equal(rows[0], r) for r in rows[1:]) == same

@@ -25,7 +25,9 @@ sliding contact at mu |u_t+| but never lets it sink; the step's report says so
 (``StepReport.friction_relaxed``).
 d_1 is turned against the tangential velocity the contact would have without friction, so a
 sliding or pulled contact sees the full cone, not a facet of the pyramid ("pyramid" mode keeps a
-fixed basis and no shift). With mu = 0 a contact is the single row n^T J x >= b.
+fixed basis and no shift); below ALIGN_SPEED that velocity is round-off, and the basis is the fixed one
+(a resting contact's rows stay the same from step to step). With mu = 0 a contact is the single row
+n^T J x >= b.
 
 At the acceleration level a sliding contact (|u_t| > SLIP_SPEED) cannot be posed as a QP row set
 (its force is on the cone's edge opposite the slip, which couples to the normal force): it keeps

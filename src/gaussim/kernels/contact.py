@@ -25,6 +25,10 @@ def bound_of(level, dt, stabilisation, phi, rate, drift, unilateral):  # type: i
 # Below this tangential speed a contact sticks: no sliding force at the acceleration level, no De
 # Saxce shift (a lagged slip that small is the step's own error, which mu would amplify) [m/s].
 SLIP_SPEED = 1e-4
+# Below this free tangential speed a contact's pyramid takes the fixed basis of its normal, not the
+# slip's direction: a resting contact's free slip is round-off (1e-17 to 1e-8 m/s in a settled bin),
+# whose direction would turn its rows at every step, and so the active set of its QP [m/s].
+ALIGN_SPEED = 1e-6
 
 
 @njit(cache=True)
@@ -160,7 +164,8 @@ def pyramids(  # type: ignore[no-untyped-def]
             along = d0 * n0 + d1 * n1 + d2 * n2
             t0, t1, t2 = -d0 + along * n0, -d1 + along * n1, -d2 + along * n2
             norm = np.sqrt(t0**2 + t1**2 + t2**2)
-            if pyramid or norm <= 1e-12:  # a fixed basis: n x (the axis of n's smallest component)
+            if pyramid or norm * (dt if acceleration else 1.0) <= ALIGN_SPEED:
+                # a fixed basis: n x (the axis of n's smallest component)
                 a0, a1, a2 = abs(n0), abs(n1), abs(n2)
                 if a0 <= a1 and a0 <= a2:
                     t0, t1, t2 = cross(n0, n1, n2, 1.0, 0.0, 0.0)
