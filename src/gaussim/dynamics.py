@@ -177,12 +177,12 @@ class MassStructure:
     @classmethod
     def of(cls, model: pin.Model, data: pin.Data) -> MassStructure | None:
         """The structure of a world of free bodies, or of a model of STRUCTURED_NV coordinates or
-        more, else None (dense is cheaper)."""
+        more, else None (dense is cheaper). ``data``: the model's (a constant M is computed in it)."""
         nv = model.nv
         parents = np.array(data.parents_fromRow, dtype=np.int64)
         subtree = np.array(data.nvSubtree_fromRow, dtype=np.int64)
         if nv and len(FloatingBases.of(model)) == model.njoints - 1:  # every joint a free body's
-            upper = pin.crba(model, model.createData(), pin.neutral(model), _WORLD)  # the same at any q
+            upper = pin.crba(model, data, pin.neutral(model), _WORLD)  # the same at any q
             M = np.zeros((nv, nv))
             mirrored(upper, subtree, M)
             # the armature M holds: none yet, so the first step puts the model's in and factors M

@@ -98,14 +98,47 @@ class Robot:
     on_massless: str = "lump"
 
     def __post_init__(self) -> None:
-        _conventions(self)
-        _check(self)
+        # one data for the checks: Pinocchio's grows as nv^3 (a second-order tensor; 4.5 s and 3.3 GB
+        # to make at nv 384)
+        data = self.model.createData()
+        _conventions(self, data)
+        _check(self, data)
         _warn_oddities(self)
         for geometry in self.collision_model.geometryObjects:
             if isinstance(geometry.geometry, coal.BVHModelBase) and geometry.geometry.convex is None:
                 # Contacts are detected on the convex hull of a mesh (coal's GJK/EPA needs convex shapes
                 # to give signed distances and contact patches); built once here.
                 _convex_hull(self, geometry)
+
+    @classmethod
+    def of_checked_parts(
+        cls,
+        name: str,
+        model: pin.Model,
+        geometry: tuple[pin.GeometryModel, pin.GeometryModel],
+        urdf: str,
+        package_dirs: tuple[str, ...],
+        reference_configurations: dict[str, np.ndarray],
+    ) -> Robot:
+        """A robot made of robots each already checked, with their convex hulls (``geometry``: its
+        collision and visual models): a world's bodies side by side (``pin.appendModel``), whose mass
+        matrix is theirs block by block. It is not checked again: the checks make a Pinocchio data of
+        the whole model, whose size grows as nv^3 (3.3 GB and 4.5 s for 64 free bodies)."""
+        values = {
+            "name": name,
+            "model": model,
+            "collision_model": geometry[0],
+            "visual_model": geometry[1],
+            "urdf": urdf,
+            "package_dirs": package_dirs,
+            "reference_configurations": reference_configurations,
+            "on_massless": "lump",  # what each part's was is done: the merged model has its inertias
+        }
+        assert set(values) == {f.name for f in dataclasses.fields(cls)}  # every field, as __init__ sets
+        robot = object.__new__(cls)
+        for key, value in values.items():
+            object.__setattr__(robot, key, value)  # frozen: past __setattr__, as dataclasses' __init__
+        return robot
 
     @property
     def source(self) -> str:
@@ -461,8 +494,9 @@ def _warn_mimics(path: Path, model: pin.Model) -> None:
         )
 
 
-def _check(robot: Robot) -> None:
-    """Raise :class:`InvalidRobot` unless the robot is simulable."""
+def _check(robot: Robot, data: pin.Data) -> None:
+    """Raise :class:`InvalidRobot` unless the robot is simulable (``data``: its model's, for the mass
+    matrix)."""
     where, model = robot.source, robot.model
     if not isinstance(model, pin.Model):
         raise InvalidRobot(f"{where}: the model must be a pinocchio.Model, got {type(model).__name__}")
@@ -497,7 +531,6 @@ def _check(robot: Robot) -> None:
             raise InvalidRobot(
                 f"{where}: configuration '{key}' must be {model.nq} finite numbers, got {shown(q)}"
             )
-    data = model.createData()
     mass_matrix = pin.crba(model, data, pin.neutral(model))
     if not np.all(np.isfinite(mass_matrix)):
         raise InvalidRobot(f"{where}: the mass matrix at the neutral configuration is not finite")
@@ -578,10 +611,11 @@ def _link(model: pin.Model, joint_id: int) -> str:
     )
 
 
-def _conventions(robot: Robot) -> None:
+def _conventions(robot: Robot, data: pin.Data) -> None:
     """Read the files' well-known conventions, with a warning naming what is read so: a joint's lower
     limit above its upper one is Bullet's "no limit" (unlimited here); joints whose moving links have no
-    inertia about their motion are lumped or refused as ``robot.on_massless`` says."""
+    inertia about their motion are lumped or refused as ``robot.on_massless`` says (``data``: the
+    model's)."""
     model, where = robot.model, robot.source
     if robot.on_massless not in ON_MASSLESS:
         raise InvalidOptions(
@@ -607,7 +641,7 @@ def _conventions(robot: Robot) -> None:
     _check_inertias(model, where)  # an unphysical inertia is refused, not lumped
     lumped: list[int] = []
     for _ in range(model.nv):
-        massless = _massless(model)
+        massless = _massless(model, data)
         if not massless:
             break
         if robot.on_massless == "error":
@@ -635,11 +669,10 @@ def _conventions(robot: Robot) -> None:
         )
 
 
-def _massless(model: pin.Model) -> list[int]:
+def _massless(model: pin.Model, data: pin.Data) -> list[int]:
     """The joints whose links move, with no kinetic energy, along the mass matrix's null direction (at
     the neutral configuration; none when the matrix is regular or the direction moves no link: joints
     that repeat one another's motion)."""
-    data = model.createData()
     q = pin.neutral(model)
     mass_matrix = pin.crba(model, data, q)
     if not np.all(np.isfinite(mass_matrix)):

@@ -506,4 +506,4 @@ def _merged(robots: Mapping[str, Robot], specs: Mapping[str, Body], separator: s
     (first,) = robots.values() if len(robots) == 1 else (None,)
     urdf = first.urdf if first is not None else ""
     dirs = tuple(d for r in robots.values() for d in r.package_dirs)
-    return Robot("+".join(robots), model, collision, visual, urdf, dirs, configurations)
+    return Robot.of_checked_parts("+".join(robots), model, (collision, visual), urdf, dirs, configurations)
