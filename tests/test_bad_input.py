@@ -316,14 +316,18 @@ def _cli(capsys, *argv):
     ("inertia", "message"),
     [
         ('izz="-1"', r"principal moments of inertia -1, 0.1, 0.1 \[kg m\^2\]: a negative one"),
-        ('izz="0.3"', r"principal moments of inertia 0.1, 0.1, 0.3 \[kg m\^2\]: I1 \+ I2 < I3"),
+        (
+            'izz="0.3"',
+            r"moments of inertia 0.1, 0.1, 0.3 \[kg m\^2\]: I1 \+ I2 < I3.*on_bad_inertia='balance'",
+        ),
         ('ixy="0.2"', r"principal moments of inertia -0.1, 0.1, 0.3 \[kg m\^2\]: a negative one"),
     ],
     ids=["negative", "triangle", "indefinite"],
 )
 def test_an_unphysical_inertia_names_the_link_and_the_file(tmp_path, inertia, message):
     """Item 10: a link with izz = -1 passed the mass-matrix check at the neutral pose and its run gained
-    energy; each body's principal moments are checked now."""
+    energy; each body's principal moments are checked now (on_bad_inertia='error': the triangle
+    inequality refused too)."""
     path = tmp_path / "robot.urdf"
     arm = _ARM.replace(
         inertia.split("=")[0] + '="' + ("0" if inertia.startswith("ixy") else "0.1") + '"', inertia
@@ -332,7 +336,34 @@ def test_an_unphysical_inertia_names_the_link_and_the_file(tmp_path, inertia, me
     with pytest.raises(
         gaussim.InvalidRobot, match=rf"{path}: link 'arm' \(the body of joint 'j'\) .*{message}"
     ):
-        gaussim.load_robot(path, floating_base=True)
+        gaussim.load_robot(path, floating_base=True, on_bad_inertia="error")
+
+
+def test_a_triangle_inequality_broken_is_balanced_as_mujoco_does(tmp_path):
+    """pybullet_data's xarm and mini_cheetah have links whose moments break I1 + I2 >= I3: by default
+    the three are set to their mean with a warning naming the link, the moments and the mean, as
+    MuJoCo's compiler does with balanceinertia (compared with MuJoCo's own on the same numbers); the
+    robot then runs. An unknown option value is refused naming the option."""
+    mujoco = pytest.importorskip("mujoco")
+    path = tmp_path / "robot.urdf"
+    path.write_text(_URDF.format(**{**_GOOD, "arm": _ARM.replace('izz="0.1"', 'izz="0.3"')}))
+    with pytest.warns(
+        gaussim.GaussimWarning,
+        match=r"balanceinertia.*link 'arm' \(the body of joint 'j'\): 0.1, 0.1, 0.3 -> 0.166667",
+    ):
+        robot = gaussim.load_robot(path, floating_base=True)
+    peer = mujoco.MjModel.from_xml_string(
+        '<mujoco><compiler balanceinertia="true"/><worldbody><body><freejoint/>'
+        '<inertial pos="0 0 0" mass="1" diaginertia="0.1 0.1 0.3"/></body></worldbody></mujoco>'
+    )
+    np.testing.assert_allclose(robot.model.inertias[2].inertia, np.diag(peer.body_inertia[1]), rtol=1e-12)
+    sim = gaussim.Simulator(gaussim.Scene(robot, gravity=(0.0, 0.0, 0.0)))
+    state = sim.reset(v=np.array([0, 0, 0, 0.3, 0.2, 0.1, 1.0]))
+    for _ in range(100):
+        state = sim.step(state)
+    assert np.all(np.isfinite(state.v))
+    with pytest.raises(gaussim.InvalidOptions, match="on_bad_inertia.*balance, error"):
+        gaussim.load_robot(path, floating_base=True, on_bad_inertia="mean")
 
 
 def test_joint_limits_lower_above_upper_are_no_limit(tmp_path):

@@ -35,7 +35,7 @@ SAMPLE = {
     "cube_no_rotation.urdf": ("ok", "Bullet's convention for no limit"),
     "teddy_large.urdf": ("ok", "centre of mass of the links 'baseLink'"),
     "torus_deform.urdf": ("refused", "no <link> element"),
-    "mini_cheetah/mini_cheetah.urdf": ("refused", "link 'thigh_fl'"),
+    "mini_cheetah/mini_cheetah.urdf": ("ok", "link 'thigh_fl' (the body of joint"),  # I1 + I2 < I3: balanced
     "random_urdfs/000/000.urdf": ("ok", "['random_obj_000'] have no mass"),
     "sphere2red_nocol.urdf": ("refused", "has no collision geometry"),
 }

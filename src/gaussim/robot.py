@@ -14,7 +14,7 @@ import sys
 import tempfile
 import warnings
 import xml.etree.ElementTree as ET
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -53,6 +53,7 @@ SUFFIXES = (".urdf", ".xml", ".mjcf", ".sdf")
 # shapes no body has: a ground is a Scene's gaussim.Ground
 UNBOUNDED = (coal.Halfspace, coal.Plane)
 ON_MASSLESS = ("lump", "error")
+ON_BAD_INERTIA = ("balance", "error")
 # A joint's block of the mass matrix is singular when its smallest eigenvalue is below this fraction of
 # the matrix's largest; "lump" gives its link this fraction of the typical link's mass and inertia.
 SINGULAR_RTOL, MASSLESS_FRACTION = 1e-12, 1e-3
@@ -86,6 +87,11 @@ class Robot:
             motion (the mass matrix is then singular): ``"lump"`` (default, PyBullet accepts such
             files) gives the joint's link MASSLESS_FRACTION of the robot's typical link mass and
             inertia, with a warning naming each; ``"error"`` refuses the robot naming them.
+        on_bad_inertia: what to do with a body whose principal moments of inertia break the triangle
+            inequality I1 + I2 >= I3 (no mass distribution has them; pybullet_data's xarm and
+            mini_cheetah): ``"balance"`` (default; PyBullet accepts such files) sets its three moments
+            to their mean (MuJoCo's ``balanceinertia``), with a warning naming each; ``"error"``
+            refuses the robot naming it. A negative moment is always refused.
     """
 
     name: str
@@ -96,6 +102,7 @@ class Robot:
     package_dirs: tuple[str, ...] = ()
     reference_configurations: dict[str, np.ndarray] = field(default_factory=dict)
     on_massless: str = "lump"
+    on_bad_inertia: str = "balance"
 
     def __post_init__(self) -> None:
         # one data for the checks: Pinocchio's grows as nv^3 (a second-order tensor; 4.5 s and 3.3 GB
@@ -132,7 +139,9 @@ class Robot:
             "urdf": urdf,
             "package_dirs": package_dirs,
             "reference_configurations": reference_configurations,
-            "on_massless": "lump",  # what each part's was is done: the merged model has its inertias
+            # what each part's policies did is done: the merged model has its inertias
+            "on_massless": "lump",
+            "on_bad_inertia": "balance",
         }
         assert set(values) == {f.name for f in dataclasses.fields(cls)}  # every field, as __init__ sets
         robot = object.__new__(cls)
@@ -196,6 +205,7 @@ def load_robot(
     package_dirs: list[str] | tuple[str, ...] = (),
     floating_base: bool | None = None,
     on_massless: str = "lump",
+    on_bad_inertia: str = "balance",
 ) -> Robot:
     """Load a robot.
 
@@ -211,17 +221,19 @@ def load_robot(
             joint attaches it to the world; a URDF is fixed-base; example-robot-data decides for its
             robots (mobile robots float). A file that says the opposite of the value given is refused.
         on_massless: ``"lump"`` or ``"error"``: see :class:`Robot`.
+        on_bad_inertia: ``"balance"`` or ``"error"``: see :class:`Robot`.
 
     Raises:
         RobotNotFound: the name is none of the above (the message lists the known names).
         InvalidRobot: the file could not be read or describes an unusable model.
     """
+    policies = {"on_massless": on_massless, "on_bad_inertia": on_bad_inertia}
     path = Path(name)
     local = ROBOTS_DIR / f"{name}.urdf"
     if path.suffix in SUFFIXES or path.exists():
         if not path.is_file():
             raise RobotNotFound(str(name), _known_names())
-        return _from_file(path, tuple(package_dirs), floating_base, on_massless)
+        return _from_file(path, tuple(package_dirs), floating_base, policies)
     if local.is_file():
         if str(name) in example_robot_names():  # the shipped robot comes first: say so
             warnings.warn(
@@ -230,7 +242,7 @@ def load_robot(
                 GaussimWarning,
                 stacklevel=2,
             )
-        return _from_urdf(local, (str(ROBOTS_DIR), *package_dirs), bool(floating_base), on_massless)
+        return _from_urdf(local, (str(ROBOTS_DIR), *package_dirs), bool(floating_base), policies)
     known = example_robot_names()
     if str(name) not in known:
         raise RobotNotFound(str(name), _known_names())
@@ -241,7 +253,7 @@ def load_robot(
     if kind.sdf_filename and not kind.urdf_filename:  # its loader needs Pinocchio's SDF parser: gaussim's
         relative = os.path.join(kind.path, kind.sdf_subpath, kind.sdf_filename)
         model_path = Path(getModelPath(relative))
-        robot = _from_sdf(model_path / relative, (str(model_path.parent.parent),), floating_base, on_massless)
+        robot = _from_sdf(model_path / relative, (str(model_path.parent.parent),), floating_base, policies)
         return dataclasses.replace(robot, name=str(name))
     try:
         with _stderr_kept() as stderr:
@@ -266,7 +278,7 @@ def load_robot(
         str(loader.df_path),
         (str(loader.model_path),),
         _configurations(model),
-        on_massless,
+        **policies,
     )
 
 
@@ -287,7 +299,9 @@ def _own_geometry(name: str, model: pin.Model, geometry: pin.GeometryModel) -> p
     return geometry
 
 
-def as_robot(obj: object, name: str | None = None, *, on_massless: str = "lump") -> Robot:
+def as_robot(
+    obj: object, name: str | None = None, *, on_massless: str = "lump", on_bad_inertia: str = "balance"
+) -> Robot:
     """A :class:`Robot` of what a user holds, passed as it is.
 
     Args:
@@ -298,7 +312,7 @@ def as_robot(obj: object, name: str | None = None, *, on_massless: str = "lump")
             path or robot name (see :func:`load_robot`). Pinocchio objects are copied: changing them
             later does not change the robot.
         name: the robot's name; default the model's name (``model.name``), or "robot".
-        on_massless: ``"lump"`` or ``"error"``: see :class:`Robot` (for a model it makes).
+        on_massless, on_bad_inertia: see :class:`Robot` (for a model it makes).
 
     Raises:
         InvalidRobot: ``obj`` is none of these, or its model is unusable, or a geometry is attached to
@@ -308,7 +322,7 @@ def as_robot(obj: object, name: str | None = None, *, on_massless: str = "lump")
     if isinstance(obj, Robot):
         return obj if name is None else dataclasses.replace(obj, name=name)
     if isinstance(obj, str | os.PathLike):
-        robot = load_robot(obj, on_massless=on_massless)
+        robot = load_robot(obj, on_massless=on_massless, on_bad_inertia=on_bad_inertia)
         return robot if name is None else dataclasses.replace(robot, name=name)
     if isinstance(obj, pin.RobotWrapper):
         parts: tuple[object, ...] = (obj.model, obj.collision_model, obj.visual_model)
@@ -332,7 +346,17 @@ def as_robot(obj: object, name: str | None = None, *, on_massless: str = "lump")
     visual = visual if visual is not None else collision.clone()
     model = pin.Model(model)
     configurations = _configurations(model)
-    return Robot(name or model.name or "robot", model, collision, visual, "", (), configurations, on_massless)
+    return Robot(
+        name or model.name or "robot",
+        model,
+        collision,
+        visual,
+        "",
+        (),
+        configurations,
+        on_massless,
+        on_bad_inertia,
+    )
 
 
 def _described(obj: object) -> str:
@@ -348,24 +372,26 @@ def _known_names() -> list[str]:
     return local + example_robot_names()
 
 
-def _from_file(path: Path, package_dirs: tuple[str, ...], floating: bool | None, on_massless: str) -> Robot:
+def _from_file(
+    path: Path, package_dirs: tuple[str, ...], floating: bool | None, policies: Mapping[str, str]
+) -> Robot:
     """A robot of a URDF, MJCF or SDF file, told apart by its root element."""
     try:
         tag = ET.parse(path).getroot().tag.rpartition("}")[2]  # without an XML namespace
     except ET.ParseError as err:
         raise InvalidRobot(f"{path}: not well-formed XML ({err})") from err
     if tag == "mujoco":
-        return _from_mjcf(path, floating, on_massless)
+        return _from_mjcf(path, floating, policies)
     if tag == "sdf":
-        return _from_sdf(path, package_dirs, floating, on_massless)
+        return _from_sdf(path, package_dirs, floating, policies)
     if tag == "robot":
-        return _from_urdf(path, package_dirs, bool(floating), on_massless)
+        return _from_urdf(path, package_dirs, bool(floating), policies)
     known = ", ".join(f"<{t}> ({f})" for t, f in FORMATS.items())
     raise InvalidRobot(f"{path}: the root element <{tag}> is no robot format gaussim reads; known: {known}")
 
 
 def _from_urdf(
-    path: Path, package_dirs: tuple[str, ...] | list[str], floating: bool, on_massless: str = "lump"
+    path: Path, package_dirs: tuple[str, ...] | list[str], floating: bool, policies: Mapping[str, str]
 ) -> Robot:
     dirs = [str(d) for d in (*package_dirs, path.parent)]
     check_urdf(path)
@@ -379,10 +405,10 @@ def _from_urdf(
         cause = mesh_fault(path, dirs, str(err)) or _cause(err) + _said(stderr)
         raise InvalidRobot(f"{path}: cannot build a model from this URDF: {cause}") from err
     _warn_mimics(path, model)
-    return Robot(path.stem, model, collision, visual, str(path), tuple(dirs), {}, on_massless)
+    return Robot(path.stem, model, collision, visual, str(path), tuple(dirs), {}, **policies)
 
 
-def _from_mjcf(path: Path, floating: bool | None, on_massless: str) -> Robot:
+def _from_mjcf(path: Path, floating: bool | None, policies: Mapping[str, str]) -> Robot:
     root = mjcf.read(path)
     mjcf.check_file(path, root)
     try:
@@ -419,10 +445,12 @@ def _from_mjcf(path: Path, floating: bool | None, on_massless: str) -> Robot:
     for note in notes:
         warnings.warn(f"{path}: {note}", GaussimWarning, stacklevel=4)
     dirs = (str(path.parent),)
-    return Robot(path.stem, model, collision, visual, str(path), dirs, _configurations(model), on_massless)
+    return Robot(path.stem, model, collision, visual, str(path), dirs, _configurations(model), **policies)
 
 
-def _from_sdf(path: Path, package_dirs: tuple[str, ...], floating: bool | None, on_massless: str) -> Robot:
+def _from_sdf(
+    path: Path, package_dirs: tuple[str, ...], floating: bool | None, policies: Mapping[str, str]
+) -> Robot:
     converted = sdf.to_urdf(path, package_dirs)
     floats = converted.world_joint is None if floating is None else floating
     if floats and converted.world_joint is not None:
@@ -442,7 +470,7 @@ def _from_sdf(path: Path, package_dirs: tuple[str, ...], floating: bool | None, 
     for note in converted.notes:
         warnings.warn(f"{path}: {note}", GaussimWarning, stacklevel=4)
     dirs = (*package_dirs, str(path.parent))
-    return Robot(path.stem, model, collision, visual, str(path), dirs, {}, on_massless)
+    return Robot(path.stem, model, collision, visual, str(path), dirs, {}, **policies)
 
 
 @contextlib.contextmanager
@@ -516,7 +544,7 @@ def _check(robot: Robot, data: pin.Data) -> None:
         inertia = model.inertias[joint_id]
         if not np.isfinite(inertia.mass) or inertia.mass < 0:
             raise InvalidRobot(f"{where}: body of joint '{model.names[joint_id]}' has mass {inertia.mass}")
-    _check_inertias(model, where)
+    _check_inertias(model, where, robot.on_bad_inertia)
     for joint_id in range(1, model.njoints):
         joint = model.joints[joint_id]
         lower = model.lowerPositionLimit[joint.idx_q : joint.idx_q + joint.nq]
@@ -581,25 +609,39 @@ def _check_geometry(model: pin.Model, geometry: pin.GeometryModel, where: str, r
             )
 
 
-def _check_inertias(model: pin.Model, where: str) -> None:
-    """Refuse a body whose principal moments of inertia are negative (a run gains energy) or break the
-    triangle inequality I1 + I2 >= I3 (no mass distribution has them). Checked on Pinocchio's bodies,
-    each the sum of a moving link and the links fixed to it: the example-robot-data robots whose URDF
-    links break it (allegro, go1, anymal) have valid sums."""
+def _check_inertias(model: pin.Model, where: str, on_bad_inertia: str) -> None:
+    """Refuse a body whose principal moments of inertia are negative (a run gains energy); balance or
+    refuse (``on_bad_inertia``) one whose moments break the triangle inequality I1 + I2 >= I3 (no mass
+    distribution has them). Checked on Pinocchio's bodies, each the sum of a moving link and the links
+    fixed to it: the example-robot-data robots whose URDF links break it (allegro, go1, anymal) have
+    valid sums."""
+    balanced = []
     for joint_id in range(1, model.njoints):
-        moments = np.linalg.eigvalsh(model.inertias[joint_id].inertia)
+        inertia = model.inertias[joint_id]
+        moments = np.linalg.eigvalsh(inertia.inertia)
         tolerance = INERTIA_RTOL * np.abs(moments).max() + INERTIA_ATOL
         if moments[0] >= -tolerance and moments[0] + moments[1] >= moments[2] - tolerance:
             continue
-        body = next(
-            (f.name for f in model.frames if f.type == pin.FrameType.BODY and f.parentJoint == joint_id),
-            model.names[joint_id],
-        )
-        fault = "a negative one" if moments[0] < -tolerance else "I1 + I2 < I3"
-        raise InvalidRobot(
-            f"{where}: link '{body}' (the body of joint '{model.names[joint_id]}') has principal moments of "
-            f"inertia {', '.join(f'{m:.6g}' for m in moments)} [kg m^2]: {fault}, which no body has "
-            "(check the <inertia> of it and of the links fixed to it)"
+        listed = ", ".join(f"{m:.6g}" for m in moments)
+        body = f"link '{_link(model, joint_id)}' (the body of joint '{model.names[joint_id]}')"
+        negative = not moments[0] >= -tolerance  # NaN too
+        if negative or on_bad_inertia == "error":
+            fault = "a negative one" if negative else "I1 + I2 < I3"
+            option = "" if negative else "; or load with on_bad_inertia='balance'"
+            raise InvalidRobot(
+                f"{where}: {body} has principal moments of inertia {listed} [kg m^2]: {fault}, which no "
+                f"body has (check the <inertia> of it and of the links fixed to it{option})"
+            )
+        mean = float(np.mean(moments))  # MuJoCo's balanceinertia: the three moments set to their mean
+        model.inertias[joint_id] = pin.Inertia(inertia.mass, inertia.lever, mean * np.eye(3))
+        balanced.append(f"{body}: {listed} -> {mean:.6g}")
+    if balanced:
+        warnings.warn(
+            f"{where}: principal moments of inertia [kg m^2] that break the triangle inequality I1 + I2 >= "
+            f"I3, which no body has, are set to their mean (MuJoCo's balanceinertia; on_bad_inertia='error' "
+            f"refuses the robot instead): {'; '.join(balanced)}",
+            GaussimWarning,
+            stacklevel=6,
         )
 
 
@@ -613,14 +655,17 @@ def _link(model: pin.Model, joint_id: int) -> str:
 
 def _conventions(robot: Robot, data: pin.Data) -> None:
     """Read the files' well-known conventions, with a warning naming what is read so: a joint's lower
-    limit above its upper one is Bullet's "no limit" (unlimited here); joints whose moving links have no
-    inertia about their motion are lumped or refused as ``robot.on_massless`` says (``data``: the
-    model's)."""
+    limit above its upper one is Bullet's "no limit" (unlimited here); a body whose moments of inertia
+    break the triangle inequality is balanced or refused as ``robot.on_bad_inertia`` says; joints whose
+    moving links have no inertia about their motion are lumped or refused as ``robot.on_massless`` says
+    (``data``: the model's)."""
     model, where = robot.model, robot.source
-    if robot.on_massless not in ON_MASSLESS:
-        raise InvalidOptions(
-            "on_massless", f"must be one of {', '.join(ON_MASSLESS)}, got {shown(robot.on_massless)}"
-        )
+    for option, value, known in (
+        ("on_massless", robot.on_massless, ON_MASSLESS),
+        ("on_bad_inertia", robot.on_bad_inertia, ON_BAD_INERTIA),
+    ):
+        if value not in known:
+            raise InvalidOptions(option, f"must be one of {', '.join(known)}, got {shown(value)}")
     swapped = []
     for joint_id in range(1, model.njoints):
         joint = model.joints[joint_id]
@@ -638,7 +683,7 @@ def _conventions(robot: Robot, data: pin.Data) -> None:
         )
     if not all(i.mass >= 0 and np.all(np.isfinite(i.inertia)) for i in model.inertias[1:]):
         return  # refused by _check, naming the body
-    _check_inertias(model, where)  # an unphysical inertia is refused, not lumped
+    _check_inertias(model, where, robot.on_bad_inertia)  # a negative moment is refused, not lumped
     lumped: list[int] = []
     for _ in range(model.nv):
         massless = _massless(model, data)
