@@ -312,7 +312,8 @@ def as_robot(
             path or robot name (see :func:`load_robot`). Pinocchio objects are copied: changing them
             later does not change the robot.
         name: the robot's name; default the model's name (``model.name``), or "robot".
-        on_massless, on_bad_inertia: see :class:`Robot` (for a model it makes).
+        on_massless: ``"lump"`` or ``"error"``: see :class:`Robot` (for a model it makes).
+        on_bad_inertia: ``"balance"`` or ``"error"``: see :class:`Robot` (for a model it makes).
 
     Raises:
         InvalidRobot: ``obj`` is none of these, or its model is unusable, or a geometry is attached to
