@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import time
 
 import pytest
@@ -396,6 +397,10 @@ def test_the_scene_suite_runs_the_same_scene_in_every_engine(capsys, tmp_path):
         f"Made by `gaussim bench --scenes --quick stack_3 --report {report}` ({QUICK_STEPS} steps per scene; "
     )
     assert made + time.strftime("%Y-%m-%d") in report.read_text()
+    assert re.search(
+        r"a fixed Python loop \(3,000,000 additions\) took \d\.\d\d s before the run, \d\.\d\d s after",
+        report.read_text(),
+    )
 
 
 def test_matched_accuracy_on_motion_picks_the_cheapest_setting_that_meets_each_tolerance():
