@@ -139,11 +139,10 @@ class Robot:
             "urdf": urdf,
             "package_dirs": package_dirs,
             "reference_configurations": reference_configurations,
-            # what each part's policies did is done: the merged model has its inertias
-            "on_massless": "lump",
-            "on_bad_inertia": "balance",
         }
-        assert set(values) == {f.name for f in dataclasses.fields(cls)}  # every field, as __init__ sets
+        for f in dataclasses.fields(cls):  # the policies at their defaults: each part's did their work
+            values.setdefault(f.name, f.default)
+        assert dataclasses.MISSING not in values.values()  # every field set, as __init__ sets them
         robot = object.__new__(cls)
         for key, value in values.items():
             object.__setattr__(robot, key, value)  # frozen: past __setattr__, as dataclasses' __init__
