@@ -376,7 +376,8 @@ def test_a_recorder_absorbs_another_runs_steps():
 def test_the_scene_suite_runs_the_same_scene_in_every_engine(capsys, tmp_path):
     """``gaussim bench --scenes --quick``: a row per scene whose cells match the header; MuJoCo's model,
     generated from the gaussim scene, holds the same bodies and contact pairs and touches at as many
-    points (a box face on the ground: 4 each); gaussim's penetration and KKT residual are reported."""
+    points (a box face on the ground: 4 each); each engine is timed in turns and alone; gaussim's
+    penetration and KKT residual are reported."""
     from gaussim.bench.scenes import QUICK_STEPS, run_suite
 
     records = run_suite(["box", "pile_4", "panda_cube"], quick=True, peers=["mujoco"])
@@ -387,6 +388,8 @@ def test_the_scene_suite_runs_the_same_scene_in_every_engine(capsys, tmp_path):
         assert r["mujoco_pairs"] == r["pairs"], r
         assert round(gaussim["contacts"]) == round(mujoco["contacts"]) > 0, r
         assert 0 <= gaussim["penetration"] < 1e-4 and gaussim["kkt_residual"] < 1e-6, r
+        # each engine is timed in turns and alone
+        assert all(e[f"us{how}_median"] > 0 for e in (gaussim, mujoco) for how in ("", "_alone")), r
     report = tmp_path / "benchmarks.md"
     assert main(["bench", "--scenes", "--quick", "--no-peers", "stack_3", "--report", str(report)]) == 0
     table = [line for line in capsys.readouterr().out.splitlines() if line.startswith("|")]

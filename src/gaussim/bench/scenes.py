@@ -28,6 +28,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import ModuleType
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pinocchio as pin
@@ -41,6 +42,9 @@ from ..scenefile import load_scene
 from ..simulator import Simulator
 from ..world import Body, FreeBody, pose
 from .cases import SCENES_DIR
+
+if TYPE_CHECKING:
+    from .peers import Bullet, MuJoCo
 
 EXAMPLES = Path(__file__).resolve().parents[3] / "examples"
 BOX, BOX_MASS, SPACING = 0.1, 1.0, 0.15  # the piles' boxes: side [m], mass [kg], columns' pitch [m]
@@ -408,24 +412,34 @@ class Timing:
     penetration: float = 0.0
     kkt_residual: float = float("nan")
     status: str = "ok"
+    alone: list[float] = field(default_factory=list)  # the step times of its run alone [s]
 
     def row(self) -> dict[str, float]:
-        t = np.array(self.seconds[WARM_UP:]) * 1e6
         return {
             "bodies": float(self.bodies),
-            "us_median": float(np.median(t)) if len(t) else float("nan"),
-            "us_p90": float(np.percentile(t, 90)) if len(t) else float("nan"),
+            **_spread("us", self.seconds),
+            **_spread("us_alone", self.alone),
             "contacts": float(np.mean(self.contacts)) if self.contacts else 0.0,
             "penetration": self.penetration,
             "kkt_residual": self.kkt_residual,
         }
 
 
+def _spread(key: str, seconds: list[float]) -> dict[str, float]:
+    """``key``_median and ``key``_p90 of step times ``seconds`` [s] in us, the first WARM_UP left out."""
+    t = np.array(seconds[WARM_UP:]) * 1e6
+    if not len(t):
+        return {f"{key}_median": float("nan"), f"{key}_p90": float("nan")}
+    return {f"{key}_median": float(np.median(t)), f"{key}_p90": float(np.percentile(t, 90))}
+
+
 def run_scene(case: SceneCase, steps: int, peers: Iterable[str] | None = None) -> dict:
     """Step ``case`` ``steps`` times with gaussim (default options at the scene's dt) and each peer,
-    the engines in turn at every step, each timed alone (the drives, computed from each engine's own
-    state, and the contact readings are not); returns the scene's record: per engine its
-    :meth:`Timing.row`, and the bodies and declared pairs of the scene."""
+    the engines in turn at every step, each step timed (the drives, computed from each engine's own
+    state, and the contact readings are not); then each engine again from the start, alone (its
+    memory warm from its own last step, as in a user's loop, where the turns leave each step's cache
+    to the other engines: MuJoCo's step of one box took 3 times longer in turns); returns the scene's
+    record: per engine its :meth:`Timing.row`, and the bodies and declared pairs of the scene."""
     from .peers import Bullet, MuJoCo, available
 
     setup = case.build()
@@ -436,7 +450,7 @@ def run_scene(case: SceneCase, steps: int, peers: Iterable[str] | None = None) -
     installed = [e for e in ("mujoco", "pybullet") if any(p.startswith(e) for p in available())]
     for name in installed if peers is None else peers:
         try:
-            engine = engines[name] = MuJoCo(setup) if name == "mujoco" else Bullet(setup)
+            engine = engines[name] = _peer(name, setup)
             timings[name] = Timing(engine.bodies())
         except ValueError as err:
             timings[name] = Timing(status=f"not run: {err}")
@@ -461,9 +475,11 @@ def run_scene(case: SceneCase, steps: int, peers: Iterable[str] | None = None) -
             n, depth = engine.contacts()
             timings[name].contacts.append(n)
             timings[name].penetration = max(timings[name].penetration, depth)
-    for engine in engines.values():
+    for name, engine in engines.items():
         if isinstance(engine, Bullet):
             engine.close()
+        timings[name].alone = _alone_peer(name, setup, steps)
+    timings["gaussim"].alone = _alone_gaussim(setup, steps)
     mujoco_pairs = None
     peer = engines.get("mujoco")
     if isinstance(peer, MuJoCo):
@@ -479,6 +495,42 @@ def run_scene(case: SceneCase, steps: int, peers: Iterable[str] | None = None) -
         "steps": steps,
         "engines": {name: {**t.row(), "status": t.status} for name, t in timings.items()},
     }
+
+
+def _peer(name: str, setup: Setup) -> MuJoCo | Bullet:
+    """Peer engine ``name`` ("mujoco" or "pybullet") holding ``setup``'s scene at its start."""
+    from .peers import Bullet, MuJoCo
+
+    return MuJoCo(setup) if name == "mujoco" else Bullet(setup)
+
+
+def _alone_gaussim(setup: Setup, steps: int) -> list[float]:
+    """The step times [s] of gaussim stepping ``setup`` alone from its start."""
+    sim = Simulator(setup.scene, Options(dt=setup.dt))
+    state, seconds = sim.reset(setup.q, setup.v), []
+    for _ in range(steps):
+        tau = setup.drive(state.t, state.q, state.v) if setup.drive else None
+        tic = time.perf_counter()
+        state = sim.step(state, tau, setup.damping)
+        seconds.append(time.perf_counter() - tic)
+    return seconds
+
+
+def _alone_peer(name: str, setup: Setup, steps: int) -> list[float]:
+    """The step times [s] of peer ``name`` stepping ``setup`` alone from its start."""
+    from .peers import Bullet, MuJoCo
+
+    engine, seconds = _peer(name, setup), []
+    for _ in range(steps):
+        if isinstance(engine, MuJoCo) and setup.drive:
+            q, v = engine.state()
+            engine.apply(setup.drive(engine.data.time, q, v))
+        tic = time.perf_counter()
+        engine.step()
+        seconds.append(time.perf_counter() - tic)
+    if isinstance(engine, Bullet):
+        engine.close()
+    return seconds
 
 
 def run_suite(
@@ -512,12 +564,14 @@ def run_suite(
 TITLE = "Scene suite for speed"
 INTRO = """Each scene is stepped by gaussim (default options, velocity scheme, dt 1 ms), MuJoCo (Newton,
 pyramidal cones, implicitfast, its default soft contacts) and PyBullet (scenes of primitive free bodies
-only), the engines in turn at every step in one process, from models generated from the same gaussim
-scene (`gaussim.bench.scenes.mjcf`: the same bodies, inertias, collision geometries or their convex
-hulls, friction and contact pairs). `us` is one step alone, median / p90 over the run (the first
-steps, which compile, left out); the ratio is gaussim's time over the peer's; contact points are the
-mean per step of each engine; penetration is gaussim's deepest and the KKT residual its largest (of
-the steps' certificates)."""
+only), from models generated from the same gaussim scene (`gaussim.bench.scenes.mjcf`: the same
+bodies, inertias, collision geometries or their convex hulls, friction and contact pairs): first the
+engines in turn at every step in one process, then each engine alone from the same start, as a user's
+loop runs it. `us` is the time of one step, median / p90 over the run (the first steps, which compile,
+left out); the ratio is gaussim's time over the peer's. In turns, each engine's step starts with a
+cache the others' steps have filled, which slows a small step most: compare the ratios alone. Contact
+points are the mean per step of each engine; penetration is gaussim's deepest and the KKT residual its
+largest (of the steps' certificates)."""
 
 
 def write_section(path: Path, title: str, text: str) -> None:
@@ -539,35 +593,37 @@ def write_section(path: Path, title: str, text: str) -> None:
 
 
 def markdown(records: list[dict]) -> str:
-    """The suite's table: a row per scene, per engine its median and p90 step [us], gaussim's ratio
-    to each peer, contact points per step (mean), and gaussim's deepest penetration and KKT residual."""
+    """The suite's table: a row per scene, per engine its median and p90 step [us] in turns and alone
+    (see :func:`run_scene`), gaussim's ratio to each peer in each, contact points per step (mean), and
+    gaussim's deepest penetration and KKT residual."""
     peers = list(dict.fromkeys(e for r in records for e in r["engines"] if e != "gaussim"))
-    header = ["scene", "bodies", "nv", "pairs", "gaussim us (median / p90)"]
-    for peer in peers:
-        header += [f"{peer} us (median / p90)", f"ratio to {peer} (median / p90)"]
+    header = ["scene", "bodies", "nv", "pairs"]
+    for how in ("in turns", "alone"):
+        header.append(f"gaussim us {how} (median / p90)")
+        for peer in peers:
+            header += [f"{peer} us {how} (median / p90)", f"ratio to {peer} {how} (median / p90)"]
     header += ["contact points (" + " / ".join(["gaussim", *peers]) + ")", "penetration [m]", "KKT residual"]
     lines = ["| " + " | ".join(header) + " |", "|---|" + "---:|" * (len(header) - 1)]
     for r in records:
         g = r["engines"]["gaussim"]
-        cells = [
-            r["scene"],
-            str(r["bodies"]),
-            str(r["nv"]),
-            str(r["pairs"]),
-            f"{g['us_median']:.0f} / {g['us_p90']:.0f}",
-        ]
+        cells = [r["scene"], str(r["bodies"]), str(r["nv"]), str(r["pairs"])]
+        for key in ("us", "us_alone"):
+            cells.append(f"{g[key + '_median']:.0f} / {g[key + '_p90']:.0f}")
+            for peer in peers:
+                cells += _peer_cells(g, r["engines"].get(peer), key)
         counts = [f"{g['contacts']:.1f}"]
         for peer in peers:
             e = r["engines"].get(peer)
-            if e is None or e["status"] != "ok":
-                cells += [e["status"] if e else "not installed", ""]
-                counts.append("-")
-                continue
-            cells += [
-                f"{e['us_median']:.1f} / {e['us_p90']:.1f}",
-                f"{g['us_median'] / e['us_median']:.1f} / {g['us_p90'] / e['us_p90']:.1f}",
-            ]
-            counts.append(f"{e['contacts']:.1f}")
+            counts.append(f"{e['contacts']:.1f}" if e is not None and e["status"] == "ok" else "-")
         cells += [" / ".join(counts), f"{g['penetration']:.2e}", f"{g['kkt_residual']:.1e}"]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
+
+
+def _peer_cells(g: dict, e: dict | None, key: str) -> list[str]:
+    """A peer's two cells of timing ``key`` ("us" or "us_alone"): its median / p90 step and gaussim's
+    ratio to it (``g``: gaussim's row), or its status."""
+    if e is None or e["status"] != "ok":
+        return [e["status"] if e else "not installed", ""]
+    median, p90 = f"{key}_median", f"{key}_p90"
+    return [f"{e[median]:.1f} / {e[p90]:.1f}", f"{g[median] / e[median]:.1f} / {g[p90] / e[p90]:.1f}"]
