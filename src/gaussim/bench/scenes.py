@@ -24,7 +24,7 @@ import importlib.util
 import sys
 import time
 import warnings
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Generator, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import ModuleType
@@ -233,6 +233,7 @@ SCENES: dict[str, SceneCase] = {
     ]
 }
 QUICK_STEPS, STEPS = 100, 2000
+ALONE_BLOCK = 100  # steps an engine takes alone before the next engine's turn (see _run_alone)
 
 
 # ---- MuJoCo ---------------------------------------------------------------------------------------
@@ -436,9 +437,10 @@ def _spread(key: str, seconds: list[float]) -> dict[str, float]:
 def run_scene(case: SceneCase, steps: int, peers: Iterable[str] | None = None) -> dict:
     """Step ``case`` ``steps`` times with gaussim (default options at the scene's dt) and each peer,
     the engines in turn at every step, each step timed (the drives, computed from each engine's own
-    state, and the contact readings are not); then each engine again from the start, alone (its
-    memory warm from its own last step, as in a user's loop, where the turns leave each step's cache
-    to the other engines: MuJoCo's step of one box took 3 times longer in turns); returns the scene's
+    state, and the contact readings are not); then each engine again from the start, alone
+    (:func:`_run_alone`: its memory warm from its own last step, as in a user's loop, where the turns
+    leave each step's cache to the other engines: MuJoCo's step of one box took 3 times longer in
+    turns); returns the scene's
     record: per engine its :meth:`Timing.row`, and the bodies and declared pairs of the scene."""
     from .peers import Bullet, MuJoCo, available
 
@@ -475,11 +477,10 @@ def run_scene(case: SceneCase, steps: int, peers: Iterable[str] | None = None) -
             n, depth = engine.contacts()
             timings[name].contacts.append(n)
             timings[name].penetration = max(timings[name].penetration, depth)
-    for name, engine in engines.items():
+    for engine in engines.values():
         if isinstance(engine, Bullet):
             engine.close()
-        timings[name].alone = _alone_peer(name, setup, steps)
-    timings["gaussim"].alone = _alone_gaussim(setup, steps)
+    _run_alone(setup, ["gaussim", *engines], steps, timings)
     mujoco_pairs = None
     peer = engines.get("mujoco")
     if isinstance(peer, MuJoCo):
@@ -504,33 +505,43 @@ def _peer(name: str, setup: Setup) -> MuJoCo | Bullet:
     return MuJoCo(setup) if name == "mujoco" else Bullet(setup)
 
 
-def _alone_gaussim(setup: Setup, steps: int) -> list[float]:
-    """The step times [s] of gaussim stepping ``setup`` alone from its start."""
-    sim = Simulator(setup.scene, Options(dt=setup.dt))
-    state, seconds = sim.reset(setup.q, setup.v), []
-    for _ in range(steps):
-        tau = setup.drive(state.t, state.q, state.v) if setup.drive else None
-        tic = time.perf_counter()
-        state = sim.step(state, tau, setup.damping)
-        seconds.append(time.perf_counter() - tic)
-    return seconds
-
-
-def _alone_peer(name: str, setup: Setup, steps: int) -> list[float]:
-    """The step times [s] of peer ``name`` stepping ``setup`` alone from its start."""
+def _alone(name: str, setup: Setup) -> Generator[float, None, None]:
+    """The step times [s] of engine ``name`` ("gaussim", "mujoco", "pybullet") stepping ``setup`` from
+    its start, one per ``next``; closing it closes the engine."""
     from .peers import Bullet, MuJoCo
 
-    engine, seconds = _peer(name, setup), []
-    for _ in range(steps):
-        if isinstance(engine, MuJoCo) and setup.drive:
-            q, v = engine.state()
-            engine.apply(setup.drive(engine.data.time, q, v))
-        tic = time.perf_counter()
-        engine.step()
-        seconds.append(time.perf_counter() - tic)
-    if isinstance(engine, Bullet):
-        engine.close()
-    return seconds
+    if name == "gaussim":
+        sim = Simulator(setup.scene, Options(dt=setup.dt))
+        state = sim.reset(setup.q, setup.v)
+        while True:
+            tau = setup.drive(state.t, state.q, state.v) if setup.drive else None
+            tic = time.perf_counter()
+            state = sim.step(state, tau, setup.damping)
+            yield time.perf_counter() - tic
+    engine = _peer(name, setup)
+    try:
+        while True:
+            if isinstance(engine, MuJoCo) and setup.drive:
+                q, v = engine.state()
+                engine.apply(setup.drive(engine.data.time, q, v))
+            tic = time.perf_counter()
+            engine.step()
+            yield time.perf_counter() - tic
+    finally:
+        if isinstance(engine, Bullet):
+            engine.close()
+
+
+def _run_alone(setup: Setup, names: list[str], steps: int, timings: dict[str, Timing]) -> None:
+    """Each engine of ``names`` stepping ``setup`` ``steps`` times from its start, alone for ALONE_BLOCK
+    steps at a time, the engines taking the blocks in turn (a drift of the machine's speed then reaches
+    them alike); their times into ``timings[name].alone``."""
+    runs = {name: _alone(name, setup) for name in names}
+    for first in range(0, steps, ALONE_BLOCK):
+        for name, run in runs.items():
+            timings[name].alone += [next(run) for _ in range(min(ALONE_BLOCK, steps - first))]
+    for run in runs.values():
+        run.close()
 
 
 def run_suite(
@@ -567,11 +578,12 @@ pyramidal cones, implicitfast, its default soft contacts) and PyBullet (scenes o
 only), from models generated from the same gaussim scene (`gaussim.bench.scenes.mjcf`: the same
 bodies, inertias, collision geometries or their convex hulls, friction and contact pairs): first the
 engines in turn at every step in one process, then each engine alone from the same start, as a user's
-loop runs it. `us` is the time of one step, median / p90 over the run (the first steps, which compile,
-left out); the ratio is gaussim's time over the peer's. In turns, each engine's step starts with a
-cache the others' steps have filled, which slows a small step most: compare the ratios alone. Contact
-points are the mean per step of each engine; penetration is gaussim's deepest and the KKT residual its
-largest (of the steps' certificates)."""
+loop runs it (in blocks of 100 steps, the engines' blocks in turn, so that a drift of the machine's
+speed reaches them alike). `us` is the time of one step, median / p90 over the run (the first steps,
+which compile, left out); the ratio is gaussim's time over the peer's. In turns, each engine's step
+starts with a cache the others' steps have filled, which slows a small step most: compare the ratios
+alone. Contact points are the mean per step of each engine; penetration is gaussim's deepest and the
+KKT residual its largest (of the steps' certificates)."""
 
 
 def write_section(path: Path, title: str, text: str) -> None:
