@@ -298,7 +298,8 @@ def compute_dynamics(
         M, f, g = pin.crba(model, data, q, _WORLD), np.empty(len(v)), np.empty(len(v))
         finite = linear_term(M, v, tau, pin.nonLinearEffects(model, data, q, v), h, f, g)
     else:  # M's upper triangle, b, data.oMi and data.J (WORLD), O(nv)
-        pin.computeAllTerms(model, data, q, v)
+        pin.crba(model, data, q, _WORLD)  # not computeAllTerms: its centroidal and energy terms go unread
+        pin.nonLinearEffects(model, data, q, v)
         M, f = structure.M, np.empty(len(v))
         finite = structured_terms(data.M, structure.subtree, v, tau, data.nle, h, M, f)
         g = -f
@@ -338,7 +339,7 @@ def gauss_problem(
         M = structure.M
         armed(M, structure.U, structure.D, structure.parents, structure.subtree, structure.armature(model))
     else:
-        pin.computeAllTerms(model, data, q, np.zeros(model.nv))  # its CRBA without the O(nv^2) mirror
+        pin.crba(model, data, q, _WORLD)  # not computeAllTerms: its RNEA and centroidal terms go unread
         M = structure.M
         mirrored(data.M, structure.subtree, M)
     return Dynamics(M, _negated(M, x_free, structure), x_free)
