@@ -440,8 +440,8 @@ def run_scene(case: SceneCase, steps: int, peers: Iterable[str] | None = None) -
     state, and the contact readings are not); then each engine again from the start, alone
     (:func:`_run_alone`: its memory warm from its own last step, as in a user's loop, where the turns
     leave each step's cache to the other engines: MuJoCo's step of one box took 3 times longer in
-    turns); returns the scene's
-    record: per engine its :meth:`Timing.row`, and the bodies and declared pairs of the scene."""
+    turns); returns the scene's record: per engine its :meth:`Timing.row`, and the bodies and
+    declared pairs of the scene."""
     from .peers import Bullet, MuJoCo, available
 
     setup = case.build()
