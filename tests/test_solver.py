@@ -126,6 +126,28 @@ def test_kkt_residual_is_nan_when_anything_is_not_finite():
     assert np.isnan(kkt_residual(anchored, solution, np.array([np.inf]), np.zeros(1)))
 
 
+def test_kkt_residuals_are_numpys_on_a_problem_of_a_piles_size():
+    """The compiled check, whose sums run in any order, against numpy's products on a problem of a
+    settling bin's size (120 coordinates, 10 equality and 330 inequality rows, a fifth of them active)."""
+    rng = np.random.default_rng(3)
+    n, n_eq, n_in = 120, 10, 330
+    root = rng.normal(size=(n, n))
+    H, g = root @ root.T + n * np.eye(n), rng.normal(size=n)
+    A, C = rng.normal(size=(n_eq, n)), rng.normal(size=(n_in, n))
+    x, y = rng.normal(size=n), rng.normal(size=n_eq)
+    z = np.where(rng.random(n_in) < 0.2, rng.random(n_in), 0.0)
+    slack = rng.random(n_in) * (z == 0)  # the active rows met, the others slack
+    b, l = A @ x + 1e-7 * rng.normal(size=n_eq), C @ x - slack
+    stationarity = H @ x + g - A.T @ y - C.T @ z
+    primal = max(np.abs(A @ x - b).max(), (l - C @ x).max())
+    complementarity = np.abs(z * (C @ x - l)).max()
+    expected = max(primal, complementarity, np.abs(stationarity).max())
+    got = kkt_residuals(H, g, A, b, C, l, x, y, z)
+    assert got[0] == pytest.approx(expected, rel=1e-9)
+    assert got[3] == pytest.approx(np.abs(stationarity).max(), rel=1e-9)
+    assert got[4] == pytest.approx(abs(z @ (C @ x - l)), rel=1e-6, abs=1e-12)
+
+
 def test_sign_violation_is_judged_relative_to_the_problem_scale():
     """A -1.6e-7 multiplier on a light row beside a 1e4 load (a 1e6 kg box on a 1 kg one, as ProxQP
     returned it at eps_abs 1e-9) is a round-off, not a pull: accepted relative to max(1, |g|), still

@@ -9,7 +9,7 @@ from numba import njit
 from ..linalg import backward, cholesky, dot, forward, independent_cholesky, matvec
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath={"reassoc", "contract"})  # summed in any order: its products vectorize
 def kkt_residuals(H, g, A, b, C, l, x, y, z):  # type: ignore[no-untyped-def]
     """(the residual of :func:`gaussim.solver.certificate.kkt_residual`, the same with each term relative to
     its size, the primal violation, the stationarity residual, the duality gap sum_i z_i s_i): the relative
@@ -22,9 +22,9 @@ def kkt_residuals(H, g, A, b, C, l, x, y, z):  # type: ignore[no-untyped-def]
     size = 1.0
     for i in range(len(g)):
         size = max(size, abs(g[i]))
-    stationarity = matvec(H, x)
+    stationarity = np.empty(len(g))
     for k in range(len(g)):
-        stationarity[k] += g[k]
+        stationarity[k] = dot(H[k], x) + g[k]
     for i in range(len(b)):
         if y[i] != 0.0:  # most rows carry no force (a row's non-finite entry shows in its violation)
             for k in range(len(g)):  # loops, not array expressions: those allocate a temporary each
