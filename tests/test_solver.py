@@ -10,6 +10,7 @@ import pytest
 import gaussim
 from gaussim.assembly import GaussProblem, assemble
 from gaussim.constraints.base import ConstraintModule, Context, Rows
+from gaussim.kernels.solver import violates
 from gaussim.solver import KKT_RTOL, GaussSolver, Status, kkt_residual
 from gaussim.solver.active_set import ACTIVE_SET_FLOOR, active_set_candidate
 from gaussim.solver.certificate import kkt_residuals
@@ -146,6 +147,16 @@ def test_kkt_residuals_are_numpys_on_a_problem_of_a_piles_size():
     assert got[0] == pytest.approx(expected, rel=1e-9)
     assert got[3] == pytest.approx(np.abs(stationarity).max(), rel=1e-9)
     assert got[4] == pytest.approx(abs(z @ (C @ x - l)), rel=1e-6, abs=1e-12)
+
+
+def test_a_violated_row_refuses_a_point_before_its_check():
+    """``violates``: a row violated beyond the tolerance, not within it, and not a NaN (which the KKT
+    check refuses on its own)."""
+    C, l = np.array([[1.0, 0.0], [0.0, 1.0]]), np.array([0.0, 1.0])
+    assert violates(C, l, np.array([0.0, 1.0 - 1e-9]), 1e-8) is False
+    assert violates(C, l, np.array([0.0, 1.0 - 1e-7]), 1e-8) is True
+    assert violates(C, l, np.array([np.nan, 1.0]), 1e-8) is False
+    assert violates(np.zeros((0, 2)), np.zeros(0), np.zeros(2), 1e-8) is False
 
 
 def test_sign_violation_is_judged_relative_to_the_problem_scale():

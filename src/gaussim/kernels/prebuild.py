@@ -82,6 +82,7 @@ SIGNATURES = {
     ],
     # the equalities (A, b) or the inequalities (C, l) of a problem are read-only when empty
     "solver.kkt_residuals": [f"f2 f1 {sides} f1 f1 f1" for sides in _SIDES],
+    "solver.violates": ["f2 f1 f1 f", "f2r f1r f1 f"],
     "solver.active_set_candidate": [
         "f2 f1 f2 f1 f2 f1 f1 f1 f f f1 f1",
         "f2 f1 f2 f1 f2r f1r f1 f1 f f f1 f1",

@@ -51,6 +51,16 @@ def kkt_residuals(H, g, A, b, C, l, x, y, z):  # type: ignore[no-untyped-def]
     return worst, relative, primal, dual, abs(gap)
 
 
+@njit(cache=True, fastmath={"reassoc", "contract"})
+def violates(C, l, x, tolerance):  # type: ignore[no-untyped-def]
+    """Whether x violates a row of C x >= l by more than ``tolerance`` (a NaN does not: the KKT check
+    refuses it); stops at the first such row."""
+    for i in range(len(l)):
+        if dot(C[i], x) - l[i] < -tolerance:
+            return True
+    return False
+
+
 # In ProxQP's answer, an inequality row is active when its multiplier exceeds this fraction of the
 # largest one: ProxQP leaves multipliers of 1e-172 on inactive rows, which would make them equalities.
 # (The last solution keeps every positive multiplier's row: with this floor there, Talos with 16

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..assembly import GaussProblem
-from ..kernels.solver import kkt_residuals
+from ..kernels.solver import kkt_residuals, violates
 
 # A solution is accepted when its relative KKT residual (see Certificate) is below KKT_RTOL * eps_abs.
 KKT_RTOL = 100.0
@@ -162,7 +162,7 @@ def checked(
     """(x, multipliers) as a solution of ``status`` (after ``iterations`` of its solver) when the KKT
     check's relative residual certifies it to ``tolerance``, else None."""
     p, n_eq = problem, len(problem.b)
-    if len(p.l) and (p.C @ x - p.l).min() < -tolerance:  # a row violated: refused at a product's cost
+    if violates(p.C, p.l, x, tolerance):  # refused at the first row it violates
         return None
     residual, relative, primal, dual, gap = kkt_residuals(
         p.H, p.g, p.A, p.b, p.C, p.l, x, multipliers[:n_eq], multipliers[n_eq:]
