@@ -37,6 +37,7 @@ import numpy as np
 import pinocchio as pin
 
 import gaussim
+from gaussim.bench.provenance import made, python_loop
 from gaussim.collision import ContactDetector
 from gaussim.exceptions import GaussimError, GaussimWarning
 from gaussim.robot import example_robot_names
@@ -284,8 +285,9 @@ def summary(rows: list[Row]) -> list[str]:
     ]
 
 
-def write(rows: list[Row], markdown: Path, command: str, duration: float) -> None:
-    """The table as Markdown (with the counts) and as a CSV beside it."""
+def write(rows: list[Row], markdown: Path, command: str, duration: float, notes: list[str]) -> None:
+    """The table as Markdown (with the counts and the run's ``notes``: see
+    :func:`gaussim.bench.provenance.made`) and as a CSV beside it."""
     markdown.parent.mkdir(parents=True, exist_ok=True)
     with open(markdown.with_suffix(".csv"), "w", newline="") as f:
         writer = csv.DictWriter(f, [f.name for f in fields(Row)])
@@ -297,8 +299,9 @@ def write(rows: list[Row], markdown: Path, command: str, duration: float) -> Non
     lines = [
         "# The robot corpora",
         "",
-        f"Written by `{command}` ({duration:g} s each pass, dt = {DT:g} s; see benchmarks/corpus.py for the "
-        "settings and the outcomes). The CSV beside this file holds the same rows with the warnings.",
+        f"Written by `{command}` ({duration:g} s each pass, dt = {DT:g} s; {'; '.join(notes)}; see "
+        "benchmarks/corpus.py for the settings and the outcomes). The CSV beside this file holds the same "
+        "rows with the warnings.",
         "",
         f"{len(robots)} robots: {len(both)} simulate both passes, {len(refused)} are refused with a reason, "
         f"{len(robots - both - refused)} neither.",
@@ -343,8 +346,10 @@ def main(argv: list[str] | None = None) -> int:
         entries = [e for e in entries if {e[0], e[1], Path(e[0]).name} & set(args.only)]
     warm = [e for e in corpus(0) if e[0] == "solo12"]  # compiles the kernels before the fork
     one(*warm[0], DT)
+    before = python_loop()  # the machine's speed around the run: its step times compare within it
     rows = run_all(entries, duration, args.workers, args.limit)
-    write(rows, args.out, "python benchmarks/corpus.py " + " ".join(argv or sys.argv[1:]), duration)
+    notes = made((before, python_loop()))
+    write(rows, args.out, "python benchmarks/corpus.py " + " ".join(argv or sys.argv[1:]), duration, notes)
     counts = Counter((r.run, r.outcome) for r in rows)
     for run in PASSES:
         print(run + ": " + ", ".join(f"{o} {counts[run, o]}" for o in OUTCOMES if counts[run, o]))

@@ -6,7 +6,9 @@ test_loaders.py with a small URDF)."""
 from __future__ import annotations
 
 import importlib.util
+import re
 import sys
+import time
 from pathlib import Path
 
 import pybullet_data
@@ -64,3 +66,17 @@ def test_a_fast_turning_collapse_stays_on_the_ground():
     zero = next(row for row in rows if row.run == "zero")
     assert zero.outcome == "ok", zero.message
     assert zero.max_penetration_mm < 2.0
+
+
+def test_the_corpus_table_says_when_and_on_what_it_was_made(tmp_path):
+    """``python benchmarks/corpus.py``'s table names its command, the day (and the commit of a source
+    checkout) and the machine's speed before and after its run, and counts its outcomes."""
+    out = tmp_path / "corpus.md"
+    argv = ["--only", "sphere2red_nocol.urdf", "--duration", "0.01", "--workers", "1", "--out", str(out)]
+    assert corpus.main(argv) == 0
+    text = out.read_text()
+    command = "python benchmarks/corpus.py " + " ".join(argv)
+    assert f"Written by `{command}` (0.01 s each pass, dt = 0.001 s; {time.strftime('%Y-%m-%d')}" in text
+    assert re.search(r"a fixed Python loop \(3,000,000 additions\) took \d\.\d\d s before the run", text)
+    assert "1 robots: 0 simulate both passes, 1 are refused with a reason, 0 neither." in text
+    assert out.with_suffix(".csv").exists()

@@ -276,6 +276,8 @@ def _bench(args: argparse.Namespace) -> int:
 def _bench_suite(args: argparse.Namespace) -> int:
     """``gaussim bench --scenes`` (the speed suite) or ``--motion`` (matched accuracy on motion): the
     table on stdout, progress on stderr, and with ``--report`` a markdown file."""
+    from .bench.provenance import made, python_loop
+
     if args.scenes:
         from .bench import scenes as suite
     else:
@@ -289,14 +291,14 @@ def _bench_suite(args: argparse.Namespace) -> int:
         raise InvalidOptions("cases", f"unknown {unknown}; known: {', '.join(suite.SCENES)}")
     flags = " --quick" if args.quick else ""
     command = f"gaussim bench --{'scenes' if args.scenes else 'motion'}{flags} {' '.join(args.cases)}".strip()
-    loops = [_python_loop()]  # the machine's speed around the run: timings compare within one spell
+    before = python_loop()  # the machine's speed around the run: timings compare within one spell
     records = suite.run_suite(
         args.cases or None,
         quick=args.quick,
         peers=[] if args.no_peers else None,
         progress=lambda line: print(line, file=sys.stderr, flush=True),
     )
-    loops.append(_python_loop())
+    after = python_loop()
     text = suite.markdown(records)
     print(text)
     if args.report:
@@ -304,48 +306,13 @@ def _bench_suite(args: argparse.Namespace) -> int:
 
         steps = {r["steps"] for r in records if "steps" in r}
         notes = [f"{steps.pop()} steps per scene"] if len(steps) == 1 else []
-        notes.append(time.strftime("%Y-%m-%d") + _commit())
-        notes.append(
-            f"a fixed Python loop ({LOOP:,} additions) took {loops[0]:.2f} s before the run, "
-            f"{loops[1]:.2f} s after"
-        )
+        notes += made((before, after))
         if args.quick:
             notes.append("short runs of a subset: the structure of the full run, timings indicative only")
-        made = f"Made by `{command} --report {args.report}` ({'; '.join(notes)})."
-        write_section(args.report, suite.TITLE, f"{suite.INTRO}\n\n{made}\n\n{text}")
+        line = f"Made by `{command} --report {args.report}` ({'; '.join(notes)})."
+        write_section(args.report, suite.TITLE, f"{suite.INTRO}\n\n{line}\n\n{text}")
         print(f"table: section '{suite.TITLE}' of {args.report}")
     return 0
-
-
-LOOP = 3_000_000  # additions of _python_loop
-
-
-def _python_loop() -> float:
-    """Seconds a fixed pure-Python loop of LOOP additions takes: the machine's speed, which drifts on a
-    shared machine by a factor of 2 (a quiet 2-core machine: about 0.16 s)."""
-    tic = time.perf_counter()
-    total = 0
-    for k in range(LOOP):
-        total += k
-    return time.perf_counter() - tic
-
-
-def _commit() -> str:
-    """ ", at commit <short hash>" of the source checkout gaussim runs from, or "" (an installed
-    package, no git)."""
-    import subprocess
-
-    try:
-        found = subprocess.run(
-            ["git", "rev-parse", "--short", "HEAD"],
-            cwd=Path(__file__).parent,
-            capture_output=True,
-            text=True,
-            timeout=10,
-        )
-    except (OSError, subprocess.SubprocessError):
-        return ""
-    return f", at commit {found.stdout.strip()}" if found.returncode == 0 and found.stdout.strip() else ""
 
 
 def _sweep(args: argparse.Namespace) -> int:
