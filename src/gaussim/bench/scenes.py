@@ -468,9 +468,7 @@ def run_scene(case: SceneCase, steps: int, peers: Iterable[str] | None = None) -
         mine.penetration = max(mine.penetration, max((-c.gap for c in report.contacts), default=0.0))
         mine.kkt_residual = max(mine.kkt_residual, report.max_residual)
         for name, engine in engines.items():
-            if isinstance(engine, MuJoCo) and setup.drive:
-                q, v = engine.state()
-                engine.apply(setup.drive(engine.data.time, q, v))
+            _drive(engine, setup)
             tic = time.perf_counter()
             engine.step()
             timings[name].seconds.append(time.perf_counter() - tic)
@@ -505,10 +503,19 @@ def _peer(name: str, setup: Setup) -> MuJoCo | Bullet:
     return MuJoCo(setup) if name == "mujoco" else Bullet(setup)
 
 
+def _drive(engine: MuJoCo | Bullet, setup: Setup) -> None:
+    """Apply ``setup``'s drive at the peer's own state (MuJoCo's; PyBullet runs free bodies only)."""
+    from .peers import MuJoCo
+
+    if isinstance(engine, MuJoCo) and setup.drive:
+        q, v = engine.state()
+        engine.apply(setup.drive(engine.data.time, q, v))
+
+
 def _alone(name: str, setup: Setup) -> Generator[float, None, None]:
     """The step times [s] of engine ``name`` ("gaussim", "mujoco", "pybullet") stepping ``setup`` from
     its start, one per ``next``; closing it closes the engine."""
-    from .peers import Bullet, MuJoCo
+    from .peers import Bullet
 
     if name == "gaussim":
         sim = Simulator(setup.scene, Options(dt=setup.dt))
@@ -521,9 +528,7 @@ def _alone(name: str, setup: Setup) -> Generator[float, None, None]:
     engine = _peer(name, setup)
     try:
         while True:
-            if isinstance(engine, MuJoCo) and setup.drive:
-                q, v = engine.state()
-                engine.apply(setup.drive(engine.data.time, q, v))
+            _drive(engine, setup)
             tic = time.perf_counter()
             engine.step()
             yield time.perf_counter() - tic
