@@ -508,6 +508,35 @@ def test_daqp_starts_a_new_problem_from_its_last_working_set():
     assert np.sqrt(difference @ problem.H @ difference) < 1e-8
 
 
+def test_daqp_starts_from_the_last_working_set_matched_by_row_ids():
+    """The next step's rows come in another order, with a new one among them (a contact appeared, a
+    patch's points shifted the rows after it): DAQP starts from the rows the last solution held active,
+    found by their ids (Rows.ids), in a few iterations, to the answer of a cold start of that problem
+    (its rows by position would start it from the wrong ones)."""
+    saved = _saved_problem("pile_wrong_sign_multiplier_full_rank.npz")
+    module, n = _Given(), len(saved.l)
+
+    def posed(order: np.ndarray, C: np.ndarray, l: np.ndarray, ids: np.ndarray) -> GaussProblem:
+        rows = Rows(C[order], l[order], False, lambda: [], ids=lambda: ids[order])
+        return assemble(saved.H, saved.g * (1 + 1e-6), [(module, rows)])
+
+    first = assemble(
+        saved.H, saved.g, [(module, Rows(saved.C, saved.l, False, lambda: [], ids=lambda: np.arange(n)))]
+    )
+    # the new row: the first one shifted far down (inactive), with an id of its own
+    C, l = np.vstack([saved.C, saved.C[:1]]), np.append(saved.l, saved.l[0] - 1.0)
+    order = np.r_[n, np.arange(n)[::-1]]
+    nxt = posed(order, C, l, np.arange(n + 1))
+    solver = GaussSolver(gaussim.Options())
+    assert solver.solve(first).certificate.iterations > 10
+    warm = solver.solve(nxt)
+    cold = GaussSolver(gaussim.Options()).solve(posed(order, C, l, np.arange(n + 1)))
+    assert warm.certificate.status is cold.certificate.status is Status.DUAL_ACTIVE_SET_SOLVED
+    assert warm.certificate.iterations < 10 < cold.certificate.iterations
+    difference = warm.x - cold.x
+    assert np.sqrt(difference @ saved.H @ difference) < 1e-8
+
+
 def test_daqp_answers_the_check_refuses_or_inputs_it_refuses_go_to_proxqp(monkeypatch):
     """Rows of integers in a read-only array (a module of the user's) are DAQP's as floats; an
     answer the KKT check refuses goes on to ProxQP."""

@@ -8,11 +8,11 @@ with g = -(M v + dt F) (velocity level), -M v (impulse level) or -F (acceleratio
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from functools import cache
+from functools import cache, cached_property
 
 import numpy as np
 
-from .constraints.base import ConstraintModule, Rows
+from .constraints.base import ROW_ID_BITS, ConstraintModule, Rows
 from .kernels.solver import cut
 
 
@@ -53,11 +53,41 @@ class GaussProblem:
             return [names[i] for i in (eq if equality else ineq)]
         return [label for _, rows, _ in self.blocks if rows.equality == equality for label in rows.labels()]
 
+    @cached_property
+    def row_ids(self) -> np.ndarray:
+        """Each row of [A; C]'s identity from step to step, shape (n_eq + n_in,): its module's tag
+        (:func:`module_tag`) and its id among the module's rows (:attr:`Rows.ids`, else its place);
+        rows of no block (a problem made by hand) are named by their place."""
+        if self.source is not None:
+            source, eq, ineq = self.source
+            return source.row_ids[np.concatenate((eq, len(source.b) + ineq))]
+        ids = np.arange(len(self.b) + len(self.l), dtype=np.int64)
+        for module, rows, part in self.blocks:
+            own = rows.ids() if rows.ids is not None else np.arange(len(rows))
+            ids[part] = (module_tag(module) << ROW_ID_BITS) | own
+        return ids
+
     def island(self, cols: np.ndarray, eq: np.ndarray, ineq: np.ndarray) -> GaussProblem:
         """The problem on the coordinates ``cols`` and the equality and inequality rows ``eq``,
         ``ineq`` (an island: no other row reads those coordinates, and H couples them to no other)."""
         H, g, A, b, C, l = cut(self.H, self.g, self.A, self.b, self.C, self.l, cols, eq, ineq)
         return GaussProblem(H, g, A, b, C, l, [], None, (self, eq, ineq))
+
+
+_TAGS: dict[int, int] = {}  # id(module) -> its tag
+# The most modules tagged apart (the bits an int64 row id leaves above ROW_ID_BITS).
+MAX_TAGS = 2 ** (62 - ROW_ID_BITS)
+
+
+def module_tag(module: ConstraintModule) -> int:
+    """A small integer that tells ``module`` from the others in row ids (:attr:`GaussProblem.row_ids`)
+    while it lives (by identity: a user's module may define __eq__)."""
+    tag = _TAGS.get(id(module))
+    if tag is None:
+        if len(_TAGS) >= MAX_TAGS:  # modules of many simulators: tags are only compared within one
+            _TAGS.clear()
+        tag = _TAGS[id(module)] = len(_TAGS)
+    return tag
 
 
 def assemble(

@@ -8,7 +8,15 @@ import numpy as np
 
 from ..kernels.pairs import PATCH_MIN_EXTENT, PATCH_TOLERANCE
 
-__all__ = ["PATCH_MIN_EXTENT", "PATCH_TOLERANCE", "Contacts", "NO_CONTACTS", "Piece", "one_pair"]
+__all__ = [
+    "MAX_POINTS",
+    "PATCH_MIN_EXTENT",
+    "PATCH_TOLERANCE",
+    "Contacts",
+    "NO_CONTACTS",
+    "Piece",
+    "one_pair",
+]
 
 
 @dataclass
@@ -24,6 +32,9 @@ class Contacts:
         normal: unit normals from the obstacle towards the robot, shape (m, 3).
         gap: signed distances along the normal, negative when penetrating, shape (m,) [m].
         friction, restitution: coefficients of the obstacle, shape (m,).
+        key: each point's identity, its declared pair and its rank among that pair's points
+            (pair * MAX_POINTS + rank, stable while a patch keeps its size, as the names are), (m,);
+            None: not known.
     """
 
     names: list[str]
@@ -36,6 +47,7 @@ class Contacts:
     gap: np.ndarray
     friction: np.ndarray
     restitution: np.ndarray
+    key: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.names)
@@ -54,12 +66,23 @@ class Contacts:
             self.gap[keep],
             self.friction[keep],
             self.restitution[keep],
+            None if self.key is None else self.key[keep],
         )
 
 
 NO_CONTACTS = Contacts(
-    [], [], [], np.zeros(0, int), np.zeros(0, int), *(np.zeros((0, 3)),) * 2, *(np.zeros(0),) * 3
+    [],
+    [],
+    [],
+    np.zeros(0, int),
+    np.zeros(0, int),
+    *(np.zeros((0, 3)),) * 2,
+    *(np.zeros(0),) * 3,
+    np.zeros(0, np.int64),
 )
+
+# The most points one pair's patch is named apart (Contacts.key).
+MAX_POINTS = 4096
 
 
 # Contact points a routine found, k of them, before the driver gathers them into Contacts: the

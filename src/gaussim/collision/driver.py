@@ -14,7 +14,7 @@ from ..dynamics import Supports, joint_jacobians
 from ..kernels.collision import closing, in_pair_order
 from ..scene import Scene
 from .boxes import BoxPairs
-from .contacts import NO_CONTACTS, NOTHING_FOUND, Contacts, Piece
+from .contacts import MAX_POINTS, NO_CONTACTS, NOTHING_FOUND, Contacts, Piece
 from .cylinders import GroundCylinders
 from .ground import GroundHulls
 from .margin import WIDENING, MarginSchedule
@@ -194,16 +194,24 @@ class ContactDetector:
             if len(self._layouts) > 1024:  # many pairs touching in ever new combinations
                 self._layouts.clear()
             self._layouts[key] = self._layout(owner)
-        names, geometry, obstacle, joint, other_joint, friction, restitution = self._layouts[key]
+        names, geometry, obstacle, joint, other_joint, friction, restitution, ids = self._layouts[key]
         return Contacts(
-            names, geometry, obstacle, joint, other_joint, points, normals, gaps, friction, restitution
+            names, geometry, obstacle, joint, other_joint, points, normals, gaps, friction, restitution, ids
         )
 
     def _layout(self, owner: np.ndarray) -> tuple:
         """What the contacts of pairs ``owner`` (one entry per point, sorted) have that does not move."""
         pairs, counts = np.unique(owner, return_counts=True)
         chosen = [self.pairs[k] for k in owner.tolist()]
-        arrays = [self.joint[owner], self.other_joint[owner], self.friction[owner], self.restitution[owner]]
+        rank = np.arange(len(owner)) - np.searchsorted(owner, owner)  # each point's among its pair's
+        ids = owner.astype(np.int64) * MAX_POINTS + np.minimum(rank, MAX_POINTS - 1)
+        arrays = [
+            self.joint[owner],
+            self.other_joint[owner],
+            self.friction[owner],
+            self.restitution[owner],
+            ids,
+        ]
         for array in arrays:
             array.flags.writeable = False  # shared by every step with these pairs touching
         names = [

@@ -29,6 +29,8 @@ if TYPE_CHECKING:
 
 Level = Literal["velocity", "impulse", "acceleration"]
 T = TypeVar("T")
+# The bits of a row's id (Rows.ids): a solver names a row by its module and this id in one int64.
+ROW_ID_BITS = 48
 
 
 @dataclass
@@ -51,6 +53,10 @@ class Rows(Generic[T]):
         joints: the two joints whose motion each row reads, shape (m, 2) (0: the world): the row is
             zero off their supports, so the solver need not scan J for the bodies it couples; None
             (the default): J is scanned.
+        ids: returns one integer per row (m,), in [0, 2**ROW_ID_BITS), that names the same constraint
+            from step to step (a contact point's facet, a joint's limit side), so that a solver
+            starts from the rows the last step held active; called only when a solver sets up a new
+            problem. None (the default): a row is named by its position among the module's rows.
     """
 
     J: np.ndarray
@@ -61,6 +67,7 @@ class Rows(Generic[T]):
     force: np.ndarray | None = None
     settled: bool = True
     joints: np.ndarray | None = None
+    ids: Callable[[], np.ndarray] | None = None
 
     def __len__(self) -> int:
         return len(self.bound)

@@ -65,6 +65,9 @@ from ..kernels.contact import newton_moves, pyramids, secant_moves, shifted_boun
 from ..kernels.solver import ACTIVE_SET_FLOOR
 from .base import LEVELS, ConstraintModule, Context, Rows, is_active
 
+# More than a contact's rows (its pyramid's facets, at most options.MAXIMA["friction_facets"]): a row's
+# id is its contact's key times this plus its place among them.
+ROWS_PER_CONTACT = 128
 # Fixed-point iterations on the slip stop when the shifted bounds' error is below this [m/s].
 SLIP_TOLERANCE = {"accurate": 1e-4, "exact": 1e-9}
 # Still above this after the step's passes, the iteration is far from its fixed point: the last QP
@@ -216,6 +219,16 @@ class ContactBatch:
         """Sum each contact's rows' multipliers times their generators, shape (m, 3)."""
         return np.add.reduceat(lam[:, None] * self.generators, self.starts[:-1], axis=0)
 
+    def row_ids(self) -> np.ndarray:
+        """Each row's id (:attr:`Rows.ids`): its contact's key and its place among that contact's
+        rows, shape (R,)."""
+        counts = np.diff(self.starts)
+        place = np.arange(self.starts[-1]) - np.repeat(self.starts[:-1], counts)
+        key = self.contacts.key
+        if key is None:  # contacts of no detector's making: named by their order
+            key = np.arange(len(counts))
+        return np.repeat(key, counts) * ROWS_PER_CONTACT + place
+
 
 def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Row-wise dot products of (m, 3) arrays, shape (m,)."""
@@ -358,7 +371,7 @@ class ContactModule(ConstraintModule[ContactBatch]):
             ]
 
         batch = ContactBatch(contacts, packed, starts, sliding, shifts, lagged.relaxed)
-        posed = Rows(rows, bound, False, labels, batch, force, joints=read)
+        posed = Rows(rows, bound, False, labels, batch, force, joints=read, ids=batch.row_ids)
         self._posed = (ctx, posed)
         return posed
 
@@ -453,7 +466,7 @@ def _reshifted(rows: Rows[ContactBatch], slip: np.ndarray, relaxed: bool) -> Row
     packed = b.packed.copy()
     unpacked(packed, m, nv)[2][:] = slip
     batch = ContactBatch(b.contacts, packed, b.starts, b.sliding, b.shifts, relaxed)
-    return Rows(rows.J, bound, False, rows.labels, batch, rows.force, joints=rows.joints)
+    return Rows(rows.J, bound, False, rows.labels, batch, rows.force, joints=rows.joints, ids=rows.ids)
 
 
 def contact_batch(blocks: Iterable[tuple[ConstraintModule, Rows, Any]]) -> ContactBatch | None:

@@ -64,7 +64,7 @@ class LimitModule(ConstraintModule[np.ndarray]):
         def labels() -> list[str]:
             return [f"limit {self.labels[i][0]} {self.labels[i][1]}" for i in active]
 
-        return Rows(J, bound, False, labels, active)
+        return Rows(J, bound, False, labels, active, ids=lambda: active)
 
     def reactions(self, rows: Rows[np.ndarray], multipliers: np.ndarray, scale: float) -> list[LimitReaction]:
         return [

@@ -9,7 +9,8 @@ active-set method leaves them out: a settled pile's island (120 coordinates, 336
 iterations, 2 to 3.5 ms, from a cold start, where ProxQP took 20 to 40 ms. Each island keeps its DAQP
 workspace: a problem that differs from the last one only in its bounds (the friction passes of one
 step, which shift the normal rows' bounds) is solved on the factors it left, about 0.1 ms there; a
-new one starts from the last working set (0.5 to 1 ms). The answer, like ProxQP's, is accepted only
+new one starts from the last working set, its rows matched by their ids (:attr:`GaussProblem.row_ids`),
+0.5 to 1 ms. The answer, like ProxQP's, is accepted only
 when gaussim's KKT check certifies it.
 """
 
@@ -36,8 +37,8 @@ class DualActiveSet:
         self._model: Any = None  # daqp.Model
         self._held: tuple[np.ndarray, ...] = ()  # copies of the model's H, g and rows
         self._key: object = None  # the rows_key of the problem they are
-        self._multipliers: np.ndarray | None = None  # the last solution's: DAQP's working set
-        self._split = (0, 0)  # its equality and inequality rows
+        # the last solution's row ids and multipliers: the working set a new problem starts from
+        self._last: tuple[np.ndarray, np.ndarray] | None = None
 
     def solve(self, problem: GaussProblem) -> Solution | None:
         """DAQP's solution of ``problem`` (rows met to eps_abs) when it is optimal and the relative
@@ -56,7 +57,7 @@ class DualActiveSet:
             return None
         # DAQP's multipliers of lower bounds are <= 0 (and its inactive rows' -0: 0 - (-0) is +0)
         multipliers = np.zeros(n_eq + n_in) - np.asarray(info["lam"])
-        self._multipliers, self._split = multipliers, (n_eq, n_in)
+        self._last = p.row_ids, multipliers
         status, iterations = Status.DUAL_ACTIVE_SET_SOLVED, info["iterations"]
         return checked(p, np.array(x), multipliers.copy(), status, self.tolerance, iterations)
 
@@ -70,11 +71,26 @@ class DualActiveSet:
             x, _, flag, info = self._model.solve()
             if flag == _OPTIMAL:
                 return flag, x, info
-        if self._multipliers is not None and self._split == (len(p.b), len(p.l)):
-            flag, x, info = self._setup(p, rows, upper, lower, -self._multipliers)
+        start = self._start(p)
+        if start is not None:
+            flag, x, info = self._setup(p, rows, upper, lower, start)
             if flag == _OPTIMAL:
                 return flag, x, info
         return self._setup(p, rows, upper, lower, None)
+
+    def _start(self, p: GaussProblem) -> np.ndarray | None:
+        """DAQP's dual start for ``p``: the last solution's multipliers of the rows of ``p`` that it had
+        (matched by their ids, :attr:`GaussProblem.row_ids`: contacts come and go, and a patch's points
+        shift the rows after them), in DAQP's sign; None when it held none of them active."""
+        if self._last is None or not len(self._last[0]):
+            return None
+        ids, multipliers = self._last
+        order = np.argsort(ids, kind="stable")
+        ids, multipliers = ids[order], multipliers[order]
+        new = p.row_ids
+        at = np.minimum(np.searchsorted(ids, new), len(ids) - 1)
+        start = np.where(ids[at] == new, -multipliers[at], 0.0)
+        return start if start.any() else None
 
     def _holds(self, p: GaussProblem, rows: np.ndarray) -> bool:
         """Whether the workspace holds ``p``'s H, g and ``rows`` (the key of the problem it was set up
