@@ -37,8 +37,8 @@ class DualActiveSet:
         self._model: Any = None  # daqp.Model
         self._held: tuple[np.ndarray, ...] = ()  # copies of the model's H, g and rows
         self._key: object = None  # the rows_key of the problem they are
-        # the last solution's row ids and multipliers: the working set a new problem starts from
-        self._last: tuple[np.ndarray, np.ndarray] | None = None
+        # the last solution's problem and multipliers: the working set a new problem starts from
+        self._last: tuple[GaussProblem, np.ndarray] | None = None
 
     def solve(self, problem: GaussProblem) -> Solution | None:
         """DAQP's solution of ``problem`` (rows met to eps_abs) when it is optimal and the relative
@@ -57,7 +57,7 @@ class DualActiveSet:
             return None
         # DAQP's multipliers of lower bounds are <= 0 (and its inactive rows' -0: 0 - (-0) is +0)
         multipliers = np.zeros(n_eq + n_in) - np.asarray(info["lam"])
-        self._last = p.row_ids, multipliers
+        self._last = p, multipliers  # its row ids only when a new problem starts from it
         status, iterations = Status.DUAL_ACTIVE_SET_SOLVED, info["iterations"]
         return checked(p, np.array(x), multipliers.copy(), status, self.tolerance, iterations)
 
@@ -82,9 +82,9 @@ class DualActiveSet:
         """DAQP's dual start for ``p``: the last solution's multipliers of the rows of ``p`` that it had
         (matched by their ids, :attr:`GaussProblem.row_ids`: contacts come and go, and a patch's points
         shift the rows after them), in DAQP's sign; None when it held none of them active."""
-        if self._last is None or not len(self._last[0]):
+        if self._last is None or not len(self._last[1]):
             return None
-        ids, multipliers = self._last
+        ids, multipliers = self._last[0].row_ids, self._last[1]
         order = np.argsort(ids, kind="stable")
         ids, multipliers = ids[order], multipliers[order]
         new = p.row_ids
