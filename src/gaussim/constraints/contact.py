@@ -175,6 +175,8 @@ class ContactBatch:
         sliding: which contacts get that friction force, shape (m,), or None when none does.
         shifts: True when the contacts with a full pyramid refine their De Saxce shift.
         relaxed: True when these rows dropped the shift: its fixed point was not reached.
+        slip: the slip the shift used when not the packed one, (m, 3) (a later pass's, see
+            :func:`_reshifted`: the buffer, mostly J, is shared with the first pass's record).
     """
 
     def __init__(
@@ -185,9 +187,11 @@ class ContactBatch:
         sliding: np.ndarray | None,
         shifts: bool,
         relaxed: bool,
+        slip: np.ndarray | None = None,
     ) -> None:
         self.contacts, self.packed, self.starts = contacts, packed, starts
         self.sliding, self.shifts, self.relaxed = sliding, shifts, relaxed
+        self._slip = slip
 
     @cached_property
     def _views(self) -> tuple[np.ndarray, ...]:
@@ -208,7 +212,7 @@ class ContactBatch:
     @property
     def slip(self) -> np.ndarray:
         """The slip the De Saxce shift used, shape (m, 3) [m/s]."""
-        return self._views[2]
+        return self._views[2] if self._slip is None else self._slip
 
     @property
     def friction(self) -> np.ndarray:
@@ -430,7 +434,7 @@ class ContactModule(ConstraintModule[ContactBatch]):
             mu = b.contacts.friction
             joints = (b.contacts.joint, b.contacts.other_joint)
             slip, residual = slips(
-                b.packed, b.starts, x, normals, mu, rows.J, rows.bound, *joints, *self.supports[1:]
+                b.packed, b.slip, b.starts, x, normals, mu, rows.J, rows.bound, *joints, *self.supports[1:]
             )
             if residual > SLIP_TOLERANCE[self.mode]:
                 lagged = self._iterate(ctx)
@@ -460,12 +464,9 @@ def _reshifted(rows: Rows[ContactBatch], slip: np.ndarray, relaxed: bool) -> Row
     shift of the lagged ``slip`` (m, 3): only the bounds move (the rows' directions read the free
     motion, not the slip), where posing them again cost a friction pass most of its time."""
     b = rows.data
-    m, nv = len(b.contacts), rows.J.shape[1]
     bound = np.empty_like(rows.bound)
     shifted_bounds(rows.bound, b.starts, b.contacts.friction, b.slip, slip, bound)
-    packed = b.packed.copy()
-    unpacked(packed, m, nv)[2][:] = slip
-    batch = ContactBatch(b.contacts, packed, b.starts, b.sliding, b.shifts, relaxed)
+    batch = ContactBatch(b.contacts, b.packed, b.starts, b.sliding, b.shifts, relaxed, slip)
     return Rows(rows.J, bound, False, rows.labels, batch, rows.force, joints=rows.joints, ids=rows.ids)
 
 

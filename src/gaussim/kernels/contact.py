@@ -202,15 +202,18 @@ def pyramids(  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def slips(packed, starts, x, normal, mu, rows, bound, joints, other_joints, support_starts, support_columns):  # type: ignore[no-untyped-def]
+def slips(
+    packed, slip, starts, x, normal, mu, rows, bound, joints, other_joints, support_starts, support_columns
+):  # type: ignore[no-untyped-def]
     """(the slips (m, 3) of solution x for the contacts that refine their shift (one with a full
     pyramid) and are moving (a sticking contact has no shift to refine), the others' unchanged; the
     largest error of the shifted bounds: mu times the change of a contact's slip speed (all the
     shift reads; its cut below SLIP_SPEED adds at most mu SLIP_SPEED, which passes would not remove),
     less the slack its rows ``rows`` x >= ``bound`` leave at x (a bound that moves within its row's
     slack leaves x the solution). ``packed`` and ``starts`` are :func:`pyramids`', the rest what it
-    reads. (In scalars, no array per contact: this runs after every QP with friction.)"""
-    J, _, slip, _ = unpacked(packed, len(normal), len(x))
+    reads, ``slip`` (m, 3) the slips the QP's shift used. (In scalars, no array per contact: this runs
+    after every QP with friction.)"""
+    J = unpacked(packed, len(normal), len(x))[0]
     result, residual = slip.copy(), 0.0
     for i in range(len(slip)):
         a, b = joints[i], other_joints[i]
