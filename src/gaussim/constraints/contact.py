@@ -212,7 +212,10 @@ class ContactBatch:
     @property
     def slip(self) -> np.ndarray:
         """The slip the De Saxce shift used, shape (m, 3) [m/s]."""
-        return self._views[2] if self._slip is None else self._slip
+        if self._slip is None:  # the buffer's, before its last 3 m entries (a slice: each pass reads it)
+            m = len(self.starts) - 1
+            self._slip = self.packed[len(self.packed) - 6 * m : len(self.packed) - 3 * m].reshape(m, 3)
+        return self._slip
 
     @property
     def friction(self) -> np.ndarray:
