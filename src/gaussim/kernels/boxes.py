@@ -10,7 +10,9 @@ clipped to each other are coal's contact patch; when the incident points reach t
 is also their distance. A corner over the other box's face is a patch of one point, coal's witness
 point: the corner, or its foot on the robot's face. When an edge axis separates them most, two edges
 touch at the closest points of their lines, coal's witness points, with coal's patch of the two edges
-(its rule for two segments, :func:`gaussim.kernels.primitives._patch`). Pairs on a patch of more
+(its rule for two segments, :func:`gaussim.kernels.primitives._patch`), or, where each box still
+presents a face along that axis (a box settling tilted on another), the two faces clipped along it
+(:func:`_faces`, coal's Sutherland-Hodgman on the projected support sets). Pairs on a patch of more
 points narrower than PATCH_MIN_EXTENT (one point, which coal's witness decides), on 3 corners of a face
 (coal orders their clipped points otherwise where two round to the same 0.1 mm), with a test within
 DECISION of its threshold, or apart at a distance the patch does not reach go to coal.
@@ -129,7 +131,7 @@ def _box_box(R, p, half, margin, normal, points, work):  # type: ignore[no-untyp
     if edge_best > best + EDGE_PREFERENCE:
         if edge_best - edge_next <= DECISION:
             return ASK_COAL, lower, 0  # two edge axes about as good: coal's EPA picks one
-        return _edge_edge(R, p, T, half, edges[0], edges[1], d, lower, normal, points)
+        return _edge_edge(R, p, T, half, edges[0], edges[1], d, lower, normal, points, work)
     flip = -1.0 if dot(d, T[axis_box, axis_index]) < 0 else 1.0
     for j in range(3):
         n[j] = flip * T[axis_box, axis_index, j]  # from box 1 towards box 0
@@ -184,18 +186,21 @@ def _box_box(R, p, half, margin, normal, points, work):  # type: ignore[no-untyp
     if widest <= PATCH_MIN_EXTENT and size > 1:
         return ASK_COAL, lower, 0  # one point, which coal's witness decides
     order(points, kept, R[0], p[0])
+    if _tied(points, kept, R[0], p[0]):
+        return ASK_COAL, lower, 0
     normal[:] = n
     return FOUND, gap, kept
 
 
 @njit(cache=True)
-def _edge_edge(R, p, T, half, a, b, d, lower, normal, points):  # type: ignore[no-untyped-def]
+def _edge_edge(R, p, T, half, a, b, d, lower, normal, points, work):  # type: ignore[no-untyped-def]
     """Box 0's edge along its axis ``a`` against box 1's along its axis ``b``, whose axis separates the
     boxes most (by ``lower``: their least overlap): returns (answer, gap, number of points) as
     :func:`_box_box`. The edges are each box's support edge along the normal n (their cross product,
     from box 1 towards box 0); coal's witness points are the closest points of their lines, when each
     lies inside its edge by DECISION and the lines are not nearly parallel; its patch is the
-    primitives' (coal's support sets of the two boxes along n: edges, or a face within PATCH_TOLERANCE)."""
+    primitives' (coal's support sets of the two boxes along n: edges, or a face within PATCH_TOLERANCE),
+    or, where both boxes present a face along n, the faces' clipped patch (:func:`_faces`)."""
     n = np.empty(3)
     e, f = T[0, a], T[1, b]
     n[0], n[1], n[2] = cross(e[0], e[1], e[2], f[0], f[1], f[2])
@@ -221,16 +226,111 @@ def _edge_edge(R, p, T, half, a, b, d, lower, normal, points):  # type: ignore[n
     witness = c0 + s * e
     towards = -n  # coal's normal: from the robot's box to the other
     supports = np.empty((8, 3))
-    if (
-        _box_support(R[0], p[0], half[0], towards, supports) + _box_support(R[1], p[1], half[1], n, supports)
-        > 6
-    ):
-        return ASK_COAL, lower, 0  # a face on each side (or a test within DECISION): not an edge's patch
-    count = _touching(BOXES, half, R, p, towards, witness, points)
-    if count < 0:
+    own = _box_support(R[0], p[0], half[0], towards, supports)
+    other = _box_support(R[1], p[1], half[1], n, supports)
+    if own < 0 or other < 0:
+        return ASK_COAL, lower, 0  # a test within DECISION
+    if own >= 3 and other >= 3:  # a face (or 3 of its corners) on each side: not an edge's patch
+        count = _faces(R, p, half, n, work, points)
+    else:
+        count = _touching(BOXES, half, R, p, towards, witness, points)
+    if count <= 0:
         return ASK_COAL, lower, 0
     normal[:] = n
     return FOUND, dot(n, r) + s * dot(n, e) - t * dot(n, f), count
+
+
+@njit(cache=True)
+def _faces(R, p, half, n, work, points):  # type: ignore[no-untyped-def]
+    """The patch of two boxes that each present a face along the edge axis n (from box 1 towards box 0;
+    both faces within PATCH_TOLERANCE of it): box 1's face clipped by the planes along n through the
+    edges of box 0's (coal clips the two support polygons projected along n, Sutherland-Hodgman), on
+    box 0's support plane, without repeats, in the robot's order (:func:`order`). Returns the number of
+    points written into ``points``, 0 when coal is to answer (a support that is no face, fewer than 3
+    points, a patch not clearly wider than PATCH_MIN_EXTENT, two points whose order keys round alike)."""
+    _, _, corners, clipped, inside = work
+    face = np.empty((4, 3))
+    sides = _support_polygon(R[0], p[0], half[0], -1.0, n, corners, face)
+    if sides < 3:
+        return 0
+    k = _support_polygon(R[1], p[1], half[1], 1.0, n, corners, clipped[0])
+    if k < 3:
+        return 0
+    centre = np.zeros(3)
+    for j in range(sides):
+        for a in range(3):
+            centre[a] += face[j, a] / sides
+    side = np.empty(3)
+    at = 0
+    for j in range(sides):
+        start, end = face[j], face[(j + 1) % sides]
+        side[0], side[1], side[2] = cross(
+            end[0] - start[0], end[1] - start[1], end[2] - start[2], n[0], n[1], n[2]
+        )
+        if (centre[0] - start[0]) * side[0] + (centre[1] - start[1]) * side[1] + (
+            centre[2] - start[2]
+        ) * side[2] > 0:
+            for a in range(3):
+                side[a] = -side[a]  # outwards
+        k = _cut(clipped[at], k, start, 1.0, side, 0.0, inside, clipped[1 - at])
+        at = 1 - at
+        if k < 3:
+            return 0
+    polygon = clipped[at]
+    support = np.inf
+    for j in range(sides):
+        support = min(support, dot(n, face[j]))
+    kept = 0
+    for j in range(k):  # onto box 0's support plane, without repeats
+        lift = support - dot(n, polygon[j])
+        repeated = False
+        for m in range(kept):
+            squared = 0.0
+            for a in range(3):
+                squared += (points[m, a] - (polygon[j, a] + n[a] * lift)) ** 2
+            if np.sqrt(squared) <= SAME_POINT:
+                repeated = True
+        if not repeated:
+            for a in range(3):
+                points[kept, a] = polygon[j, a] + n[a] * lift
+            kept += 1
+    if kept < 3:
+        return 0
+    widest = 0.0
+    for a in range(3):
+        low, high = points[0, a], points[0, a]
+        for j in range(kept):
+            low, high = min(low, points[j, a]), max(high, points[j, a])
+        widest = max(widest, high - low)
+    if widest <= PATCH_MIN_EXTENT + DECISION:
+        return 0
+    order(points, kept, R[0], p[0])
+    if _tied(points, kept, R[0], p[0]):
+        return 0
+    return kept
+
+
+@njit(cache=True)
+def _tied(points, count, R, p):  # type: ignore[no-untyped-def]
+    """Whether two of the first ``count`` points (in :func:`order`) have the same order key: coal's order
+    of them is then its own."""
+    previous = np.empty(3)
+    for j in range(count):
+        same = j > 0
+        for c in range(3):
+            key = np.rint(
+                (
+                    (points[j, 0] - p[0]) * R[0, c]
+                    + (points[j, 1] - p[1]) * R[1, c]
+                    + (points[j, 2] - p[2]) * R[2, c]
+                )
+                * 1e4
+            )
+            same = same and key == previous[c]
+            previous[c] = key
+        if same:
+            return True
+    return False
 
 
 @njit(cache=True, inline="always")
@@ -254,9 +354,9 @@ def _extent(T, s, half, a0, a1, a2):  # type: ignore[no-untyped-def]
 @njit(cache=True)
 def _support_polygon(R, p, half, sign, n, corners, polygon):  # type: ignore[no-untyped-def]
     """The number k of the box's vertices within PATCH_TOLERANCE of its support plane along
-    ``sign`` n, written into ``polygon[:k]`` in order around the face, edge or vertex they make; 0
-    when they make none of those (a box thinner than the tolerance, 3 corners of a face) or a vertex
-    is within DECISION of the tolerance. ``corners``: the corners' signs and buffers (see
+    ``sign`` n, written into ``polygon[:k]`` in order around the face, 3 corners of a face, edge or
+    vertex they make; 0 when they make none of those (a box thinner than the tolerance) or a vertex is
+    within DECISION of the tolerance. ``corners``: the corners' signs and buffers (see
     :func:`_workspace`)."""
     signs, points, heights, chosen = corners
     for v in range(8):
@@ -278,7 +378,7 @@ def _support_polygon(R, p, half, sign, n, corners, polygon):  # type: ignore[no-
         if heights[v] >= top - PATCH_TOLERANCE:
             chosen[k] = v
             k += 1
-    if k == 1 or k == 2:
+    if k <= 3:  # a vertex, an edge, 3 corners of a face: any order goes around them
         for j in range(k):
             for a in range(3):
                 polygon[j, a] = points[chosen[j], a]
