@@ -163,26 +163,7 @@ def _box_box(R, p, half, margin, normal, points, work):  # type: ignore[no-untyp
         reached = min(reached, along)
     if gap > 0 and reached - gap > REACHED:
         return ASK_COAL, lower, 0
-    kept = 0
-    for j in range(count):  # onto the robot's support plane, without repeats
-        lift = robot_support - dot(n, polygon[j])
-        repeated = False
-        for m in range(kept):
-            squared = 0.0
-            for a in range(3):
-                squared += (points[m, a] - (polygon[j, a] + n[a] * lift)) ** 2
-            if np.sqrt(squared) <= SAME_POINT:
-                repeated = True
-        if not repeated:
-            for a in range(3):
-                points[kept, a] = polygon[j, a] + n[a] * lift
-            kept += 1
-    widest = 0.0
-    for a in range(3):
-        low = high = points[0, a]
-        for j in range(kept):
-            low, high = min(low, points[j, a]), max(high, points[j, a])
-        widest = max(widest, high - low)
+    kept, widest = _on_plane(polygon, count, n, robot_support, points)
     if widest <= PATCH_MIN_EXTENT and size > 1:
         return ASK_COAL, lower, 0  # one point, which coal's witness decides
     order(points, kept, R[0], p[0])
@@ -280,8 +261,22 @@ def _faces(R, p, half, n, work, points):  # type: ignore[no-untyped-def]
     support = np.inf
     for j in range(sides):
         support = min(support, dot(n, face[j]))
+    kept, widest = _on_plane(polygon, k, n, support, points)
+    if kept < 3 or widest <= PATCH_MIN_EXTENT + DECISION:
+        return 0
+    order(points, kept, R[0], p[0])
+    if _tied(points, kept, R[0], p[0]):
+        return 0
+    return kept
+
+
+@njit(cache=True)
+def _on_plane(polygon, count, n, support, points):  # type: ignore[no-untyped-def]
+    """The first ``count`` points of ``polygon`` moved along the unit n onto the plane n . x =
+    ``support``, without repeats (within SAME_POINT), into ``points``: (their number, the widest of
+    their extents along the world axes)."""
     kept = 0
-    for j in range(k):  # onto box 0's support plane, without repeats
+    for j in range(count):
         lift = support - dot(n, polygon[j])
         repeated = False
         for m in range(kept):
@@ -294,20 +289,13 @@ def _faces(R, p, half, n, work, points):  # type: ignore[no-untyped-def]
             for a in range(3):
                 points[kept, a] = polygon[j, a] + n[a] * lift
             kept += 1
-    if kept < 3:
-        return 0
     widest = 0.0
     for a in range(3):
-        low, high = points[0, a], points[0, a]
+        low = high = points[0, a]
         for j in range(kept):
             low, high = min(low, points[j, a]), max(high, points[j, a])
         widest = max(widest, high - low)
-    if widest <= PATCH_MIN_EXTENT + DECISION:
-        return 0
-    order(points, kept, R[0], p[0])
-    if _tied(points, kept, R[0], p[0]):
-        return 0
-    return kept
+    return kept, widest
 
 
 @njit(cache=True)
