@@ -1,7 +1,10 @@
 """The solve: DAQP first, then ProxQP's warm starts that cannot go stale; certificates that are checked."""
 
+import gc
 import subprocess
 import sys
+import warnings
+import weakref
 from pathlib import Path
 
 import numpy as np
@@ -9,7 +12,7 @@ import pytest
 
 import gaussim
 from gaussim.assembly import GaussProblem, assemble
-from gaussim.constraints.base import ConstraintModule, Context, Rows
+from gaussim.constraints.base import ROW_ID_BITS, ConstraintModule, Context, Rows
 from gaussim.kernels.solver import violates
 from gaussim.solver import KKT_RTOL, GaussSolver, Status, kkt_residual
 from gaussim.solver.active_set import ACTIVE_SET_FLOOR, active_set_candidate
@@ -535,6 +538,37 @@ def test_daqp_starts_from_the_last_working_set_matched_by_row_ids():
     assert warm.certificate.iterations < 10 < cold.certificate.iterations
     difference = warm.x - cold.x
     assert np.sqrt(difference @ saved.H @ difference) < 1e-8
+    held = weakref.ref(nxt)  # the solver keeps the ids of its last rows, not their problem
+    del nxt
+    gc.collect()
+    assert held() is None
+
+
+@pytest.mark.parametrize(
+    "ids",
+    [
+        lambda n: np.arange(n, dtype=np.int32),
+        lambda n: list(range(n)),
+        lambda n: np.arange(n - 1),
+        lambda n: np.arange(n) * 0.5,
+        lambda n: np.arange(n) - 1,
+    ],
+)
+def test_a_modules_row_ids_are_integers_per_row_or_their_places(ids):
+    """Integers of any kind, one per row in [0, 2**ROW_ID_BITS), name the rows; ids of another
+    length, of floats or out of range name them by their places, with a warning naming the module."""
+    n, module = 5, _Given()
+    rows = Rows(np.eye(n), np.zeros(n), False, lambda: [], ids=lambda: ids(n))
+    given = np.asarray(ids(n))
+    good = given.shape == (n,) and given.dtype.kind == "i" and given.min() >= 0
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        problem = assemble(np.eye(n), np.zeros(n), [(module, rows)])
+        own = problem.row_ids & (2**ROW_ID_BITS - 1)
+    np.testing.assert_array_equal(own, given if good else np.arange(n))
+    assert len({i >> ROW_ID_BITS for i in problem.row_ids.tolist()}) == 1
+    said = [str(w.message) for w in caught if issubclass(w.category, gaussim.GaussimWarning)]
+    assert (not said) if good else ("module 'given': Rows.ids" in said[0])
 
 
 def test_daqp_answers_the_check_refuses_or_inputs_it_refuses_go_to_proxqp(monkeypatch):

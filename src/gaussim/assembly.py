@@ -7,12 +7,14 @@ with g = -(M v + dt F) (velocity level), -M v (impulse level) or -F (acceleratio
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 from functools import cache, cached_property
 
 import numpy as np
 
 from .constraints.base import ROW_ID_BITS, ConstraintModule, Rows
+from .exceptions import GaussimWarning
 from .kernels.solver import cut
 
 
@@ -63,8 +65,7 @@ class GaussProblem:
             return source.row_ids[np.concatenate((eq, len(source.b) + ineq))]
         ids = np.arange(len(self.b) + len(self.l), dtype=np.int64)
         for module, rows, part in self.blocks:
-            own = rows.ids() if rows.ids is not None else np.arange(len(rows))
-            ids[part] = (module_tag(module) << ROW_ID_BITS) | own
+            ids[part] = (module_tag(module) << ROW_ID_BITS) | _own_ids(module, rows)
         return ids
 
     def island(self, cols: np.ndarray, eq: np.ndarray, ineq: np.ndarray) -> GaussProblem:
@@ -72,6 +73,30 @@ class GaussProblem:
         ``ineq`` (an island: no other row reads those coordinates, and H couples them to no other)."""
         H, g, A, b, C, l = cut(self.H, self.g, self.A, self.b, self.C, self.l, cols, eq, ineq)
         return GaussProblem(H, g, A, b, C, l, [], None, (self, eq, ineq))
+
+
+def _own_ids(module: ConstraintModule, rows: Rows) -> np.ndarray:
+    """The ids of a module's ``rows`` (:attr:`Rows.ids`), or their places where the module gives none
+    or ids that are not one integer in [0, 2**ROW_ID_BITS) per row (with a warning, which Python's
+    filters show once: the solver then starts its rows from their places)."""
+    place = np.arange(len(rows), dtype=np.int64)
+    if rows.ids is None:
+        return place
+    given = np.asarray(rows.ids())
+    if (
+        given.shape == place.shape
+        and given.dtype.kind in "iu"
+        and (not len(given) or (given.min() >= 0 and given.max() < 2**ROW_ID_BITS))
+    ):
+        return given.astype(np.int64, copy=False)
+    warnings.warn(
+        f"module '{getattr(module, 'name', type(module).__name__)}': Rows.ids must give one integer in "
+        f"[0, 2**{ROW_ID_BITS}) per row ({len(rows)}), got {given.dtype} of shape {given.shape}; "
+        "its rows are named by their places (a warm start of the solver only)",
+        GaussimWarning,
+        stacklevel=2,
+    )
+    return place
 
 
 _TAGS: dict[int, int] = {}  # id(module) -> its tag

@@ -56,7 +56,8 @@ class Rows(Generic[T]):
         ids: returns one integer per row (m,), in [0, 2**ROW_ID_BITS), that names the same constraint
             from step to step (a contact point's facet, a joint's limit side), so that a solver
             starts from the rows the last step held active; called only when a solver sets up a new
-            problem. None (the default): a row is named by its position among the module's rows.
+            problem, so it must read the rows it came with, not the module's later state. None (the
+            default), or ids of another shape: a row is named by its position among the module's rows.
     """
 
     J: np.ndarray

@@ -11,11 +11,12 @@ is also their distance. A corner over the other box's face is a patch of one poi
 point: the corner, or its foot on the robot's face. When an edge axis separates them most, two edges
 touch at the closest points of their lines, coal's witness points, with coal's patch of the two edges
 (its rule for two segments, :func:`gaussim.kernels.primitives._patch`), or, where each box still
-presents a face along that axis (a box settling tilted on another), the two faces clipped along it
-(:func:`_faces`, coal's Sutherland-Hodgman on the projected support sets). Pairs on a patch of more
-points narrower than PATCH_MIN_EXTENT (one point, which coal's witness decides), on 3 corners of a face
-(coal orders their clipped points otherwise where two round to the same 0.1 mm), with a test within
-DECISION of its threshold, or apart at a distance the patch does not reach go to coal.
+presents a face (or 3 of its corners) along that axis (a box settling tilted on another), the two
+clipped along it (:func:`_faces`, coal's Sutherland-Hodgman on the projected support sets). Pairs on a
+patch of more points narrower than PATCH_MIN_EXTENT (one point, which coal's witness decides), on a
+patch two of whose points round to the same 0.1 mm in the robot's order (coal's order of them is its
+own), with a test within DECISION of its threshold, or apart at a distance the patch does not reach go
+to coal.
 """
 
 from __future__ import annotations
@@ -34,7 +35,7 @@ EDGE_PREFERENCE = 1e-9
 REACHED = 1e-12
 # Two patch points closer than this are one (a corner on the reference face's edge, clipped) [m].
 SAME_POINT = 1e-9
-MAX_POINTS = 8  # a quadrilateral clipped to a rectangle
+MAX_POINTS = 8  # a patch's points: two quadrilaterals clipped to each other
 BOXES = np.array([BOX, BOX])  # the kinds of the primitives' patch (its sides)
 
 

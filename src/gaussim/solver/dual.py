@@ -37,8 +37,9 @@ class DualActiveSet:
         self._model: Any = None  # daqp.Model
         self._held: tuple[np.ndarray, ...] = ()  # copies of the model's H, g and rows
         self._key: object = None  # the rows_key of the problem they are
-        # the last solution's problem and multipliers: the working set a new problem starts from
-        self._last: tuple[GaussProblem, np.ndarray] | None = None
+        self._ids: np.ndarray | None = None  # the row ids of the problem the workspace holds
+        # the last solution's row ids and multipliers: the working set a new problem starts from
+        self._last: tuple[np.ndarray, np.ndarray] | None = None
 
     def solve(self, problem: GaussProblem) -> Solution | None:
         """DAQP's solution of ``problem`` (rows met to eps_abs) when it is optimal and the relative
@@ -57,7 +58,8 @@ class DualActiveSet:
             return None
         # DAQP's multipliers of lower bounds are <= 0 (and its inactive rows' -0: 0 - (-0) is +0)
         multipliers = np.zeros(n_eq + n_in) - np.asarray(info["lam"])
-        self._last = p, multipliers  # its row ids only when a new problem starts from it
+        # the rows of the workspace that solved it: the held ones, or a new setup's
+        self._last = None if self._ids is None else (self._ids, multipliers)
         status, iterations = Status.DUAL_ACTIVE_SET_SOLVED, info["iterations"]
         return checked(p, np.array(x), multipliers.copy(), status, self.tolerance, iterations)
 
@@ -84,7 +86,7 @@ class DualActiveSet:
         shift the rows after them), in DAQP's sign; None when it held none of them active."""
         if self._last is None or not len(self._last[1]):
             return None
-        ids, multipliers = self._last[0].row_ids, self._last[1]
+        ids, multipliers = self._last
         order = np.argsort(ids, kind="stable")
         ids, multipliers = ids[order], multipliers[order]
         new = p.row_ids
@@ -115,7 +117,7 @@ class DualActiveSet:
         if flag < 0:  # rows DAQP finds inconsistent as they stand (dependent equalities that conflict)
             return flag, None, None
         x, _, flag, info = model.solve()
-        self._model, self._held, self._key = model, held, p.rows_key
+        self._model, self._held, self._key, self._ids = model, held, p.rows_key, p.row_ids
         return flag, x, info
 
 
