@@ -167,8 +167,7 @@ def _box_box(R, p, half, margin, normal, points, work):  # type: ignore[no-untyp
     kept, widest = _on_plane(polygon, count, n, robot_support, points)
     if widest <= PATCH_MIN_EXTENT and size > 1:
         return ASK_COAL, lower, 0  # one point, which coal's witness decides
-    order(points, kept, R[0], p[0])
-    if _tied(points, kept, R[0], p[0]):
+    if order(points, kept, R[0], p[0]):  # two points tied: coal's order of them is its own
         return ASK_COAL, lower, 0
     normal[:] = n
     return FOUND, gap, kept
@@ -265,8 +264,7 @@ def _faces(R, p, half, n, work, points):  # type: ignore[no-untyped-def]
     kept, widest = _on_plane(polygon, k, n, support, points)
     if kept < 3 or widest <= PATCH_MIN_EXTENT + DECISION:
         return 0
-    order(points, kept, R[0], p[0])
-    if _tied(points, kept, R[0], p[0]):
+    if order(points, kept, R[0], p[0]):
         return 0
     return kept
 
@@ -297,29 +295,6 @@ def _on_plane(polygon, count, n, support, points):  # type: ignore[no-untyped-de
             low, high = min(low, points[j, a]), max(high, points[j, a])
         widest = max(widest, high - low)
     return kept, widest
-
-
-@njit(cache=True)
-def _tied(points, count, R, p):  # type: ignore[no-untyped-def]
-    """Whether two of the first ``count`` points (in :func:`order`) have the same order key: coal's order
-    of them is then its own."""
-    previous = np.empty(3)
-    for j in range(count):
-        same = j > 0
-        for c in range(3):
-            key = np.rint(
-                (
-                    (points[j, 0] - p[0]) * R[0, c]
-                    + (points[j, 1] - p[1]) * R[1, c]
-                    + (points[j, 2] - p[2]) * R[2, c]
-                )
-                * 1e4
-            )
-            same = same and key == previous[c]
-            previous[c] = key
-        if same:
-            return True
-    return False
 
 
 @njit(cache=True, inline="always")

@@ -131,7 +131,8 @@ def gathered(owner, near, answer, gaps, normals, points, sizes, least):  # type:
 @njit(cache=True)
 def order(points, count, R, p):  # type: ignore[no-untyped-def]
     """Sorts the first ``count`` points by their coordinates on the robot's geometry (at R, p), rounded
-    to 0.1 mm, x first (the order of :meth:`gaussim.collision.narrow.NarrowPhase._patch`)."""
+    to 0.1 mm, x first (the order of :meth:`gaussim.collision.narrow.NarrowPhase._patch`); returns
+    whether two of them round alike (coal's order of those is then its own)."""
     keys = np.empty((count, 3))
     for j in range(count):
         for c in range(3):
@@ -150,6 +151,10 @@ def order(points, count, R, p):  # type: ignore[no-untyped-def]
                 keys[m, a], keys[m - 1, a] = keys[m - 1, a], keys[m, a]
                 points[m, a], points[m - 1, a] = points[m - 1, a], points[m, a]
             m -= 1
+    for j in range(1, count):
+        if not _before(keys[j - 1], keys[j]):
+            return True
+    return False
 
 
 @njit(cache=True)
