@@ -65,7 +65,7 @@ def recording(name, dispatcher):
 STAGES = ("actuation", "assembly", "collision.boxes", "collision.cylinders", "collision.ground",
           "collision.margin", "collision.narrow", "collision.primitives", "constraints.base",
           "constraints.contact", "dynamics", "integrator", "solver.active_set", "solver.certificate",
-          "solver.islands", "solver.proxqp")
+          "solver.dual", "solver.islands", "solver.proxqp")
 for stage in STAGES:
     module = importlib.import_module("gaussim." + stage)
     for attribute, value in list(vars(module).items()):
@@ -94,6 +94,11 @@ def test_the_build_compiles_every_signature_the_workload_calls():
     assert result.returncode == 0, result.stderr
     called = {tuple(line.split(" = ")) for line in result.stdout.splitlines() if " = " in line}
     families = {"boxes.box_pairs", "primitives.primitive_pairs", "cylinders.ground_cylinders"}
-    assert {name for name, _ in called} >= {"contact.pyramids", "solver.islands", *families}, called
+    assert {name for name, _ in called} >= {
+        "contact.pyramids",
+        "solver.islands",
+        "dual.dual_iterations",
+        *families,
+    }, called
     missing = sorted((name, code) for name, code in called if code not in SIGNATURES.get(name, ()))
     assert not missing, missing

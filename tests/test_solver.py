@@ -17,11 +17,17 @@ from gaussim.kernels.solver import violates
 from gaussim.solver import KKT_RTOL, GaussSolver, Status, kkt_residual
 from gaussim.solver.active_set import ACTIVE_SET_FLOOR, active_set_candidate
 from gaussim.solver.certificate import kkt_residuals
+from gaussim.solver.dual import DaqpActiveSet, SparseDualActiveSet
 from gaussim.solver.proxqp import _initialise, _sides
 
 DATA = Path(__file__).parent / "data"
 # The ProxQP path's tests solve without DAQP, which answers their problems before ProxQP is asked.
 PROXQP = gaussim.Options(solver="proxqp")
+# The dual active-set solvers (gaussim's own, DAQP) and the status of their answers
+DUAL_SOLVERS = ["dual", "daqp"]
+SOLVED_BY = {"dual": Status.DUAL_SOLVED, "daqp": Status.DUAL_ACTIVE_SET_SOLVED}
+DUAL_CLASSES = {"dual": SparseDualActiveSet, "daqp": DaqpActiveSet}
+SETUPS_FOR_A_NEW_G = {"dual": 1, "daqp": 2}
 
 
 def _problem(lower: float) -> GaussProblem:
@@ -383,21 +389,23 @@ def _tight_proxqp(problem: GaussProblem) -> np.ndarray:
         "stalled_warm_start.npz",
     ],
 )
-def test_daqp_certifies_the_dependent_rows_proxqp_struggles_with(saved):
+@pytest.mark.parametrize("solver", DUAL_SOLVERS)
+def test_daqp_certifies_the_dependent_rows_proxqp_struggles_with(saved, solver):
     """The saved QPs whose dependent contact rows cost ProxQP a refused answer, a cold restart or its
     iteration cap: DAQP, tried first, answers each with nonnegative multipliers that the KKT check
     certifies, and x is ProxQP's at eps_abs = 1e-12 (to 1e-8 in the norm of M)."""
     problem = _saved_problem(saved)
-    solution = GaussSolver(gaussim.Options()).solve(problem)
+    solution = GaussSolver(gaussim.Options(solver=solver)).solve(problem)
     c, p = solution.certificate, problem
-    assert c.status is Status.DUAL_ACTIVE_SET_SOLVED and c.converged and not c.restarted, c
+    assert c.status is SOLVED_BY[solver] and c.converged and not c.restarted, c
     assert c.relative_kkt_residual <= KKT_RTOL * gaussim.Options().eps_abs
     assert solution.lambda_in.min() >= 0.0
     difference = solution.x - _tight_proxqp(problem)
     assert np.sqrt(difference @ p.H @ difference) < 1e-8
 
 
-def test_daqp_solves_equality_rows_as_proxqp_does():
+@pytest.mark.parametrize("solver", DUAL_SOLVERS)
+def test_daqp_solves_equality_rows_as_proxqp_does(solver):
     """Bilateral rows (a loop closure's) with contact rows: DAQP holds the equalities and gives
     ProxQP's x (at eps_abs = 1e-12) and multipliers that certify it; a problem DAQP finds infeasible
     (two rows that conflict by 1e-6) goes on to ProxQP, which reports it."""
@@ -407,33 +415,103 @@ def test_daqp_solves_equality_rows_as_proxqp_does():
     A, C, x = rng.normal(size=(3, n)), rng.normal(size=(20, n)), rng.normal(size=n)  # x admissible
     H, g, b, l = B @ B.T + np.eye(n), rng.normal(size=n) * 10, A @ x, C @ x - rng.uniform(0, 1, 20)
     problem = GaussProblem(H, g, A, b, C, l, [])
-    solution = GaussSolver(gaussim.Options()).solve(problem)
-    assert solution.certificate.status is Status.DUAL_ACTIVE_SET_SOLVED, solution.certificate
+    solution = GaussSolver(gaussim.Options(solver=solver)).solve(problem)
+    assert solution.certificate.status is SOLVED_BY[solver], solution.certificate
     np.testing.assert_allclose(A @ solution.x, b, atol=1e-9)
     assert solution.lambda_in.min() >= 0.0 and np.count_nonzero(solution.lambda_in) > 0
     np.testing.assert_allclose(solution.x, _tight_proxqp(problem), atol=1e-8)
     C = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]])
     no_rows, l = np.zeros((0, 3)), np.array([0.0, 1e-6])
     conflict = GaussProblem(np.eye(3), np.array([0, 0, 9.81e-3]), no_rows, np.zeros(0), C, l, [])
-    refused = GaussSolver(gaussim.Options(on_failure="report")).solve(conflict)
+    refused = GaussSolver(gaussim.Options(solver=solver, on_failure="report")).solve(conflict)
     assert refused.certificate.status is Status.MAX_ITER_REACHED
 
 
-def test_daqp_solves_a_problem_whose_bounds_moved_on_the_factors_it_holds(monkeypatch):
+def _pyramid_problem(
+    rng: np.random.Generator, bodies: int, contacts: int, dense: bool, n_eq: int
+) -> GaussProblem:
+    """A random Gauss problem shaped like a pile's or a robot's: H block diagonal (free bodies of 6
+    coordinates) or dense (a robot), each contact a normal row and four pyramid facets (mu n +- t1,
+    mu n +- t2: five rows of rank 3) reading one body or two, ``n_eq`` equality rows, every row met
+    by some x0 (feasible), and g pushing the bodies into their rows (many rows active)."""
+    n = 6 * bodies
+    if dense:
+        B = rng.normal(size=(n, n))
+        H = B @ B.T + n * np.eye(n)
+    else:
+        H = np.zeros((n, n))
+        for k in range(bodies):
+            B = rng.normal(size=(6, 6))
+            H[6 * k : 6 * k + 6, 6 * k : 6 * k + 6] = B @ B.T + 6 * np.eye(6)
+    rows = []
+    for _ in range(contacts):
+        J = np.zeros((3, n))
+        for body in rng.choice(bodies, size=rng.integers(1, 3), replace=False):
+            J[:, 6 * body : 6 * body + 6] = rng.normal(size=(3, 6))
+        normal, t1, t2 = J
+        mu = rng.uniform(0.2, 1.0)
+        rows += [normal, mu * normal + t1, mu * normal - t1, mu * normal + t2, mu * normal - t2]
+    C, x0 = np.array(rows), rng.normal(size=n)
+    A = rng.normal(size=(n_eq, n))
+    l = C @ x0 - rng.uniform(0.0, 0.1, len(C)) * (rng.uniform(size=len(C)) < 0.5)
+    g = H @ (C.T @ rng.uniform(0.0, 1.0, len(C)) * 0.1 - x0) * 3.0
+    return GaussProblem(H, g, A, A @ x0, C, l, [])
+
+
+@pytest.mark.parametrize(
+    "bodies, contacts, dense, n_eq", [(4, 12, False, 0), (8, 40, False, 2), (3, 8, True, 0), (3, 10, True, 3)]
+)
+def test_gaussims_dual_method_gives_daqps_answers_on_contact_pyramids(bodies, contacts, dense, n_eq):
+    """gaussim's dual active-set method (kernels.dual) against DAQP, Arnström et al.'s (not gaussim's), at
+    a tight tolerance: random problems of free bodies or a robot, whose contacts' pyramid rows are
+    dependent (five rows of rank 3), some with equality rows; a sequence of them on one solver, each
+    problem's g and bounds moved from the last (its working set starts from the last one's): each is
+    answered by the method itself (no ProxQP), certified, with DAQP's x to 1e-8 in the norm of H."""
+    import daqp
+
+    rng = np.random.default_rng(bodies * 100 + contacts + n_eq)
+    base = _pyramid_problem(rng, bodies, contacts, dense, n_eq)
+    gauss = GaussSolver(gaussim.Options())
+    active = []
+    for k in range(6):
+        p = base
+        if k:
+            p = GaussProblem(
+                p.H, p.g * (1 + 0.1 * rng.normal(size=len(p.g))), p.A, p.b, p.C, p.l - 1e-3 * k, []
+            )
+        solution = gauss.solve(p, warm=False)  # not the last solution's active set: the method itself
+        assert solution.certificate.status is Status.DUAL_SOLVED, solution.certificate
+        assert solution.lambda_in.min() >= 0.0
+        sense = np.r_[np.full(n_eq, 5), np.zeros(len(p.l))].astype(np.int32)  # 5: an equality row
+        model = daqp.Model()
+        settings = model.settings
+        settings["primal_tol"] = 1e-10
+        model.settings = settings
+        upper = np.r_[p.b, np.full(len(p.l), 1e30)]
+        model.setup(p.H.copy(), p.g.copy(), np.vstack([p.A, p.C]), upper, np.r_[p.b, p.l], sense)
+        x, _, flag, _ = model.solve()
+        assert flag == 1
+        difference = solution.x - x
+        assert np.sqrt(difference @ p.H @ difference) < 1e-8
+        active.append(np.count_nonzero(solution.lambda_in))
+    assert min(active) > 3  # contacts pressed: the pyramids' rows matter
+
+
+@pytest.mark.parametrize("solver", DUAL_SOLVERS)
+def test_daqp_solves_a_problem_whose_bounds_moved_on_the_factors_it_holds(monkeypatch, solver):
     """A friction pass shifts the normal rows' bounds of a problem whose H, g and rows stay: DAQP
     updates the bounds of the workspace it holds (one setup for both solves) and gives ProxQP's x of
     the shifted problem (at eps_abs = 1e-12), not the first problem's."""
-    from gaussim.solver.dual import DualActiveSet
-
     setups = []
-    setup = DualActiveSet._setup
-    monkeypatch.setattr(DualActiveSet, "_setup", lambda self, *args: setups.append(1) or setup(self, *args))
+    kind = DUAL_CLASSES[solver]
+    setup = kind._setup
+    monkeypatch.setattr(kind, "_setup", lambda self, *args: setups.append(1) or setup(self, *args))
     problem = _saved_problem("pile_wrong_sign_multiplier_full_rank.npz")
-    solver = GaussSolver(gaussim.Options())
-    first = solver.solve(problem)
+    gauss = GaussSolver(gaussim.Options(solver=solver))
+    first = gauss.solve(problem)
     shifted = GaussProblem(problem.H, problem.g, problem.A, problem.b, problem.C, problem.l + 1e-3, [])
-    second = solver.solve(shifted)
-    assert second.certificate.status is Status.DUAL_ACTIVE_SET_SOLVED and len(setups) == 1
+    second = gauss.solve(shifted)
+    assert second.certificate.status is SOLVED_BY[solver] and len(setups) == 1
     difference = second.x - _tight_proxqp(shifted)
     assert np.sqrt(difference @ problem.H @ difference) < 1e-8
     assert np.abs(second.x - first.x).max() > 1e-4  # the shift moved the answer
@@ -448,11 +526,13 @@ class _Given(ConstraintModule):
         return None
 
 
-def test_a_pass_that_moves_bounds_alone_keeps_the_stacked_rows_and_daqps_factors(monkeypatch):
+@pytest.mark.parametrize("solver", DUAL_SOLVERS)
+def test_a_pass_that_moves_bounds_alone_keeps_the_stacked_rows_and_daqps_factors(monkeypatch, solver):
     """A friction pass poses the same J arrays with new bounds: assembly keeps the last pass's
     stacked rows and its key, and DAQP updates the bounds of the factors it holds without comparing
-    H and the rows (one setup, ProxQP's x of the shifted problem). New J arrays, or a new g under
-    the same key, are set up again."""
+    H and the rows (one setup, ProxQP's x of the shifted problem). New J arrays are set up again,
+    and so is a new g under the same key for DAQP (gaussim's method keeps the factors of H and the
+    rows, and solves for the new unconstrained minimum on them)."""
     from gaussim.solver import dual
 
     saved = _saved_problem("pile_wrong_sign_multiplier_full_rank.npz")
@@ -474,44 +554,45 @@ def test_a_pass_that_moves_bounds_alone_keeps_the_stacked_rows_and_daqps_factors
     assert anew.C is not first.C and anew.rows_key is not first.rows_key
 
     setups = []
-    setup = dual.DualActiveSet._setup
-    monkeypatch.setattr(
-        dual.DualActiveSet, "_setup", lambda self, *args: setups.append(1) or setup(self, *args)
-    )
+    kind = DUAL_CLASSES[solver]
+    setup = kind._setup
+    monkeypatch.setattr(kind, "_setup", lambda self, *args: setups.append(1) or setup(self, *args))
     compared = []
     same = dual._same
     monkeypatch.setattr(dual, "_same", lambda *args: compared.append(1) or same(*args))
-    solver = GaussSolver(gaussim.Options())
-    solver.solve(first)
-    second = solver.solve(shifted)
-    assert second.certificate.status is Status.DUAL_ACTIVE_SET_SOLVED
+    gauss = GaussSolver(gaussim.Options(solver=solver))
+    gauss.solve(first)
+    second = gauss.solve(shifted)
+    assert second.certificate.status is SOLVED_BY[solver]
     assert len(setups) == 1 and not compared
     difference = second.x - _tight_proxqp(shifted)
     assert np.sqrt(difference @ saved.H @ difference) < 1e-8
     pushed = GaussProblem(saved.H, saved.g * (1 + 1e-3), shifted.A, shifted.b, shifted.C, shifted.l, [])
     pushed.rows_key = shifted.rows_key
-    third = solver.solve(pushed)
-    assert len(setups) == 2
+    third = gauss.solve(pushed)
+    assert len(setups) == SETUPS_FOR_A_NEW_G[solver]
     difference = third.x - _tight_proxqp(pushed)
     assert np.sqrt(difference @ saved.H @ difference) < 1e-8
 
 
-def test_daqp_starts_a_new_problem_from_its_last_working_set():
+@pytest.mark.parametrize("solver", DUAL_SOLVERS)
+def test_daqp_starts_a_new_problem_from_its_last_working_set(solver):
     """A problem with a new g (the next step's) starts from the rows DAQP held active in the last
     one: a few iterations where a cold start takes its 100-odd, to the same answer."""
     problem = _saved_problem("pile_wrong_sign_multiplier_full_rank.npz")
     nudged = GaussProblem(problem.H, problem.g * (1 + 1e-6), problem.A, problem.b, problem.C, problem.l, [])
-    solver = GaussSolver(gaussim.Options())
-    cold = solver.solve(problem).certificate.iterations
-    warm = solver.solve(nudged)
-    again = GaussSolver(gaussim.Options()).solve(nudged)
-    assert warm.certificate.status is again.certificate.status is Status.DUAL_ACTIVE_SET_SOLVED
+    gauss = GaussSolver(gaussim.Options(solver=solver))
+    cold = gauss.solve(problem).certificate.iterations
+    warm = gauss.solve(nudged)
+    again = GaussSolver(gaussim.Options(solver=solver)).solve(nudged)
+    assert warm.certificate.status is again.certificate.status is SOLVED_BY[solver]
     assert warm.certificate.iterations < 10 < again.certificate.iterations and cold > 10
     difference = warm.x - again.x
     assert np.sqrt(difference @ problem.H @ difference) < 1e-8
 
 
-def test_daqp_starts_from_the_last_working_set_matched_by_row_ids():
+@pytest.mark.parametrize("solver", DUAL_SOLVERS)
+def test_daqp_starts_from_the_last_working_set_matched_by_row_ids(solver):
     """The next step's rows come in another order, with a new one among them (a contact appeared, a
     patch's points shifted the rows after it): DAQP starts from the rows the last solution held active,
     found by their ids (Rows.ids), in a few iterations, to the answer of a cold start of that problem
@@ -530,11 +611,11 @@ def test_daqp_starts_from_the_last_working_set_matched_by_row_ids():
     C, l = np.vstack([saved.C, saved.C[:1]]), np.append(saved.l, saved.l[0] - 1.0)
     order = np.r_[n, np.arange(n)[::-1]]
     nxt = posed(order, C, l, np.arange(n + 1))
-    solver = GaussSolver(gaussim.Options())
-    assert solver.solve(first).certificate.iterations > 10
-    warm = solver.solve(nxt)
-    cold = GaussSolver(gaussim.Options()).solve(posed(order, C, l, np.arange(n + 1)))
-    assert warm.certificate.status is cold.certificate.status is Status.DUAL_ACTIVE_SET_SOLVED
+    gauss = GaussSolver(gaussim.Options(solver=solver))
+    assert gauss.solve(first).certificate.iterations > 10
+    warm = gauss.solve(nxt)
+    cold = GaussSolver(gaussim.Options(solver=solver)).solve(posed(order, C, l, np.arange(n + 1)))
+    assert warm.certificate.status is cold.certificate.status is SOLVED_BY[solver]
     assert warm.certificate.iterations < 10 < cold.certificate.iterations
     difference = warm.x - cold.x
     assert np.sqrt(difference @ saved.H @ difference) < 1e-8
@@ -571,7 +652,8 @@ def test_a_modules_row_ids_are_integers_per_row_or_their_places(ids):
     assert (not said) if good else ("module 'given': Rows.ids" in said[0])
 
 
-def test_daqp_answers_the_check_refuses_or_inputs_it_refuses_go_to_proxqp(monkeypatch):
+@pytest.mark.parametrize("solver", DUAL_SOLVERS)
+def test_daqp_answers_the_check_refuses_or_inputs_it_refuses_go_to_proxqp(monkeypatch, solver):
     """Rows of integers in a read-only array (a module of the user's) are DAQP's as floats; an
     answer the KKT check refuses goes on to ProxQP."""
     C = np.array([[0, 0, 1], [1, 0, 1]])
@@ -579,13 +661,13 @@ def test_daqp_answers_the_check_refuses_or_inputs_it_refuses_go_to_proxqp(monkey
     problem = GaussProblem(
         np.eye(3), np.array([0, 0, 9.81e-3]), np.zeros((0, 3)), np.zeros(0), C, np.zeros(2), []
     )
-    solution = GaussSolver(gaussim.Options()).solve(problem)
-    assert solution.certificate.status is Status.DUAL_ACTIVE_SET_SOLVED
+    solution = GaussSolver(gaussim.Options(solver=solver)).solve(problem)
+    assert solution.certificate.status is SOLVED_BY[solver]
     assert solution.lambda_in == pytest.approx([9.81e-3, 0.0], abs=1e-12)
     from gaussim.solver import dual
 
     monkeypatch.setattr(dual, "checked", lambda *args: None)  # the check refuses DAQP's answer
-    refused = GaussSolver(gaussim.Options()).solve(problem)
+    refused = GaussSolver(gaussim.Options(solver=solver)).solve(problem)
     assert refused.certificate.status is Status.SOLVED
     assert refused.lambda_in == pytest.approx([9.81e-3, 0.0], abs=1e-7)
 

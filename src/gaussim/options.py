@@ -11,7 +11,7 @@ from .exceptions import InvalidOptions, shown
 SCHEMES = ("velocity", "acceleration")
 FRICTION_MODES = ("pyramid", "accurate", "exact")
 ON_FAILURE = ("raise", "report")
-SOLVERS = ("daqp", "proxqp")
+SOLVERS = ("dual", "daqp", "proxqp")
 # Upper bounds of the integer options: ProxQP's max_iter is a C int; more facets or fixed-point QPs than
 # these only cost time (a 64-facet pyramid is within 0.12 % of the cone)
 MAXIMA = {"max_iter": 2**31 - 1, "friction_facets": 64, "friction_iterations": 1000}
@@ -47,12 +47,13 @@ class Options:
         limit_margin: joint limits closer than this produce rows [rad or m], plus the distance the
             joint can travel in one step.
         active_tolerance: acceleration scheme: a gap below this is an active contact [m].
-        solver: ``"daqp"`` (default): each QP that the previous solution's active set does not answer
-            is solved by DAQP, a dual active-set method that drops the dependent rows of contact
-            pyramids (a pile's island: a tenth of ProxQP's time), and by ProxQP when DAQP's answer
-            fails the KKT check; ``"proxqp"``: by ProxQP alone. The acceleration scheme solves with
-            ProxQP either way (its sliding friction is a fixed point on the normal forces, which
-            DAQP's answers split unevenly over redundant contacts).
+        solver: ``"dual"`` (default): each QP that the previous solution's active set does not answer
+            is solved by gaussim's dual active-set method on sparse rows (:mod:`gaussim.solver.dual`),
+            which drops the dependent rows of contact pyramids (a pile's island: a tenth of ProxQP's
+            time), and by ProxQP when its answer fails the KKT check; ``"daqp"``: the same with DAQP's
+            dual active-set method on dense rows; ``"proxqp"``: by ProxQP alone. The acceleration
+            scheme solves with ProxQP either way (its sliding friction is a fixed point on the normal
+            forces, which a dual active-set method's answers split unevenly over redundant contacts).
         eps_abs: the solvers' absolute tolerance on primal/dual residuals and duality gap (the KKT
             check accepts a relative residual of 100 eps_abs).
         max_iter: ProxQP's cap on its outer iterations for a solve from a cold start; a warm-started
@@ -79,7 +80,7 @@ class Options:
     contact_margin: float = 5e-3
     limit_margin: float = 1e-2
     active_tolerance: float = 1e-6
-    solver: str = "daqp"
+    solver: str = "dual"
     eps_abs: float = 1e-9
     max_iter: int = 1000
     on_failure: str = "raise"

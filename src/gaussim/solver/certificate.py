@@ -43,6 +43,9 @@ class Status(enum.Enum):
     """ProxQP did not solve."""
     CERTIFIED_AT_MAX_ITER = "GAUSSIM_CERTIFIED_AT_MAX_ITER"
     """ProxQP stopped at its iteration cap at a point the KKT check certifies: accepted."""
+    DUAL_SOLVED = "GAUSSIM_DUAL_SOLVED"
+    """gaussim's dual active-set method solved the problem (and the KKT check certifies its answer):
+    ProxQP was not called."""
     DUAL_ACTIVE_SET_SOLVED = "DAQP_SOLVED"
     """DAQP's dual active-set method solved the problem (and gaussim's KKT check certifies its answer):
     ProxQP was not called."""
@@ -74,6 +77,7 @@ class Status(enum.Enum):
 # above eps_abs), or a solution built from the last one that the check certifies.
 CONVERGED = (
     Status.SOLVED,
+    Status.DUAL_SOLVED,
     Status.DUAL_ACTIVE_SET_SOLVED,
     Status.CERTIFIED_AT_MAX_ITER,
     Status.PREVIOUS_SOLUTION_CERTIFIED,

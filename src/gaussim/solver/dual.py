@@ -1,17 +1,19 @@
-"""The dual active-set solve: DAQP on the Gauss problem before ProxQP is asked.
+"""The dual active-set solve: gaussim's compiled method on sparse rows, or DAQP, before ProxQP is asked.
 
 The Gauss problem's H = M is positive definite, which is the setting of a dual active-set method:
-DAQP (Arnström, Bemporad, Axehill 2022) starts from the unconstrained minimum and adds the violated
-rows one at a time, keeping a linearly independent working set and its LDL^T factors. A contact's
+it starts from the unconstrained minimum and adds the violated rows one at a time, keeping a linearly
+independent working set and its LDL^T factors. gaussim's own (:class:`SparseDualActiveSet`, the
+kernels of :mod:`gaussim.kernels.dual`) keeps each row sparse in least-distance form, which a pile's
+rows, each reading two bodies' 12 of the island's coordinates, make cheaper to set up than DAQP's dense
+rows (Arnström, Bemporad, Axehill 2022; :class:`DaqpActiveSet`, ``Options(solver="daqp")``). A contact's
 pyramid rows are dependent (four facets span three directions, a pile's stacked contacts more),
 which an interior or proximal method such as ProxQP pays for in iterations and refactorizations; an
 active-set method leaves them out: a settled pile's island (120 coordinates, 336 rows) takes 140
-iterations, 2 to 3.5 ms, from a cold start, where ProxQP took 20 to 40 ms. Each island keeps its DAQP
-workspace: a problem that differs from the last one only in its bounds (the friction passes of one
-step, which shift the normal rows' bounds) is solved on the factors it left, about 0.1 ms there; a
-new one starts from the last working set, its rows matched by their ids (:attr:`GaussProblem.row_ids`),
-0.5 to 1 ms. The answer, like ProxQP's, is accepted only
-when gaussim's KKT check certifies it.
+iterations, 2 to 3.5 ms, from a cold start, where ProxQP took 20 to 40 ms. Each island keeps its
+solver's workspace: a problem that differs from the last one only in its bounds (the friction passes of
+one step, which shift the normal rows' bounds) is solved on the factors and working set it left; a new
+one starts from the last working set, its rows matched by their ids (:attr:`GaussProblem.row_ids`).
+The answer, like ProxQP's, is accepted only when gaussim's KKT check certifies it.
 """
 
 from __future__ import annotations
@@ -22,6 +24,15 @@ import daqp
 import numpy as np
 
 from ..assembly import GaussProblem
+from ..kernels.dual import (
+    OPTIMAL,
+    dual_iterations,
+    envelope_cholesky,
+    free_products,
+    primal_answer,
+    start_set,
+    transformed_rows,
+)
 from .certificate import Solution, Status, checked
 
 _OPTIMAL = 1  # DAQP's exitflag of an optimal solution
@@ -29,7 +40,112 @@ _EQUALITY = 5  # DAQP's sense of an equality row
 _UNBOUNDED = 1e30  # DAQP's infinite bound
 
 
-class DualActiveSet:
+# A row joins the working set when its pivot exceeds this fraction of its squared norm: a smaller one is
+# a combination of the set's rows up to round-off (a sticking contact's fourth pyramid facet).
+DEPENDENCE = 1e-10
+# The compiled method's cap on iterations from one start (a pile's cold start takes about 100).
+ITERATIONS = 1000
+
+
+class SparseDualActiveSet:
+    """gaussim's dual active-set method (:mod:`gaussim.kernels.dual`) for the problems of one island:
+    the factors and sparse rows of the problem it holds, and the working set of its last solve."""
+
+    def __init__(self, eps_abs: float, tolerance: float) -> None:
+        self.eps_abs, self.tolerance = eps_abs, tolerance
+        self._held: tuple[np.ndarray, ...] = ()  # copies of H and the rows whose factors it holds
+        self._key: object = None  # the rows_key of the problem they are
+        self._g: np.ndarray | None = None  # the g of the free products it holds
+        self._ids: np.ndarray | None = None  # the row ids of those rows
+        self._arrays: tuple[np.ndarray, ...] = ()  # the factors and rows (see _setup)
+        self._set: tuple[np.ndarray, ...] = ()  # the working set (see _setup)
+        self._size = -1  # the working set's size, -1 when it holds no solve's
+        self._last: tuple[np.ndarray, np.ndarray] | None = None  # the last solution's row ids, multipliers
+
+    def solve(self, problem: GaussProblem) -> Solution | None:
+        """The method's solution of ``problem`` (rows met to eps_abs) when it finds one and the relative
+        KKT residual certifies it to ``tolerance``, else None (ProxQP then solves)."""
+        p = problem
+        n_eq = len(p.b)
+        rows = np.vstack((p.A, p.C)) if n_eq else p.C
+        lower = np.concatenate((p.b, p.l)) if n_eq else p.l
+        rows, lower = np.ascontiguousarray(rows, dtype=float), np.ascontiguousarray(lower, dtype=float)
+        held = self._held and (p.rows_key is self._key or _same(self._held, (p.H, rows)))
+        if not held and not self._setup(p, rows):
+            return None
+        if self._g is None or not np.array_equal(self._g, p.g):
+            self._g = np.array(p.g, dtype=float)
+            L, first, _, ptr, idx, val, z0, e = self._arrays
+            free_products(L, first, self._g, ptr, idx, val, z0, e)
+        flag, iterations = 0, 0
+        if self._size >= 0:  # the working set the last solve on these rows left
+            flag, iterations = self._run(lower, n_eq, self._size)
+        start = None if flag == OPTIMAL else matched_start(self._last, p.row_ids)
+        if start is not None:
+            flag, iterations = self._run(lower, n_eq, self._started(start, n_eq))
+        if flag != OPTIMAL:
+            flag, iterations = self._run(lower, n_eq, self._started(np.zeros(len(lower)), n_eq))
+        if flag != OPTIMAL:
+            self._size = -1
+            return None
+        L, first = self._arrays[:2]
+        W, _, _, lam, _, z = self._set[:6]
+        x, multipliers = np.empty(len(p.g)), np.empty(len(lower))
+        primal_answer(L, first, z, self._size, W, lam, x, multipliers)
+        self._last = (self._ids, multipliers) if self._ids is not None else None
+        return checked(p, x, multipliers.copy(), Status.DUAL_SOLVED, self.tolerance, iterations)
+
+    def _setup(self, p: GaussProblem, rows: np.ndarray) -> bool:
+        """Factor H and put the rows in least-distance form; False when H is not positive definite."""
+        H = np.ascontiguousarray(p.H, dtype=float)
+        (m, n), self._size, self._g = rows.shape, -1, None
+        L, first, parent = np.empty((n, n)), np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
+        self._key, self._held = None, ()
+        if not envelope_cholesky(H, L, first, parent):
+            return False
+        ptr, idx, val = np.empty(m + 1, dtype=np.int64), np.empty(m * n, dtype=np.int64), np.empty(m * n)
+        transformed_rows(L, first, parent, rows, ptr, idx, val, np.zeros(n), np.full(n, -1, dtype=np.int64))
+        self._arrays = (L, first, parent, ptr, idx, val, np.empty(n), np.empty(m))
+        # the working set: rows W, factors Lw and Dw, multipliers, place of each row, z, scratch
+        W, Lw, Dw, lam = np.empty(n, dtype=np.int64), np.empty((n, n)), np.empty(n), np.empty(n)
+        self._set = (W, Lw, Dw, lam, np.full(m, -1, dtype=np.int64), np.empty(n), np.zeros((5, n)))
+        self._key, self._held, self._ids = p.rows_key, (H.copy(), rows.copy()), p.row_ids
+        return True
+
+    def _started(self, start: np.ndarray, n_eq: int) -> int:
+        """The size of a working set made from the multipliers ``start`` (see start_set)."""
+        ptr, idx, val = self._arrays[3:6]
+        W, Lw, Dw, lam, pos, _, work = self._set
+        return int(start_set(ptr, idx, val, n_eq, start, DEPENDENCE, W, Lw, Dw, lam, pos, work[2], work[3]))
+
+    def _run(self, lower: np.ndarray, n_eq: int, size: int) -> tuple[int, int]:
+        """(status, iterations) of the method from a working set of ``size`` rows, whose size it keeps."""
+        ptr, idx, val, z0, e = self._arrays[3:]
+        W, Lw, Dw, lam, pos, z, work = self._set
+        flag, iterations, self._size = dual_iterations(
+            ptr,
+            idx,
+            val,
+            e,
+            lower,
+            n_eq,
+            self.eps_abs,
+            DEPENDENCE,
+            ITERATIONS,
+            size,
+            W,
+            Lw,
+            Dw,
+            lam,
+            pos,
+            z0,
+            z,
+            work,
+        )
+        return flag, iterations
+
+
+class DaqpActiveSet:
     """DAQP's workspace for the problems of one island, and the problem it holds."""
 
     def __init__(self, eps_abs: float, tolerance: float) -> None:
@@ -81,18 +197,9 @@ class DualActiveSet:
         return self._setup(p, rows, upper, lower, None)
 
     def _start(self, p: GaussProblem) -> np.ndarray | None:
-        """DAQP's dual start for ``p``: the last solution's multipliers of the rows of ``p`` that it had
-        (matched by their ids, :attr:`GaussProblem.row_ids`: contacts come and go, and a patch's points
-        shift the rows after them), in DAQP's sign; None when it held none of them active."""
-        if self._last is None or not len(self._last[1]):
-            return None
-        ids, multipliers = self._last
-        order = np.argsort(ids, kind="stable")
-        ids, multipliers = ids[order], multipliers[order]
-        new = p.row_ids
-        at = np.minimum(np.searchsorted(ids, new), len(ids) - 1)
-        start = np.where(ids[at] == new, -multipliers[at], 0.0)
-        return start if start.any() else None
+        """DAQP's dual start for ``p``: :func:`matched_start` in DAQP's sign."""
+        start = matched_start(self._last, p.row_ids)
+        return None if start is None else -start
 
     def _holds(self, p: GaussProblem, rows: np.ndarray) -> bool:
         """Whether the workspace holds ``p``'s H, g and ``rows`` (the key of the problem it was set up
@@ -124,3 +231,18 @@ class DualActiveSet:
 def _same(held: tuple[np.ndarray, ...], arrays: tuple[np.ndarray, ...]) -> bool:
     """Whether ``arrays`` equal the ``held`` ones, entry for entry."""
     return all(a.shape == b.shape and np.array_equal(a, b) for a, b in zip(held, arrays))
+
+
+def matched_start(last: tuple[np.ndarray, np.ndarray] | None, new: np.ndarray) -> np.ndarray | None:
+    """A dual start for the rows of ids ``new``: the multipliers that the ``last`` solution (its row ids,
+    multipliers) gave the rows it had (matched by their ids, :attr:`GaussProblem.row_ids`: contacts come
+    and go, and a patch's points shift the rows after them), zero for the others; None when it held none
+    of them active."""
+    if last is None or not len(last[1]):
+        return None
+    ids, multipliers = last
+    order = np.argsort(ids, kind="stable")
+    ids, multipliers = ids[order], multipliers[order]
+    at = np.minimum(np.searchsorted(ids, new), len(ids) - 1)
+    start = np.where(ids[at] == new, multipliers[at], 0.0)
+    return start if start.any() else None

@@ -29,7 +29,7 @@ from .certificate import (
     checked,
 )
 from .diagnosis import failure, infeasibility
-from .dual import DualActiveSet
+from .dual import DaqpActiveSet, SparseDualActiveSet
 
 proxqp = portable_proxsuite().proxqp
 
@@ -49,6 +49,11 @@ INNER_ITERATIONS = 100
 # contacts); larger, each refactorization of that system costs more than the iterations it saves (a
 # pile's 120 coordinates and 320 rows: 0.4 s a solve).
 PRIMAL_DUAL_UP_TO = 200
+# The dual active-set method tried before ProxQP, by Options.solver
+DUAL_SOLVERS: dict[str, type[SparseDualActiveSet | DaqpActiveSet]] = {
+    "dual": SparseDualActiveSet,
+    "daqp": DaqpActiveSet,
+}
 # The status of a candidate of active_set_candidate, by its ``how``.
 _FROM_LAST = {1: Status.PREVIOUS_SOLUTION_CERTIFIED, 2: Status.ACTIVE_SET_CERTIFIED}
 
@@ -66,7 +71,8 @@ class GaussSolver:
         self._last: tuple[np.ndarray, np.ndarray] = (np.zeros(0), np.zeros(0))  # x, multipliers
         self._candidate = self._last  # the buffers of the active-set candidate (see _warm)
         eps = options.eps_abs
-        self._dual = DualActiveSet(eps, KKT_RTOL * eps) if options.solver == "daqp" else None
+        dual: type[SparseDualActiveSet | DaqpActiveSet] | None = DUAL_SOLVERS.get(options.solver)
+        self._dual = None if dual is None else dual(eps, KKT_RTOL * eps)
         self._warned = False  # about an iterate kept by on_failure='report'
 
     def solve(self, problem: GaussProblem, x_free: np.ndarray | None = None, warm: bool = True) -> Solution:

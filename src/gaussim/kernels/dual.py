@@ -1,0 +1,311 @@
+"""Compiled kernels of the dual active-set solve (:mod:`gaussim.solver.dual`).
+
+The Gauss problem min 1/2 x^T H x + g^T x over rows a_k^T x >= d_k (and = d_k) is posed in least-distance
+form: with H = L L^T (L lower, Cholesky on H's envelope), z = L^T x, z0 = -L^-1 g and m_k = L^-1 a_k it
+is min 1/2 |z - z0|^2 over m_k^T z >= d_k. A dual active-set method (Goldfarb and Idnani's, in the form
+DAQP takes: Arnström, Bemporad, Axehill 2022) keeps a linearly independent working set W of rows, the
+LDL^T factors of their Gram matrix G = M_W M_W^T and dual-feasible multipliers lam >= 0: each iteration
+solves G lam* = d_W - M_W z0, steps from lam towards lam* until a multiplier would turn negative (that
+row leaves), or takes lam* and adds the row z = z0 + M_W^T lam* violates most. A row dependent on W
+enters by moving the multipliers along the null direction of the rows until one of W reaches zero.
+
+Every row is stored sparse (CSR): a free body's m_k reads the 6 coordinates of its block of L, so a
+pile's rows cost what their nonzeros do, where a dense solver pays for every coordinate of the island
+in each iteration.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+OPTIMAL, ITERATION_CAP, INFEASIBLE, NOT_DEFINITE = 1, -1, -2, -3
+
+
+@njit(cache=True, fastmath={"reassoc", "contract"})
+def envelope_cholesky(H, L, first, parent):  # type: ignore[no-untyped-def]
+    """H = L L^T on H's envelope (first[i]: the first column of row i within it) and the elimination
+    tree of that envelope (parent[j]: the first row below j whose envelope reaches column j, -1 at a
+    root); False when H is not positive definite."""
+    n = H.shape[0]
+    for i in range(n):
+        j = 0
+        while j < i and H[i, j] == 0.0:
+            j += 1
+        first[i] = j
+        parent[i] = -1
+    for i in range(n):
+        for j in range(first[i], i + 1):
+            total = H[i, j]
+            for k in range(max(first[i], first[j]), j):
+                total -= L[i, k] * L[j, k]
+            if j < i:
+                L[i, j] = total / L[j, j]
+                if parent[j] < 0:
+                    parent[j] = i
+            elif total > 0.0:
+                L[i, i] = np.sqrt(total)
+            else:  # NaN too
+                return False
+    return True
+
+
+@njit(cache=True, fastmath={"reassoc", "contract"})
+def transformed_rows(L, first, parent, rows, ptr, idx, val, w, mark):  # type: ignore[no-untyped-def]
+    """m_k = L^-1 a_k of each row a_k of ``rows`` into the CSR arrays (ptr, idx, val): its nonzeros lie on
+    the elimination-tree paths from a_k's own (``w`` zero and ``mark`` -1 on entry, as they are left)."""
+    m, n = rows.shape
+    nnz = 0
+    ptr[0] = 0
+    for k in range(m):
+        start = nnz
+        for c in range(n):  # the union of the paths from the row's nonzeros, each entry once
+            if rows[k, c] != 0.0:
+                j = c
+                while j >= 0 and mark[j] != k:
+                    mark[j] = k
+                    idx[nnz] = j
+                    nnz += 1
+                    j = parent[j]
+        for a in range(start + 1, nnz):  # in increasing order (a few entries: insertion sort)
+            key, b = idx[a], a - 1
+            while b >= start and idx[b] > key:
+                idx[b + 1] = idx[b]
+                b -= 1
+            idx[b + 1] = key
+        for t in range(start, nnz):  # forward substitution over those entries
+            i = idx[t]
+            total = rows[k, i]
+            for j in range(first[i], i):
+                total -= L[i, j] * w[j]
+            w[i] = total / L[i, i]
+        for t in range(start, nnz):
+            val[t] = w[idx[t]]
+            w[idx[t]] = 0.0
+            mark[idx[t]] = -1
+        ptr[k + 1] = nnz
+    return nnz
+
+
+@njit(cache=True, fastmath={"reassoc", "contract"})
+def free_products(L, first, g, ptr, idx, val, z0, e):  # type: ignore[no-untyped-def]
+    """z0 = -L^-1 g, the unconstrained minimum in z, and e_k = m_k^T z0 of every row."""
+    for i in range(len(g)):
+        total = -g[i]
+        for j in range(first[i], i):
+            total -= L[i, j] * z0[j]
+        z0[i] = total / L[i, i]
+    for k in range(len(e)):
+        e[k] = _dot(ptr, idx, val, k, z0)
+
+
+@njit(cache=True, fastmath={"reassoc", "contract"}, inline="always")
+def _dot(ptr, idx, val, k, w):  # type: ignore[no-untyped-def]
+    """m_k^T w for a dense w."""
+    total = 0.0
+    for t in range(ptr[k], ptr[k + 1]):
+        total += val[t] * w[idx[t]]
+    return total
+
+
+@njit(cache=True, fastmath={"reassoc", "contract"})
+def _append(p, ptr, idx, val, W, n_w, Lw, Dw, w, u, dependence):  # type: ignore[no-untyped-def]
+    """Row p's column of the Gram matrix, forward-solved (u = (Lw)^-1 M_W m_p), and, when p is independent
+    of the working set (its pivot above ``dependence`` times |m_p|^2, and the set not full), its row of
+    the factors at n_w; True then (``w`` zero on entry and exit)."""
+    norm = 0.0
+    for t in range(ptr[p], ptr[p + 1]):
+        w[idx[t]] = val[t]
+        norm += val[t] * val[t]
+    for j in range(n_w):
+        u[j] = _dot(ptr, idx, val, W[j], w)
+    for t in range(ptr[p], ptr[p + 1]):
+        w[idx[t]] = 0.0
+    pivot = norm
+    for j in range(n_w):
+        total = u[j]
+        for i in range(j):
+            total -= Lw[j, i] * u[i]
+        u[j] = total
+        pivot -= total * total / Dw[j]
+    if not pivot > dependence * norm or n_w == len(W):  # a full set spans every m_p
+        return False
+    for j in range(n_w):
+        Lw[n_w, j] = u[j] / Dw[j]
+    Dw[n_w], W[n_w] = pivot, p
+    return True
+
+
+@njit(cache=True, fastmath={"reassoc", "contract"})
+def _remove(r, n_w, W, Lw, Dw, lam, pos, rhs, P, B):  # type: ignore[no-untyped-def]
+    """Drop the working row at place r: the factors of the rows after it take the rank-one update that
+    their column r leaves (Gill, Golub, Murray and Saunders' method C1, row by row: each of the column's
+    multipliers P and B is made at its row's diagonal), and each row moves up one place."""
+    alpha = Dw[r]
+    pos[W[r]] = -1
+    for i in range(r + 1, n_w):
+        t = Lw[i, r]
+        for j in range(r + 1, i):
+            t -= P[j] * Lw[i, j]
+            Lw[i, j] += B[j] * t
+        d = Dw[i] + alpha * t * t
+        P[i], B[i] = t, t * alpha / d
+        alpha = Dw[i] * alpha / d
+        for j in range(r):
+            Lw[i - 1, j] = Lw[i, j]
+        for j in range(r + 1, i):
+            Lw[i - 1, j - 1] = Lw[i, j]
+        Dw[i - 1], W[i - 1], lam[i - 1], rhs[i - 1] = d, W[i], lam[i], rhs[i]
+        pos[W[i - 1]] = i - 1
+
+
+@njit(cache=True, fastmath={"reassoc", "contract"})
+def _solve_gram(n_w, Lw, Dw, rhs, y, fresh, out):  # type: ignore[no-untyped-def]
+    """out = G^-1 rhs on the factors of the working set, where y = Lw^-1 rhs is kept from before for the
+    places below ``fresh`` (the rows before the first one that changed)."""
+    for j in range(fresh, n_w):
+        total = rhs[j]
+        for i in range(j):
+            total -= Lw[j, i] * y[i]
+        y[j] = total
+    for j in range(n_w):
+        out[j] = y[j] / Dw[j]
+    for i in range(n_w - 1, 0, -1):  # by rows of Lw, which lie in memory in order
+        value = out[i]
+        for j in range(i):
+            out[j] -= Lw[i, j] * value
+
+
+@njit(cache=True, fastmath={"reassoc", "contract"})
+def start_set(ptr, idx, val, n_eq, start, dependence, W, Lw, Dw, lam, pos, w, u):  # type: ignore[no-untyped-def]
+    """A working set for a new problem: its equality rows, then the inequality rows of positive ``start``
+    (the multipliers of the last solution, matched to these rows), largest first, each that is
+    independent of those before; lam their start. Returns its size."""
+    pos[:] = -1
+    n_w = 0
+    capacity = len(W)
+    for k in range(n_eq):
+        if _append(k, ptr, idx, val, W, n_w, Lw, Dw, w, u, dependence):
+            lam[n_w], pos[k] = start[k], n_w
+            n_w += 1
+    order = np.argsort(-start[n_eq:]) + n_eq
+    for k in order:
+        if start[k] <= 0.0 or n_w == capacity:
+            break
+        if _append(k, ptr, idx, val, W, n_w, Lw, Dw, w, u, dependence):
+            lam[n_w], pos[k] = start[k], n_w
+            n_w += 1
+    return n_w
+
+
+@njit(cache=True, fastmath={"reassoc", "contract"})
+def dual_iterations(
+    ptr, idx, val, e, d, n_eq, tolerance, dependence, cap, n_w, W, Lw, Dw, lam, pos, z0, z, work
+):  # type: ignore[no-untyped-def]
+    """Run the dual active-set method from the working set of size n_w (W, its factors Lw, Dw,
+    multipliers lam >= 0 on its inequality rows; pos[k] the place of row k in it, else -1) until z = z0 +
+    M_W^T lam meets every row to ``tolerance`` (OPTIMAL), for at most ``cap`` iterations (ITERATION_CAP),
+    or a violated row's dependence on the working set shows the rows infeasible (INFEASIBLE).
+    ``work`` holds 5 scratch vectors of at least the coordinates and the working set's capacity.
+    Returns (status, iterations, size of the working set)."""
+    m = len(d)
+    star, rhs, w, u, y = work[0], work[1], work[2], work[3], work[4]
+    fresh = 0  # the places of the working set whose forward-solved right-hand side y holds
+    for j in range(n_w):
+        rhs[j] = d[W[j]] - e[W[j]]
+    for iteration in range(1, cap + 1):
+        _solve_gram(n_w, Lw, Dw, rhs, y, fresh, star)
+        fresh = n_w
+        step, block = np.inf, -1
+        for j in range(n_w):
+            if W[j] >= n_eq and star[j] < 0.0:
+                ratio = lam[j] / (lam[j] - star[j])  # in [0, 1], 1 itself in round-off
+                if ratio < step:
+                    step, block = ratio, j
+        if block >= 0:  # towards lam* until a multiplier reaches zero: that row leaves
+            step = min(step, 1.0)
+            for j in range(n_w):
+                lam[j] += step * (star[j] - lam[j])
+                if W[j] >= n_eq:  # >= 0 in round-off too: the next ratio's denominator is positive
+                    lam[j] = max(lam[j], 0.0)
+            _remove(block, n_w, W, Lw, Dw, lam, pos, rhs, star, u)
+            n_w, fresh = n_w - 1, min(fresh, block)
+            continue
+        for j in range(n_w):
+            lam[j] = star[j]
+        z[:] = z0
+        for j in range(n_w):
+            k = W[j]
+            for t in range(ptr[k], ptr[k + 1]):
+                z[idx[t]] += lam[j] * val[t]
+        worst, p = -tolerance, -1
+        for k in range(m):
+            if pos[k] < 0:
+                slack = _dot(ptr, idx, val, k, z) - d[k]
+                if k < n_eq:
+                    if abs(slack) > tolerance:  # an equality left out as dependent, and inconsistent
+                        return INFEASIBLE, iteration, n_w
+                elif slack < worst:
+                    worst, p = slack, k
+        if p < 0:
+            _refine(ptr, idx, val, d, n_eq, n_w, W, Lw, Dw, lam, z0, z, star, y, u)
+            return OPTIMAL, iteration, n_w
+        entered = 0.0  # p's multiplier, grown along the null direction of a dependent p
+        while not _append(p, ptr, idx, val, W, n_w, Lw, Dw, w, u, dependence):
+            if n_w == 0:
+                return INFEASIBLE, iteration, n_w
+            # m_p = M_W^T c: raising lam_p by s and lowering lam_W by s c leaves z, raises the dual
+            for j in range(n_w):
+                u[j] /= Dw[j]
+            for i in range(n_w - 1, 0, -1):
+                value = u[i]
+                for j in range(i):
+                    u[j] -= Lw[i, j] * value
+            move, block = np.inf, -1
+            for j in range(n_w):
+                if W[j] >= n_eq and u[j] > 0.0 and lam[j] / u[j] < move:
+                    move, block = lam[j] / u[j], j
+            if block < 0:  # nothing limits the dual's rise: no z meets the rows
+                return INFEASIBLE, iteration, n_w
+            for j in range(n_w):
+                lam[j] -= move * u[j]
+                if W[j] >= n_eq:
+                    lam[j] = max(lam[j], 0.0)
+            entered += move
+            _remove(block, n_w, W, Lw, Dw, lam, pos, rhs, star, u)
+            n_w, fresh = n_w - 1, min(fresh, block)
+        lam[n_w], pos[p], rhs[n_w] = entered, n_w, d[p] - e[p]
+        n_w += 1
+    return ITERATION_CAP, cap, n_w
+
+
+@njit(cache=True, fastmath={"reassoc", "contract"})
+def _refine(ptr, idx, val, d, n_eq, n_w, W, Lw, Dw, lam, z0, z, residual, y, step):  # type: ignore[no-untyped-def]
+    """One step of iterative refinement of the working set's equations M_W z = d_W: the factors drift
+    from the rows' Gram matrix over many updates (a pile's cold start: 200-odd), which leaves the working
+    rows' slacks at 1e-10 and more; lam and z move by G^-1 times those (inequality multipliers kept >= 0)."""
+    for j in range(n_w):
+        residual[j] = d[W[j]] - _dot(ptr, idx, val, W[j], z)
+    _solve_gram(n_w, Lw, Dw, residual, y, 0, step)
+    z[:] = z0
+    for j in range(n_w):
+        lam[j] += step[j]
+        if W[j] >= n_eq:
+            lam[j] = max(lam[j], 0.0)
+        k = W[j]
+        for t in range(ptr[k], ptr[k + 1]):
+            z[idx[t]] += lam[j] * val[t]
+
+
+@njit(cache=True, fastmath={"reassoc", "contract"})
+def primal_answer(L, first, z, n_w, W, lam, x, multipliers):  # type: ignore[no-untyped-def]
+    """x = L^-T z and the multipliers of every row (the working set's lam, zero elsewhere)."""
+    n = len(z)
+    x[:] = z
+    for k in range(n - 1, -1, -1):
+        x[k] /= L[k, k]
+        for j in range(first[k], k):
+            x[j] -= L[k, j] * x[k]
+    multipliers[:] = 0.0
+    for j in range(n_w):
+        multipliers[W[j]] = lam[j]
