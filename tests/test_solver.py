@@ -672,6 +672,38 @@ def test_daqp_answers_the_check_refuses_or_inputs_it_refuses_go_to_proxqp(monkey
     assert refused.lambda_in == pytest.approx([9.81e-3, 0.0], abs=1e-7)
 
 
+def test_a_robots_rows_stay_on_their_limb_in_least_distance_form(solo12):
+    """The dual method factors M leaves first (its coordinates reversed: Pinocchio puts a joint after its
+    parent), so L^-1 a of a foot's contact row reads the base and that leg alone (9 of Solo-12's 18
+    coordinates), as the row does; M's factor is exact (L L^T is M reversed) and so are the rows' Gram
+    products (m_i . m_j = a_i M^-1 a_j)."""
+    import pinocchio as pin
+
+    from gaussim.kernels import dual
+
+    model, data = solo12.model, solo12.model.createData()
+    q = pin.neutral(model)
+    M = pin.crba(model, data, q)
+    M = np.triu(M) + np.triu(M, 1).T
+    pin.computeJointJacobians(model, data, q)
+    pin.updateFramePlacements(model, data)
+    feet = [f.name for f in model.frames if f.name.endswith("_FOOT")]
+    rows = np.vstack(
+        [pin.getFrameJacobian(model, data, model.getFrameId(f), pin.LOCAL_WORLD_ALIGNED)[:3] for f in feet]
+    )
+    n, m = model.nv, len(rows)
+    L, first, parent = np.zeros((n, n)), np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
+    assert dual.envelope_cholesky(M, L, first, parent)
+    np.testing.assert_allclose(L @ L.T, M[::-1, ::-1], atol=1e-12)
+    ptr, idx, val = np.empty(m + 1, dtype=np.int64), np.empty(m * n, dtype=np.int64), np.empty(m * n)
+    dual.transformed_rows(L, first, parent, rows, ptr, idx, val, np.zeros(n), np.full(n, -1, dtype=np.int64))
+    assert np.all(np.diff(ptr) <= 9) and len(feet) == 4
+    dense = np.zeros((m, n))
+    for k in range(m):
+        dense[k, idx[ptr[k] : ptr[k + 1]]] = val[ptr[k] : ptr[k + 1]]
+    np.testing.assert_allclose(dense @ dense.T, rows @ np.linalg.solve(M, rows.T), atol=1e-9)
+
+
 def test_the_bound_response_is_the_derivative_of_daqps_solution():
     """bound_response's R[i, j] = V[i] . dx, dx the move of the solution when group j's active bounds
     rise by 1, against DAQP's solutions (Arnström et al.'s solver, not gaussim's) of the problem with

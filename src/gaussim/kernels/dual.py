@@ -2,12 +2,17 @@
 
 The Gauss problem min 1/2 x^T H x + g^T x over rows a_k^T x >= d_k (and = d_k) is posed in least-distance
 form: with H = L L^T (L lower, Cholesky on H's envelope), z = L^T x, z0 = -L^-1 g and m_k = L^-1 a_k it
-is min 1/2 |z - z0|^2 over m_k^T z >= d_k. A dual active-set method (Goldfarb and Idnani's, in the form
-DAQP takes: Arnström, Bemporad, Axehill 2022) keeps a linearly independent working set W of rows, the
-LDL^T factors of their Gram matrix G = M_W M_W^T and dual-feasible multipliers lam >= 0: each iteration
-solves G lam* = d_W - M_W z0, steps from lam towards lam* until a multiplier would turn negative (that
-row leaves), or takes lam* and adds the row z = z0 + M_W^T lam* violates most. A row dependent on W
-enters by moving the multipliers along the null direction of the rows until one of W reaches zero.
+is min 1/2 |z - z0|^2 over m_k^T z >= d_k. L factors H in reversed order of the coordinates (z, L and
+the m_k live in that order): Pinocchio puts a joint after its parent, so that order eliminates a tree's
+leaves before its root, as Featherstone's L^T D L factorization does, and L has no fill beyond each
+coordinate's ancestors (a robot's contact row stays on its limb and base).
+
+A dual active-set method (Goldfarb and Idnani's, in the form DAQP takes: Arnström, Bemporad, Axehill
+2022) keeps a linearly independent working set W of rows, the LDL^T factors of their Gram matrix
+G = M_W M_W^T and dual-feasible multipliers lam >= 0: each iteration solves G lam* = d_W - M_W z0,
+steps from lam towards lam* until a multiplier would turn negative (that row leaves), or takes lam* and
+adds the row z = z0 + M_W^T lam* violates most. A row dependent on W enters by moving the multipliers
+along the null direction of the rows until one of W reaches zero.
 
 Every row is stored sparse (CSR): a free body's m_k reads the 6 coordinates of its block of L, so a
 pile's rows cost what their nonzeros do, where a dense solver pays for every coordinate of the island
@@ -24,19 +29,20 @@ OPTIMAL, ITERATION_CAP, INFEASIBLE, NOT_DEFINITE = 1, -1, -2, -3
 
 @njit(cache=True, fastmath={"reassoc", "contract"})
 def envelope_cholesky(H, L, first, parent):  # type: ignore[no-untyped-def]
-    """H = L L^T on H's envelope (first[i]: the first column of row i within it) and the elimination
-    tree of that envelope (parent[j]: the first row below j whose envelope reaches column j, -1 at a
-    root); False when H is not positive definite."""
+    """P H P = L L^T (P the reversal of the coordinates) on that matrix's envelope (first[i]: the first
+    column of row i within it) and the elimination tree of that envelope (parent[j]: the first row below
+    j whose envelope reaches column j, -1 at a root); False when H is not positive definite."""
     n = H.shape[0]
+    last = n - 1
     for i in range(n):
         j = 0
-        while j < i and H[i, j] == 0.0:
+        while j < i and H[last - i, last - j] == 0.0:
             j += 1
         first[i] = j
         parent[i] = -1
     for i in range(n):
         for j in range(first[i], i + 1):
-            total = H[i, j]
+            total = H[last - i, last - j]
             for k in range(max(first[i], first[j]), j):
                 total -= L[i, k] * L[j, k]
             if j < i:
@@ -52,15 +58,16 @@ def envelope_cholesky(H, L, first, parent):  # type: ignore[no-untyped-def]
 
 @njit(cache=True, fastmath={"reassoc", "contract"})
 def transformed_rows(L, first, parent, rows, ptr, idx, val, w, mark):  # type: ignore[no-untyped-def]
-    """m_k = L^-1 a_k of each row a_k of ``rows`` into the CSR arrays (ptr, idx, val): its nonzeros lie on
-    the elimination-tree paths from a_k's own (``w`` zero and ``mark`` -1 on entry, as they are left)."""
+    """m_k = L^-1 P a_k of each row a_k of ``rows`` into the CSR arrays (ptr, idx, val): its nonzeros lie on
+    the elimination-tree paths from P a_k's own (``w`` zero and ``mark`` -1 on entry, as they are left)."""
     m, n = rows.shape
+    last = n - 1
     nnz = 0
     ptr[0] = 0
     for k in range(m):
         start = nnz
         for c in range(n):  # the union of the paths from the row's nonzeros, each entry once
-            if rows[k, c] != 0.0:
+            if rows[k, last - c] != 0.0:
                 j = c
                 while j >= 0 and mark[j] != k:
                     mark[j] = k
@@ -75,7 +82,7 @@ def transformed_rows(L, first, parent, rows, ptr, idx, val, w, mark):  # type: i
             idx[b + 1] = key
         for t in range(start, nnz):  # forward substitution over those entries
             i = idx[t]
-            total = rows[k, i]
+            total = rows[k, last - i]
             for j in range(first[i], i):
                 total -= L[i, j] * w[j]
             w[i] = total / L[i, i]
@@ -89,9 +96,10 @@ def transformed_rows(L, first, parent, rows, ptr, idx, val, w, mark):  # type: i
 
 @njit(cache=True, fastmath={"reassoc", "contract"})
 def free_products(L, first, g, ptr, idx, val, z0, e):  # type: ignore[no-untyped-def]
-    """z0 = -L^-1 g, the unconstrained minimum in z, and e_k = m_k^T z0 of every row."""
+    """z0 = -L^-1 P g, the unconstrained minimum in z, and e_k = m_k^T z0 of every row."""
+    last = len(g) - 1
     for i in range(len(g)):
-        total = -g[i]
+        total = -g[last - i]
         for j in range(first[i], i):
             total -= L[i, j] * z0[j]
         z0[i] = total / L[i, i]
@@ -299,13 +307,15 @@ def _refine(ptr, idx, val, d, n_eq, n_w, W, Lw, Dw, lam, z0, z, residual, y, ste
 
 @njit(cache=True, fastmath={"reassoc", "contract"})
 def primal_answer(L, first, z, n_w, W, lam, x, multipliers):  # type: ignore[no-untyped-def]
-    """x = L^-T z and the multipliers of every row (the working set's lam, zero elsewhere)."""
+    """x = P L^-T z and the multipliers of every row (the working set's lam, zero elsewhere)."""
     n = len(z)
-    x[:] = z
+    y = z.copy()
     for k in range(n - 1, -1, -1):
-        x[k] /= L[k, k]
+        y[k] /= L[k, k]
         for j in range(first[k], k):
-            x[j] -= L[k, j] * x[k]
+            y[j] -= L[k, j] * y[k]
+    for k in range(n):
+        x[k] = y[n - 1 - k]
     multipliers[:] = 0.0
     for j in range(n_w):
         multipliers[W[j]] = lam[j]
