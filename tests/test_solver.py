@@ -672,6 +672,40 @@ def test_daqp_answers_the_check_refuses_or_inputs_it_refuses_go_to_proxqp(monkey
     assert refused.lambda_in == pytest.approx([9.81e-3, 0.0], abs=1e-7)
 
 
+def test_gaussims_dual_method_answers_rows_near_dependence_and_rows_that_change_kind():
+    """Four small problems whose nearly dependent rows leave the working set's Gram matrix ill-conditioned
+    (found by a review's fuzzing: round-off showed a row as violated, and dependent, and the method said
+    infeasible): each is answered by the method, with DAQP's x (at a tight tolerance) to 1e-10 in the
+    norm of H. Then a row that was an equality comes back an inequality, the other arrays the same: the
+    held working set is not reused (its negative multiplier divided by zero)."""
+    import daqp
+
+    data = np.load(DATA / "dual_near_dependent.npz")
+    for k in range(4):
+        H, g, A, b, C, l = (data[f"{name}{k}"] for name in ("H", "g", "A", "b", "C", "l"))
+        solution = GaussSolver(gaussim.Options()).solve(GaussProblem(H, g, A, b, C, l, []), warm=False)
+        assert solution.certificate.status is Status.DUAL_SOLVED, (k, solution.certificate)
+        sense = np.r_[np.full(len(b), 5), np.zeros(len(l))].astype(np.int32)
+        x, _, flag, _ = daqp.solve(
+            H, g, np.vstack([A, C]), np.r_[b, np.full(len(l), 1e30)], np.r_[b, l], sense
+        )
+        difference = solution.x - np.asarray(x)
+        assert flag == 1 and np.sqrt(difference @ H @ difference) < 1e-10, k
+    H, g, rows = np.eye(2), np.array([-2.0, -1.0]), np.eye(2)
+    gauss = GaussSolver(gaussim.Options())
+    with_equality = GaussProblem(H, g, rows[:1], np.array([1.0]), rows[1:], np.array([5.0]), [])
+    inequalities = GaussProblem(H, g, rows[:0], np.zeros(0), rows, np.array([1.0, 5.0]), [])
+    for problem, x, multipliers in [
+        (with_equality, [1.0, 5.0], [-1.0, 4.0]),
+        (inequalities, [2.0, 5.0], [0.0, 4.0]),
+        (with_equality, [1.0, 5.0], [-1.0, 4.0]),  # an equality outside the held set: not infeasible
+    ]:
+        solution = gauss.solve(problem, warm=False)
+        assert solution.certificate.status is Status.DUAL_SOLVED, solution.certificate
+        np.testing.assert_allclose(solution.x, x, atol=1e-12)
+        np.testing.assert_allclose(solution.multipliers, multipliers, atol=1e-12)
+
+
 def test_a_robots_rows_stay_on_their_limb_in_least_distance_form(solo12):
     """The dual method factors M leaves first (its coordinates reversed: Pinocchio puts a joint after its
     parent), so L^-1 a of a foot's contact row reads the base and that leg alone (9 of Solo-12's 18

@@ -67,8 +67,8 @@ def transformed_rows(L, first, parent, rows, ptr, idx, val, w, mark):  # type: i
     for k in range(m):
         start = nnz
         for c in range(n):  # the union of the paths from the row's nonzeros, each entry once
-            if rows[k, last - c] != 0.0:
-                j = c
+            if rows[k, c] != 0.0:
+                j = last - c
                 while j >= 0 and mark[j] != k:
                     mark[j] = k
                     idx[nnz] = j
@@ -216,11 +216,12 @@ def dual_iterations(
     or a violated row's dependence on the working set shows the rows infeasible (INFEASIBLE).
     ``work`` holds 5 scratch vectors of at least the coordinates and the working set's capacity.
     Returns (status, iterations, size of the working set)."""
-    m = len(d)
     star, rhs, w, u, y = work[0], work[1], work[2], work[3], work[4]
     fresh = 0  # the places of the working set whose forward-solved right-hand side y holds
     for j in range(n_w):
         rhs[j] = d[W[j]] - e[W[j]]
+        if W[j] >= n_eq:  # dual feasible, whatever the set was given with
+            lam[j] = max(lam[j], 0.0)
     for iteration in range(1, cap + 1):
         _solve_gram(n_w, Lw, Dw, rhs, y, fresh, star)
         fresh = n_w
@@ -246,35 +247,30 @@ def dual_iterations(
             k = W[j]
             for t in range(ptr[k], ptr[k + 1]):
                 z[idx[t]] += lam[j] * val[t]
-        worst, p = -tolerance, -1
-        for k in range(m):
-            if pos[k] < 0:
-                slack = _dot(ptr, idx, val, k, z) - d[k]
-                if k < n_eq:
-                    if abs(slack) > tolerance:  # an equality left out as dependent, and inconsistent
-                        return INFEASIBLE, iteration, n_w
-                elif slack < worst:
-                    worst, p = slack, k
-        if p < 0:
-            _refine(ptr, idx, val, d, n_eq, n_w, W, Lw, Dw, lam, z0, z, star, y, u)
-            return OPTIMAL, iteration, n_w
+        p = _most_violated(ptr, idx, val, d, n_eq, pos, z, tolerance)
+        refined = False  # whether z was refined since the last solve for lam*
         entered = 0.0  # p's multiplier, grown along the null direction of a dependent p
-        while not _append(p, ptr, idx, val, W, n_w, Lw, Dw, w, u, dependence):
-            if n_w == 0:
-                return INFEASIBLE, iteration, n_w
-            # m_p = M_W^T c: raising lam_p by s and lowering lam_W by s c leaves z, raises the dual
-            for j in range(n_w):
-                u[j] /= Dw[j]
-            for i in range(n_w - 1, 0, -1):
-                value = u[i]
-                for j in range(i):
-                    u[j] -= Lw[i, j] * value
-            move, block = np.inf, -1
-            for j in range(n_w):
-                if W[j] >= n_eq and u[j] > 0.0 and lam[j] / u[j] < move:
-                    move, block = lam[j] / u[j], j
-            if block < 0:  # nothing limits the dual's rise: no z meets the rows
-                return INFEASIBLE, iteration, n_w
+        while p < 0 or not _append(p, ptr, idx, val, W, n_w, Lw, Dw, w, u, dependence):
+            block = -1
+            if p >= 0 and n_w:
+                # m_p = M_W^T c: raising lam_p by s and lowering lam_W by s c leaves z, raises the dual
+                for j in range(n_w):
+                    u[j] /= Dw[j]
+                for i in range(n_w - 1, 0, -1):
+                    value = u[i]
+                    for j in range(i):
+                        u[j] -= Lw[i, j] * value
+                move = np.inf
+                for j in range(n_w):
+                    if W[j] >= n_eq and u[j] > 0.0 and lam[j] / u[j] < move:
+                        move, block = lam[j] / u[j], j
+            if block < 0:  # optimal (p -1), or nothing limits the dual's rise: no z meets the rows
+                if not refined and entered == 0.0:  # unless the factors' drift made a row look violated
+                    _refine(ptr, idx, val, d, n_eq, n_w, W, Lw, Dw, lam, z0, z, star, y, u)
+                    refined, fresh = True, 0
+                    p = _most_violated(ptr, idx, val, d, n_eq, pos, z, tolerance)
+                    continue
+                return (OPTIMAL if p == -1 else INFEASIBLE), iteration, n_w
             for j in range(n_w):
                 lam[j] -= move * u[j]
                 if W[j] >= n_eq:
@@ -285,6 +281,22 @@ def dual_iterations(
         lam[n_w], pos[p], rhs[n_w] = entered, n_w, d[p] - e[p]
         n_w += 1
     return ITERATION_CAP, cap, n_w
+
+
+@njit(cache=True, fastmath={"reassoc", "contract"})
+def _most_violated(ptr, idx, val, d, n_eq, pos, z, tolerance):  # type: ignore[no-untyped-def]
+    """The row outside the working set that z violates most by more than ``tolerance``, -1 when none
+    does, -2 when an equality left out (dependent on the set) is not met."""
+    worst, p = -tolerance, -1
+    for k in range(len(d)):
+        if pos[k] < 0:
+            slack = _dot(ptr, idx, val, k, z) - d[k]
+            if k < n_eq:
+                if abs(slack) > tolerance:
+                    return -2
+            elif slack < worst:
+                worst, p = slack, k
+    return p
 
 
 @njit(cache=True, fastmath={"reassoc", "contract"})

@@ -54,9 +54,10 @@ class SparseDualActiveSet:
     def __init__(self, eps_abs: float, tolerance: float) -> None:
         self.eps_abs, self.tolerance = eps_abs, tolerance
         self._held: tuple[np.ndarray, ...] = ()  # copies of H and the rows whose factors it holds
+        self._n_eq = 0  # how many of those rows are equalities
         self._key: object = None  # the rows_key of the problem they are
         self._g: np.ndarray | None = None  # the g of the free products it holds
-        self._ids: np.ndarray | None = None  # the row ids of those rows
+        self._ids = np.zeros(0, dtype=np.int64)  # the row ids of those rows
         self._arrays: tuple[np.ndarray, ...] = ()  # the factors and rows (see _setup)
         self._set: tuple[np.ndarray, ...] = ()  # the working set (see _setup)
         self._size = -1  # the working set's size, -1 when it holds no solve's
@@ -70,8 +71,11 @@ class SparseDualActiveSet:
         rows = np.vstack((p.A, p.C)) if n_eq else p.C
         lower = np.concatenate((p.b, p.l)) if n_eq else p.l
         rows, lower = np.ascontiguousarray(rows, dtype=float), np.ascontiguousarray(lower, dtype=float)
-        held = self._held and (p.rows_key is self._key or _same(self._held, (p.H, rows)))
-        if not held and not self._setup(p, rows):
+        held = bool(self._held) and n_eq == self._n_eq
+        if held and p.rows_key is not self._key:
+            held = _same(self._held, (p.H, rows))
+            self._ids = p.row_ids  # equal rows that may be named anew
+        if not held and not self._setup(p, rows, n_eq):
             return None
         if self._g is None or not np.array_equal(self._g, p.g):
             self._g = np.array(p.g, dtype=float)
@@ -86,17 +90,21 @@ class SparseDualActiveSet:
         if flag != OPTIMAL:
             flag, iterations = self._run(lower, n_eq, self._started(np.zeros(len(lower)), n_eq))
         if flag != OPTIMAL:
-            self._size = -1
             return None
         L, first = self._arrays[:2]
         W, _, _, lam, _, z = self._set[:6]
         x, multipliers = np.empty(len(p.g)), np.empty(len(lower))
         primal_answer(L, first, z, self._size, W, lam, x, multipliers)
-        self._last = (self._ids, multipliers) if self._ids is not None else None
-        return checked(p, x, multipliers.copy(), Status.DUAL_SOLVED, self.tolerance, iterations)
+        solution = checked(p, x, multipliers.copy(), Status.DUAL_SOLVED, self.tolerance, iterations)
+        if solution is None:  # refused: neither its working set nor its multipliers start the next
+            self._size = -1
+        else:
+            self._last = (self._ids, multipliers)
+        return solution
 
-    def _setup(self, p: GaussProblem, rows: np.ndarray) -> bool:
-        """Factor H and put the rows in least-distance form; False when H is not positive definite."""
+    def _setup(self, p: GaussProblem, rows: np.ndarray, n_eq: int) -> bool:
+        """Factor H and put the rows (the first ``n_eq`` equalities) in least-distance form; False when
+        H is not positive definite."""
         H = np.ascontiguousarray(p.H, dtype=float)
         (m, n), self._size, self._g = rows.shape, -1, None
         L, first, parent = np.empty((n, n)), np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
@@ -110,6 +118,7 @@ class SparseDualActiveSet:
         W, Lw, Dw, lam = np.empty(n, dtype=np.int64), np.empty((n, n)), np.empty(n), np.empty(n)
         self._set = (W, Lw, Dw, lam, np.full(m, -1, dtype=np.int64), np.empty(n), np.zeros((5, n)))
         self._key, self._held, self._ids = p.rows_key, (H.copy(), rows.copy()), p.row_ids
+        self._n_eq = n_eq
         return True
 
     def _started(self, start: np.ndarray, n_eq: int) -> int:
@@ -119,10 +128,12 @@ class SparseDualActiveSet:
         return int(start_set(ptr, idx, val, n_eq, start, DEPENDENCE, W, Lw, Dw, lam, pos, work[2], work[3]))
 
     def _run(self, lower: np.ndarray, n_eq: int, size: int) -> tuple[int, int]:
-        """(status, iterations) of the method from a working set of ``size`` rows, whose size it keeps."""
+        """(status, iterations) of the method from a working set of ``size`` rows, whose size it keeps
+        when the method ends optimal (else none is kept)."""
         ptr, idx, val, z0, e = self._arrays[3:]
         W, Lw, Dw, lam, pos, z, work = self._set
-        flag, iterations, self._size = dual_iterations(
+        self._size = -1  # the set is changed in place: none is kept until the method says optimal
+        flag, iterations, size = dual_iterations(
             ptr,
             idx,
             val,
@@ -142,6 +153,8 @@ class SparseDualActiveSet:
             z,
             work,
         )
+        if flag == OPTIMAL:
+            self._size = size
         return flag, iterations
 
 
