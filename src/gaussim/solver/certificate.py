@@ -162,11 +162,14 @@ def checked(
     status: Status,
     tolerance: float,
     iterations: int = 0,
+    screened: bool = True,
 ) -> Solution | None:
     """(x, multipliers) as a solution of ``status`` (after ``iterations`` of its solver) when the KKT
-    check's relative residual certifies it to ``tolerance``, else None."""
+    check's relative residual certifies it to ``tolerance``, else None. ``screened``: a guess (the last
+    solution, the free motion) is first refused at the first row it violates, without the full check;
+    a solver's answer, which meets its rows to its tolerance, skips that pass over the rows."""
     p, n_eq = problem, len(problem.b)
-    if violates(p.C, p.l, x, tolerance):  # refused at the first row it violates
+    if screened and violates(p.C, p.l, x, tolerance):
         return None
     residual, relative, primal, dual, gap = kkt_residuals(
         p.H, p.g, p.A, p.b, p.C, p.l, x, multipliers[:n_eq], multipliers[n_eq:]

@@ -95,7 +95,7 @@ class SparseDualActiveSet:
         W, _, _, lam, _, z = self._set[:6]
         x, multipliers = np.empty(len(p.g)), np.empty(len(lower))
         primal_answer(L, first, z, self._size, W, lam, x, multipliers)
-        solution = checked(p, x, multipliers.copy(), Status.DUAL_SOLVED, self.tolerance, iterations)
+        solution = checked(p, x, multipliers.copy(), Status.DUAL_SOLVED, self.tolerance, iterations, False)
         if solution is None:  # refused: neither its working set nor its multipliers start the next
             self._size = -1
         else:
@@ -190,7 +190,7 @@ class DaqpActiveSet:
         # the rows of the workspace that solved it: the held ones, or a new setup's
         self._last = None if self._ids is None else (self._ids, multipliers)
         status, iterations = Status.DUAL_ACTIVE_SET_SOLVED, info["iterations"]
-        return checked(p, np.array(x), multipliers.copy(), status, self.tolerance, iterations)
+        return checked(p, np.array(x), multipliers.copy(), status, self.tolerance, iterations, False)
 
     def _solve(
         self, p: GaussProblem, rows: np.ndarray, upper: np.ndarray, lower: np.ndarray
