@@ -64,16 +64,20 @@ def transformed_rows(L, first, parent, rows, ptr, idx, val, w, mark):  # type: i
     last = n - 1
     nnz = 0
     ptr[0] = 0
+    nonzero = np.empty(n, dtype=np.int64)
     for k in range(m):
-        start = nnz
-        for c in range(n):  # the union of the paths from the row's nonzeros, each entry once
+        start, count = nnz, 0
+        for c in range(n):  # read in memory order
             if rows[k, c] != 0.0:
-                j = last - c
-                while j >= 0 and mark[j] != k:
-                    mark[j] = k
-                    idx[nnz] = j
-                    nnz += 1
-                    j = parent[j]
+                nonzero[count] = last - c
+                count += 1
+        for a in range(count - 1, -1, -1):  # the union of the paths, each entry once, nearly in order
+            j = nonzero[a]
+            while j >= 0 and mark[j] != k:
+                mark[j] = k
+                idx[nnz] = j
+                nnz += 1
+                j = parent[j]
         for a in range(start + 1, nnz):  # in increasing order (a few entries: insertion sort)
             key, b = idx[a], a - 1
             while b >= start and idx[b] > key:
