@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-OPTIMAL, ITERATION_CAP, INFEASIBLE, NOT_DEFINITE = 1, -1, -2, -3
+OPTIMAL, ITERATION_CAP, INFEASIBLE = 1, -1, -2
 
 
 @njit(cache=True, fastmath={"reassoc", "contract"})
@@ -180,12 +180,28 @@ def _solve_gram(n_w, Lw, Dw, rhs, y, fresh, out):  # type: ignore[no-untyped-def
         for i in range(j):
             total -= Lw[j, i] * y[i]
         y[j] = total
+    _backward(n_w, Lw, Dw, y, out)
+
+
+@njit(cache=True, fastmath={"reassoc", "contract"}, inline="always")
+def _backward(n_w, Lw, Dw, y, out):  # type: ignore[no-untyped-def]
+    """out = Lw^-T D^-1 y (``out`` may be ``y``)."""
     for j in range(n_w):
         out[j] = y[j] / Dw[j]
     for i in range(n_w - 1, 0, -1):  # by rows of Lw, which lie in memory in order
         value = out[i]
         for j in range(i):
             out[j] -= Lw[i, j] * value
+
+
+@njit(cache=True, fastmath={"reassoc", "contract"}, inline="always")
+def _primal(ptr, idx, val, n_w, W, lam, z0, z):  # type: ignore[no-untyped-def]
+    """z = z0 + M_W^T lam."""
+    z[:] = z0
+    for j in range(n_w):
+        k = W[j]
+        for t in range(ptr[k], ptr[k + 1]):
+            z[idx[t]] += lam[j] * val[t]
 
 
 @njit(cache=True, fastmath={"reassoc", "contract"})
@@ -246,11 +262,7 @@ def dual_iterations(
             continue
         for j in range(n_w):
             lam[j] = star[j]
-        z[:] = z0
-        for j in range(n_w):
-            k = W[j]
-            for t in range(ptr[k], ptr[k + 1]):
-                z[idx[t]] += lam[j] * val[t]
+        _primal(ptr, idx, val, n_w, W, lam, z0, z)
         p = _most_violated(ptr, idx, val, d, n_eq, pos, z, tolerance)
         refined = False  # whether z was refined since the last solve for lam*
         entered = 0.0  # p's multiplier, grown along the null direction of a dependent p
@@ -258,12 +270,7 @@ def dual_iterations(
             block = -1
             if p >= 0 and n_w:
                 # m_p = M_W^T c: raising lam_p by s and lowering lam_W by s c leaves z, raises the dual
-                for j in range(n_w):
-                    u[j] /= Dw[j]
-                for i in range(n_w - 1, 0, -1):
-                    value = u[i]
-                    for j in range(i):
-                        u[j] -= Lw[i, j] * value
+                _backward(n_w, Lw, Dw, u, u)
                 move = np.inf
                 for j in range(n_w):
                     if W[j] >= n_eq and u[j] > 0.0 and lam[j] / u[j] < move:
@@ -311,14 +318,11 @@ def _refine(ptr, idx, val, d, n_eq, n_w, W, Lw, Dw, lam, z0, z, residual, y, ste
     for j in range(n_w):
         residual[j] = d[W[j]] - _dot(ptr, idx, val, W[j], z)
     _solve_gram(n_w, Lw, Dw, residual, y, 0, step)
-    z[:] = z0
     for j in range(n_w):
         lam[j] += step[j]
         if W[j] >= n_eq:
             lam[j] = max(lam[j], 0.0)
-        k = W[j]
-        for t in range(ptr[k], ptr[k + 1]):
-            z[idx[t]] += lam[j] * val[t]
+    _primal(ptr, idx, val, n_w, W, lam, z0, z)
 
 
 @njit(cache=True, fastmath={"reassoc", "contract"})

@@ -74,7 +74,8 @@ class SparseDualActiveSet:
         held = bool(self._held) and n_eq == self._n_eq
         if held and p.rows_key is not self._key:
             held = _same(self._held, (p.H, rows))
-            self._ids = p.row_ids  # equal rows that may be named anew
+            if held:
+                self._ids = p.row_ids  # equal rows that may be named anew
         if not held and not self._setup(p, rows, n_eq):
             return None
         if self._g is None or not np.array_equal(self._g, p.g):
