@@ -706,6 +706,36 @@ def test_gaussims_dual_method_answers_rows_near_dependence_and_rows_that_change_
         np.testing.assert_allclose(solution.multipliers, multipliers, atol=1e-12)
 
 
+def test_a_start_set_in_banded_order_keeps_its_factors_in_a_narrow_envelope():
+    """A chain of bodies, each touching the next, its rows in shuffled order (row k reads coordinates
+    c_k and c_k + 1) and so are their start multipliers: the working set comes in chain order (reverse
+    Cuthill-McKee), each factor row starts at the row before it, and the factors are still those of
+    the rows' Gram matrix."""
+    from gaussim.kernels import dual
+
+    n, rng = 40, np.random.default_rng(3)
+    m = n - 1
+    ptr = np.arange(0, 2 * m + 1, 2, dtype=np.int64)
+    chain = rng.permutation(m)
+    idx = np.repeat(chain, 2) + np.tile([0, 1], m)
+    val = rng.uniform(0.5, 1.5, 2 * m)
+    masks = np.array([(1 << (c * 64 // n)) | (1 << ((c + 1) * 64 // n)) for c in chain], dtype=np.int64)
+    start = rng.permutation(np.arange(1.0, m + 1.0))
+    W, F, pos = np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64), np.empty(m, dtype=np.int64)
+    Lw, Dw, lam = np.zeros((n, n)), np.empty(n), np.empty(n)
+    size = dual.start_set(
+        ptr, idx, val, masks, 0, start, 1e-10, W, Lw, Dw, F, lam, pos, np.zeros(n), np.zeros(n)
+    )
+    assert size == m
+    assert np.all(np.abs(np.diff(chain[W[:m]])) == 1)  # the chain, from one end
+    np.testing.assert_array_equal(F[1:m], np.arange(m - 1))
+    rows = np.zeros((m, n))
+    for k in range(m):
+        rows[k, idx[ptr[k] : ptr[k + 1]]] = val[ptr[k] : ptr[k + 1]]
+    factor = np.tril(Lw[:m, :m], -1) + np.eye(m)
+    np.testing.assert_allclose(factor @ np.diag(Dw[:m]) @ factor.T, rows[W[:m]] @ rows[W[:m]].T, atol=1e-12)
+
+
 def test_a_robots_rows_stay_on_their_limb_in_least_distance_form(solo12):
     """The dual method factors M leaves first (its coordinates reversed: Pinocchio puts a joint after its
     parent), so L^-1 a of a foot's contact row reads the base and that leg alone (9 of Solo-12's 18
@@ -730,7 +760,10 @@ def test_a_robots_rows_stay_on_their_limb_in_least_distance_form(solo12):
     assert dual.envelope_cholesky(M, L, first, parent)
     np.testing.assert_allclose(L @ L.T, M[::-1, ::-1], atol=1e-12)
     ptr, idx, val = np.empty(m + 1, dtype=np.int64), np.empty(m * n, dtype=np.int64), np.empty(m * n)
-    dual.transformed_rows(L, first, parent, rows, ptr, idx, val, np.zeros(n), np.full(n, -1, dtype=np.int64))
+    masks = np.empty(m, dtype=np.int64)
+    dual.transformed_rows(
+        L, first, parent, rows, ptr, idx, val, masks, np.zeros(n), np.full(n, -1, dtype=np.int64)
+    )
     assert np.all(np.diff(ptr) <= 9) and len(feet) == 4
     dense = np.zeros((m, n))
     for k in range(m):

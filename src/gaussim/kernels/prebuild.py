@@ -98,10 +98,12 @@ SIGNATURES = {
     "solver.warm_islands": [f"f2 f1 {sides} i1*6 b1 f1 f1 f i1 f2 f1 f1" for sides in _SIDES],
     # the dual active-set method: a problem's factors and rows, its working set, its answer
     "dual.envelope_cholesky": ["f2 f2 i1 i1"],
-    "dual.transformed_rows": ["f2 i1 i1 f2 i1 i1 f1 f1 i1", "f2 i1 i1 f2r i1 i1 f1 f1 i1"],
+    "dual.transformed_rows": ["f2 i1 i1 f2 i1 i1 f1 i1 f1 i1", "f2 i1 i1 f2r i1 i1 f1 i1 f1 i1"],
     "dual.free_products": ["f2 i1 f1 i1 i1 f1 f1 f1"],
-    "dual.start_set": ["i1 i1 f1 i f1 f i1 f2 f1 f1 i1 f1 f1"],
-    "dual.dual_iterations": [f"i1 i1 f1 f1 {d} i f f i i i1 f2 f1 f1 i1 f1 f1 f2" for d in ("f1", "f1r")],
+    "dual.start_set": ["i1 i1 f1 i1 i f1 f i1 f2 f1 i1 f1 i1 f1 f1"],
+    "dual.dual_iterations": [
+        f"i1 i1 f1 i1 f1 {d} i f f i i i1 f2 f1 i1 f1 i1 f1 f1 f2" for d in ("f1", "f1r")
+    ],
     "dual.primal_answer": ["f2 i1 f1 i i1 f1 f1 f1"],
 }
 

@@ -80,7 +80,7 @@ class SparseDualActiveSet:
             return None
         if self._g is None or not np.array_equal(self._g, p.g):
             self._g = np.array(p.g, dtype=float)
-            L, first, _, ptr, idx, val, z0, e = self._arrays
+            L, first, _, ptr, idx, val, _, z0, e = self._arrays
             free_products(L, first, self._g, ptr, idx, val, z0, e)
         flag, iterations = 0, 0
         if self._size >= 0:  # the working set the last solve on these rows left
@@ -93,7 +93,7 @@ class SparseDualActiveSet:
         if flag != OPTIMAL:
             return None
         L, first = self._arrays[:2]
-        W, _, _, lam, _, z = self._set[:6]
+        W, _, _, _, lam, _, z = self._set[:7]
         x, multipliers = np.empty(len(p.g)), np.empty(len(lower))
         primal_answer(L, first, z, self._size, W, lam, x, multipliers)
         solution = checked(p, x, multipliers.copy(), Status.DUAL_SOLVED, self.tolerance, iterations, False)
@@ -113,31 +113,37 @@ class SparseDualActiveSet:
         if not envelope_cholesky(H, L, first, parent):
             return False
         ptr, idx, val = np.empty(m + 1, dtype=np.int64), np.empty(m * n, dtype=np.int64), np.empty(m * n)
-        transformed_rows(L, first, parent, rows, ptr, idx, val, np.zeros(n), np.full(n, -1, dtype=np.int64))
-        self._arrays = (L, first, parent, ptr, idx, val, np.empty(n), np.empty(m))
-        # the working set: rows W, factors Lw and Dw, multipliers, place of each row, z, scratch
+        masks, mark = np.empty(m, dtype=np.int64), np.full(n, -1, dtype=np.int64)
+        transformed_rows(L, first, parent, rows, ptr, idx, val, masks, np.zeros(n), mark)
+        self._arrays = (L, first, parent, ptr, idx, val, masks, np.empty(n), np.empty(m))
+        # the working set: rows W, factors Lw, Dw and each factor row's first column, multipliers, place
+        # of each row, z, scratch
         W, Lw, Dw, lam = np.empty(n, dtype=np.int64), np.empty((n, n)), np.empty(n), np.empty(n)
-        self._set = (W, Lw, Dw, lam, np.full(m, -1, dtype=np.int64), np.empty(n), np.zeros((5, n)))
+        F, pos = np.empty(n, dtype=np.int64), np.full(m, -1, dtype=np.int64)
+        self._set = (W, Lw, Dw, F, lam, pos, np.empty(n), np.zeros((5, n)))
         self._key, self._held, self._ids = p.rows_key, (H.copy(), rows.copy()), p.row_ids
         self._n_eq = n_eq
         return True
 
     def _started(self, start: np.ndarray, n_eq: int) -> int:
         """The size of a working set made from the multipliers ``start`` (see start_set)."""
-        ptr, idx, val = self._arrays[3:6]
-        W, Lw, Dw, lam, pos, _, work = self._set
-        return int(start_set(ptr, idx, val, n_eq, start, DEPENDENCE, W, Lw, Dw, lam, pos, work[2], work[3]))
+        ptr, idx, val, masks = self._arrays[3:7]
+        W, Lw, Dw, F, lam, pos, _, work = self._set
+        return int(
+            start_set(ptr, idx, val, masks, n_eq, start, DEPENDENCE, W, Lw, Dw, F, lam, pos, *work[2:4])
+        )
 
     def _run(self, lower: np.ndarray, n_eq: int, size: int) -> tuple[int, int]:
         """(status, iterations) of the method from a working set of ``size`` rows, whose size it keeps
         when the method ends optimal (else none is kept)."""
-        ptr, idx, val, z0, e = self._arrays[3:]
-        W, Lw, Dw, lam, pos, z, work = self._set
+        ptr, idx, val, masks, z0, e = self._arrays[3:]
+        W, Lw, Dw, F, lam, pos, z, work = self._set
         self._size = -1  # the set is changed in place: none is kept until the method says optimal
         flag, iterations, size = dual_iterations(
             ptr,
             idx,
             val,
+            masks,
             e,
             lower,
             n_eq,
@@ -148,6 +154,7 @@ class SparseDualActiveSet:
             W,
             Lw,
             Dw,
+            F,
             lam,
             pos,
             z0,
