@@ -112,6 +112,30 @@ def test_the_islands_solution_is_the_whole_problems():
     np.testing.assert_allclose(multipliers, whole.multipliers, atol=1e-6)
 
 
+def test_an_islands_rows_key_is_its_sources_and_its_cut(monkeypatch):
+    """A friction pass cuts the same islands from a problem with the same rows (its key) and moved
+    bounds: each island's key equals the last pass's, so gaussim's dual method solves it on the
+    factors it holds (one setup for the two passes); another cut, or rows posed anew, is another key."""
+    from gaussim.solver.dual import SparseDualActiveSet
+
+    problem, _ = _islands_problem(np.random.default_rng(3))
+    moved = GaussProblem(problem.H, problem.g, problem.A, problem.b, problem.C, problem.l + 0.01, [])
+    moved.rows_key = problem.rows_key
+    anew = GaussProblem(problem.H, problem.g, problem.A, problem.b, problem.C, problem.l, [])
+    cols, eq, ineq = np.arange(6), np.zeros(0, dtype=np.int64), np.arange(3)
+    key = problem.island(cols, eq, ineq).rows_key
+    assert moved.island(cols, eq, ineq).rows_key == key
+    assert problem.island(cols, eq, ineq[:2]).rows_key != key
+    assert anew.island(cols, eq, ineq).rows_key != key
+    setups = []
+    setup = SparseDualActiveSet._setup
+    monkeypatch.setattr(SparseDualActiveSet, "_setup", lambda self, *a: setups.append(1) or setup(self, *a))
+    solver = SparseDualActiveSet(1e-9, 1e-7)
+    first, second = (solver.solve(p.island(cols, eq, ineq)) for p in (problem, moved))
+    assert first is not None and second is not None and len(setups) == 1
+    assert np.abs(second.x - first.x).max() > 1e-4  # the moved bounds' answer
+
+
 @pytest.mark.parametrize("refused", [False, True])
 def test_each_island_starts_from_its_own_last_solution(refused, monkeypatch):
     """The islands solved again: the same problem from each one's last solution, bounds moved a

@@ -510,6 +510,7 @@ def test_daqp_solves_a_problem_whose_bounds_moved_on_the_factors_it_holds(monkey
     gauss = GaussSolver(gaussim.Options(solver=solver))
     first = gauss.solve(problem)
     shifted = GaussProblem(problem.H, problem.g, problem.A, problem.b, problem.C, problem.l + 1e-3, [])
+    shifted.rows_key = problem.rows_key  # the same rows, as assemble keeps them (the next test)
     second = gauss.solve(shifted)
     assert second.certificate.status is SOLVED_BY[solver] and len(setups) == 1
     difference = second.x - _tight_proxqp(shifted)

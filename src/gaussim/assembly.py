@@ -31,9 +31,9 @@ class GaussProblem:
         applied: the generalized force the modules apply outside the QP (in g), shape (nv,), or None.
         source: for an island's problem (:meth:`island`), the problem it was cut from and its
             equality and inequality rows there (the row names are the source's).
-        rows_key: stands for the values of H, A and C: a problem with the same key has the same
+        rows_key: stands for the values of H, A and C: a problem with an equal key (==) has the same
             ones (its g, b and l may differ: a friction pass's bounds), so a solver that holds
-            factors of them need not compare them.
+            factors of them need not compare them. An island's is its source's key and its cut.
     """
 
     H: np.ndarray
@@ -72,7 +72,8 @@ class GaussProblem:
         """The problem on the coordinates ``cols`` and the equality and inequality rows ``eq``,
         ``ineq`` (an island: no other row reads those coordinates, and H couples them to no other)."""
         H, g, A, b, C, l = cut(self.H, self.g, self.A, self.b, self.C, self.l, cols, eq, ineq)
-        return GaussProblem(H, g, A, b, C, l, [], None, (self, eq, ineq))
+        key = (self.rows_key, cols.tobytes(), eq.tobytes(), ineq.tobytes())  # the same cut of the same rows
+        return GaussProblem(H, g, A, b, C, l, [], None, (self, eq, ineq), key)
 
 
 def _own_ids(module: ConstraintModule, rows: Rows) -> np.ndarray:

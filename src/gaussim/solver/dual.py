@@ -53,9 +53,8 @@ class SparseDualActiveSet:
 
     def __init__(self, eps_abs: float, tolerance: float) -> None:
         self.eps_abs, self.tolerance = eps_abs, tolerance
-        self._held: tuple[np.ndarray, ...] = ()  # copies of H and the rows whose factors it holds
-        self._n_eq = 0  # how many of those rows are equalities
-        self._key: object = None  # the rows_key of the problem they are
+        self._key: object = None  # the rows_key of the problem whose factors it holds
+        self._n_eq = 0  # how many of its rows are equalities
         self._g: np.ndarray | None = None  # the g of the free products it holds
         self._ids = np.zeros(0, dtype=np.int64)  # the row ids of those rows
         self._arrays: tuple[np.ndarray, ...] = ()  # the factors and rows (see _setup)
@@ -68,15 +67,9 @@ class SparseDualActiveSet:
         KKT residual certifies it to ``tolerance``, else None (ProxQP then solves)."""
         p = problem
         n_eq = len(p.b)
-        rows = np.vstack((p.A, p.C)) if n_eq else p.C
-        lower = np.concatenate((p.b, p.l)) if n_eq else p.l
-        rows, lower = np.ascontiguousarray(rows, dtype=float), np.ascontiguousarray(lower, dtype=float)
-        held = bool(self._held) and n_eq == self._n_eq
-        if held and p.rows_key is not self._key:
-            held = _same(self._held, (p.H, rows))
-            if held:
-                self._ids = p.row_ids  # equal rows that may be named anew
-        if not held and not self._setup(p, rows, n_eq):
+        lower = np.ascontiguousarray(np.concatenate((p.b, p.l)) if n_eq else p.l, dtype=float)
+        held = self._key is not None and p.rows_key == self._key and n_eq == self._n_eq
+        if not held and not self._setup(p, n_eq):
             return None
         if self._g is None or not np.array_equal(self._g, p.g):
             self._g = np.array(p.g, dtype=float)
@@ -103,13 +96,14 @@ class SparseDualActiveSet:
             self._last = (self._ids, multipliers)
         return solution
 
-    def _setup(self, p: GaussProblem, rows: np.ndarray, n_eq: int) -> bool:
-        """Factor H and put the rows (the first ``n_eq`` equalities) in least-distance form; False when
-        H is not positive definite."""
+    def _setup(self, p: GaussProblem, n_eq: int) -> bool:
+        """Factor H and put the rows [A; C] (the first ``n_eq`` equalities) in least-distance form;
+        False when H is not positive definite."""
         H = np.ascontiguousarray(p.H, dtype=float)
+        rows = np.ascontiguousarray(np.vstack((p.A, p.C)) if n_eq else p.C, dtype=float)
         (m, n), self._size, self._g = rows.shape, -1, None
         L, first, parent = np.empty((n, n)), np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
-        self._key, self._held = None, ()
+        self._key = None
         if not envelope_cholesky(H, L, first, parent):
             return False
         ptr, idx, val = np.empty(m + 1, dtype=np.int64), np.empty(m * n, dtype=np.int64), np.empty(m * n)
@@ -121,8 +115,7 @@ class SparseDualActiveSet:
         W, Lw, Dw, lam = np.empty(n, dtype=np.int64), np.empty((n, n)), np.empty(n), np.empty(n)
         F, pos = np.empty(n, dtype=np.int64), np.full(m, -1, dtype=np.int64)
         self._set = (W, Lw, Dw, F, lam, pos, np.empty(n), np.zeros((5, n)))
-        self._key, self._held, self._ids = p.rows_key, (H.copy(), rows.copy()), p.row_ids
-        self._n_eq = n_eq
+        self._key, self._ids, self._n_eq = p.rows_key, p.row_ids, n_eq
         return True
 
     def _started(self, start: np.ndarray, n_eq: int) -> int:
@@ -225,7 +218,7 @@ class DaqpActiveSet:
     def _holds(self, p: GaussProblem, rows: np.ndarray) -> bool:
         """Whether the workspace holds ``p``'s H, g and ``rows`` (the key of the problem it was set up
         for spares comparing H and the rows)."""
-        if p.rows_key is self._key:
+        if p.rows_key == self._key:
             return bool(np.array_equal(self._held[1], p.g))
         return _same(self._held, (p.H, p.g, rows))
 
