@@ -634,6 +634,8 @@ def test_daqp_starts_from_the_last_working_set_matched_by_row_ids(solver):
         lambda n: np.arange(n - 1),
         lambda n: np.arange(n) * 0.5,
         lambda n: np.arange(n) - 1,
+        lambda n: np.arange(n) + 2**ROW_ID_BITS - n + 1,  # the last one 2**ROW_ID_BITS: out of range
+        lambda n: np.arange(n, dtype=np.uint64) + np.uint64(2**63),  # beyond int64's range
     ],
 )
 def test_a_modules_row_ids_are_integers_per_row_or_their_places(ids):
@@ -642,7 +644,9 @@ def test_a_modules_row_ids_are_integers_per_row_or_their_places(ids):
     n, module = 5, _Given()
     rows = Rows(np.eye(n), np.zeros(n), False, lambda: [], ids=lambda: ids(n))
     given = np.asarray(ids(n))
-    good = given.shape == (n,) and given.dtype.kind == "i" and given.min() >= 0
+    good = (
+        given.shape == (n,) and given.dtype.kind == "i" and given.min() >= 0 and given.max() < 2**ROW_ID_BITS
+    )
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         problem = assemble(np.eye(n), np.zeros(n), [(module, rows)])
@@ -651,6 +655,30 @@ def test_a_modules_row_ids_are_integers_per_row_or_their_places(ids):
     assert len({i >> ROW_ID_BITS for i in problem.row_ids.tolist()}) == 1
     said = [str(w.message) for w in caught if issubclass(w.category, gaussim.GaussimWarning)]
     assert (not said) if good else ("module 'given': Rows.ids" in said[0])
+
+
+def test_a_new_problems_dual_start_is_the_last_multiplier_of_each_row_id():
+    """The start of a new problem's rows: each row's multiplier in the last solution by its id (the
+    first row of an id repeated), 0 for ids it did not have; None when no row keeps a nonzero one.
+    Checked against a dictionary on random ids."""
+    from gaussim.solver.dual import matched_start
+
+    rng = np.random.default_rng(4)
+    for _ in range(50):
+        ids = rng.choice(60, size=rng.integers(1, 40)).astype(np.int64)  # repeats too
+        multipliers = np.where(rng.random(len(ids)) < 0.5, 0.0, rng.random(len(ids)))
+        new = rng.integers(0, 80, size=rng.integers(1, 50)).astype(np.int64)
+        first: dict[int, float] = {}
+        for i, lam in zip(ids.tolist(), multipliers.tolist()):
+            first.setdefault(i, lam)
+        expected = np.array([first.get(i, 0.0) for i in new.tolist()])
+        start = matched_start((ids, multipliers), new)
+        if expected.any():
+            np.testing.assert_array_equal(start, expected)
+        else:
+            assert start is None
+    assert matched_start(None, new) is None
+    assert matched_start((np.zeros(0, np.int64), np.zeros(0)), new) is None
 
 
 @pytest.mark.parametrize("solver", DUAL_SOLVERS)

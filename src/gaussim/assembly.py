@@ -15,7 +15,7 @@ import numpy as np
 
 from .constraints.base import ROW_ID_BITS, ConstraintModule, Rows
 from .exceptions import GaussimWarning
-from .kernels.solver import cut
+from .kernels.solver import cut, within
 
 
 @dataclass
@@ -80,24 +80,21 @@ def _own_ids(module: ConstraintModule, rows: Rows) -> np.ndarray:
     """The ids of a module's ``rows`` (:attr:`Rows.ids`), or their places where the module gives none
     or ids that are not one integer in [0, 2**ROW_ID_BITS) per row (with a warning, which Python's
     filters show once: the solver then starts its rows from their places)."""
-    place = np.arange(len(rows), dtype=np.int64)
-    if rows.ids is None:
-        return place
-    given = np.asarray(rows.ids())
-    if (
-        given.shape == place.shape
-        and given.dtype.kind in "iu"
-        and (not len(given) or (given.min() >= 0 and given.max() < 2**ROW_ID_BITS))
-    ):
-        return given.astype(np.int64, copy=False)
-    warnings.warn(
-        f"module '{getattr(module, 'name', type(module).__name__)}': Rows.ids must give one integer in "
-        f"[0, 2**{ROW_ID_BITS}) per row ({len(rows)}), got {given.dtype} of shape {given.shape}; "
-        "its rows are named by their places (a warm start of the solver only)",
-        GaussimWarning,
-        stacklevel=2,
-    )
-    return place
+    count = len(rows)
+    if rows.ids is not None:
+        given = np.asarray(rows.ids())
+        if given.shape == (count,) and given.dtype.kind in "iu":
+            own = given.astype(np.int64, copy=False)  # a uint64 above int64's range turns negative
+            if within(own, 2**ROW_ID_BITS):
+                return own
+        warnings.warn(
+            f"module '{getattr(module, 'name', type(module).__name__)}': Rows.ids must give one integer in "
+            f"[0, 2**{ROW_ID_BITS}) per row ({count}), got {given.dtype} of shape {given.shape}; "
+            "its rows are named by their places (a warm start of the solver only)",
+            GaussimWarning,
+            stacklevel=2,
+        )
+    return np.arange(count, dtype=np.int64)
 
 
 _TAGS: dict[int, int] = {}  # id(module) -> its tag

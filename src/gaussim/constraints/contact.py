@@ -61,7 +61,15 @@ from ..dynamics import (
     point_jacobians,
     point_placements,
 )
-from ..kernels.contact import newton_moves, pyramids, secant_moves, shifted_bounds, slips, unpacked
+from ..kernels.contact import (
+    contact_row_ids,
+    newton_moves,
+    pyramids,
+    secant_moves,
+    shifted_bounds,
+    slips,
+    unpacked,
+)
 from ..kernels.solver import ACTIVE_SET_FLOOR
 from .base import LEVELS, ConstraintModule, Context, Rows, is_active
 
@@ -229,12 +237,10 @@ class ContactBatch:
     def row_ids(self) -> np.ndarray:
         """Each row's id (:attr:`Rows.ids`): its contact's key and its place among that contact's
         rows, shape (R,)."""
-        counts = np.diff(self.starts)
-        place = np.arange(self.starts[-1]) - np.repeat(self.starts[:-1], counts)
         key = self.contacts.key
         if key is None:  # contacts of no detector's making: named by their order
-            key = np.arange(len(counts))
-        return np.repeat(key, counts) * ROWS_PER_CONTACT + place
+            key = np.arange(len(self.starts) - 1, dtype=np.int64)
+        return contact_row_ids(self.starts, key, ROWS_PER_CONTACT)
 
 
 def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:

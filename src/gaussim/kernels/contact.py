@@ -361,3 +361,14 @@ def _shift_speed(speed):  # type: ignore[no-untyped-def]
     """The speed a De Saxce shift takes from a slip of ``speed``: itself, 0 below SLIP_SPEED (the one
     rule of :func:`pyramids` and :func:`shifted_bounds`)."""
     return speed if speed > SLIP_SPEED else 0.0
+
+
+@njit(cache=True)
+def contact_row_ids(starts, key, per_contact):  # type: ignore[no-untyped-def]
+    """Each row's id (R,): its contact's ``key`` times ``per_contact`` plus its place among the
+    contact's rows (``starts``: :func:`pyramids`')."""
+    ids = np.empty(starts[-1], np.int64)
+    for i in range(len(starts) - 1):
+        for r in range(starts[i], starts[i + 1]):
+            ids[r] = key[i] * per_contact + r - starts[i]
+    return ids

@@ -74,6 +74,7 @@ SIGNATURES = {
         for joints, mu in (("i1", "f1"), ("i1r", "f1r"))  # all the contacts, or those a level keeps
         for v, x in (("f1", "f1"), ("f1r", "f1"), ("f1r", "f1r"))
     ],
+    "contact.contact_row_ids": ["i1 i1 i", "i1 i1r i"],
     "contact.secant_moves": ["f2 f2 f2 f2 f*2 f2 f2"],
     "contact.newton_moves": ["f2r f2r f2r f1 f i i1 f1 f1r f2 f2 f*2 f2"],
     "contact.shifted_bounds": [f"f1 i1 {mu} f2 f2 f1" for mu in ("f1", "f1r")],
@@ -94,6 +95,7 @@ SIGNATURES = {
     # the scenes of several bodies: their islands, and each one's problem
     "solver.islands": [f"{a} {c} i2 i1 f1 i1 i" for a, c in (("f2r", "f2"), ("f2", "f2"), ("f2", "f2r"))],
     "solver.members": ["i1 i"],
+    "solver.within": ["i1 i"],
     "solver.cut": [f"f2 f1 {sides} i1 i1 i1" for sides in _SIDES],
     "solver.warm_islands": [f"f2 f1 {sides} i1*6 b1 f1 f1 f i1 f2 f1 f1" for sides in _SIDES],
     # the dual active-set method: a problem's factors and rows, its working set, its answer
@@ -105,6 +107,7 @@ SIGNATURES = {
         f"i1 i1 f1 i1 f1 {d} i f f i i i1 f2 f1 i1 f1 i1 f1 f1 f2" for d in ("f1", "f1r")
     ],
     "dual.primal_answer": ["f2 i1 f1 i i1 f1 f1 f1"],
+    "dual.matched_multipliers": ["i1 f1 i1 f1"],
 }
 
 

@@ -395,3 +395,12 @@ def members(labels, n):  # type: ignore[no-untyped-def]
             order[fill[labels[k]]] = k
             fill[labels[k]] += 1
     return order, start
+
+
+@njit(cache=True)
+def within(values, limit):  # type: ignore[no-untyped-def]
+    """Whether every entry of ``values`` is in [0, limit)."""
+    for value in values:
+        if value < 0 or value >= limit:
+            return False
+    return True

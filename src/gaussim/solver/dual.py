@@ -29,6 +29,7 @@ from ..kernels.dual import (
     dual_iterations,
     envelope_cholesky,
     free_products,
+    matched_multipliers,
     primal_answer,
     start_set,
     transformed_rows,
@@ -254,9 +255,5 @@ def matched_start(last: tuple[np.ndarray, np.ndarray] | None, new: np.ndarray) -
     of them active."""
     if last is None or not len(last[1]):
         return None
-    ids, multipliers = last
-    order = np.argsort(ids, kind="stable")
-    ids, multipliers = ids[order], multipliers[order]
-    at = np.minimum(np.searchsorted(ids, new), len(ids) - 1)
-    start = np.where(ids[at] == new, multipliers[at], 0.0)
-    return start if start.any() else None
+    start = np.empty(len(new))
+    return start if matched_multipliers(*last, new, start) else None
