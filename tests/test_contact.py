@@ -496,6 +496,40 @@ def test_a_friction_pass_moves_the_bounds_as_posing_the_rows_again_would(box, mo
     assert len(compared) >= 50 and max(np.abs(c).max() for c in compared) > 1e-4  # the bounds moved
 
 
+def test_a_contact_that_stuck_starts_the_next_step_stuck(monkeypatch):
+    """A tall box set down on an edge, tilted with its centre still over its base, falls back onto its
+    face pivoting on that edge, which sticks: the edge's vertices slip at the step's start velocity by
+    the turn of the box (fast near the end of the fall), and a start from that slip takes a second QP
+    to find them stuck again; started from the last step's stuck contacts, one QP a step does, and the
+    motion is the fixed point the iteration reaches from the current slip (within its tolerance)."""
+    from gaussim.constraints import contact
+
+    body = gaussim.FreeBody.box("b", (0.1, 0.1, 0.3), mass=1.0)
+    tilt = 0.2
+    start = gaussim.pose(z=0.15 * np.cos(tilt) + 0.05 * np.sin(tilt), rpy=(tilt, 0.0, 0.0))
+
+    def tipping():
+        scene = gaussim.Scene(bodies={"b": body}, ground=gaussim.Ground(friction=0.8))
+        sim = gaussim.Simulator(scene, gaussim.Options(dt=1e-3))
+        state, qps, q, edge = sim.reset({"b": start}), [], [], []
+        for _ in range(250):
+            state = sim.step(state)
+            qps.append(len(sim.last_step.certificates))
+            q.append(state.q)
+            edge.append(np.array([c.point for c in sim.last_step.contacts]))
+        return np.array(qps), np.array(q), edge
+
+    remembered, q, edge = tipping()
+    monkeypatch.setattr(contact.ContactModule, "_stuck_start", lambda self, contacts, current: current)
+    from_current, q_current, _ = tipping()
+    assert (from_current[200:] > 1).sum() >= 20  # the fall's end: two QPs a step from the current slip
+    assert (remembered[200:] > 1).sum() <= 3
+    pivot = np.array(edge[:230])  # the edge's two vertices while it pivots (then the face comes near)
+    assert pivot.shape == (230, 2, 3) and np.abs(pivot - pivot[0]).max() < 1e-5
+    assert q[0][2] - q[230][2] > 5e-3  # it did fall back
+    np.testing.assert_allclose(q, q_current, rtol=0, atol=1e-6)
+
+
 @pytest.mark.parametrize(
     ("scheme", "passes", "friction", "level", "relaxed"),
     [("acceleration", 10, 0.5, "impulse", False), ("velocity", 2, 1000.0, "velocity", True)],

@@ -51,6 +51,7 @@ class Actuation:
         self._padded, self._padded_damping = np.zeros(self.nv), np.zeros(self.nv)
         self._zero = np.zeros(self.nv)
         self._zero.flags.writeable = False
+        self._undamped = np.zeros(0)  # the previous damping of a step that had none
         self._armature = model.armature.copy()  # the robot's own (rotor inertias)
         self.damping: np.ndarray | None = None  # the implicit damping D (nv,) of the last step
 
@@ -66,7 +67,9 @@ class Actuation:
             return full
         D = self._full(damping, "damping", self._padded_damping)
         assert v is not None
-        code, damped, same = damped_torque(full, D, v, np.zeros(0) if self.damping is None else self.damping)
+        code, damped, same = damped_torque(
+            full, D, v, self._undamped if self.damping is None else self.damping
+        )
         if code == 1:
             raise InvalidState.non_finite("tau", full)
         if code == 2:
@@ -94,7 +97,7 @@ class Actuation:
         from a per-body mapping (entries are checked for finiteness by the kernels that read them)."""
         if tau is None:
             return self._zero
-        if isinstance(tau, Mapping):
+        if type(tau) is not np.ndarray and isinstance(tau, Mapping):  # an array first: ABCs are slow
             return self._per_body(tau, name)
         arr = np.asarray(tau)
         if arr.dtype is not _FLOAT:  # ints, float32, or what is no torque at all (complex, text)

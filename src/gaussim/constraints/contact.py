@@ -9,11 +9,14 @@ sum_i lambda_i (n + mu d_i), which lies in the friction pyramid inscribed in the
 (The rows say that the contact velocity lies in the dual of that pyramid: Anitescu's relaxation.)
 b is the stabilised normal bound (with restitution), s the De Saxce shift mu |u_t+| that removes
 the relaxation's lift-off while sliding. The shift needs the slip u_t+ of the solution: it starts
-from the current slip and, while a contact slides, the QP is solved again with the slip of the last
-solution (a lagged slip lets a decelerating contact sink at mu (|u_t| - |u_t+|), an accelerating one
-lift off at as much; each pass divides that error by about 1 + 1/mu^2) until the bounds' error is
-below SLIP_TOLERANCE[mode]: mu times the change of |u_t+| (all the shift reads), less the slack the
-contact's rows leave (a bound that moves within its row's slack leaves the solution where it is).
+from the current slip, or from none for a contact that stuck at the end of the last step (a foot
+pivoting on an edge slips at its start velocity by the turn of its point, and its QP would be solved
+twice a step to find it stuck again), and, while a contact slides, the QP is solved again with the
+slip of the last solution (a lagged slip lets a decelerating contact sink at mu (|u_t| - |u_t+|), an
+accelerating one lift off at as much; each pass divides that error by about 1 + 1/mu^2) until the
+bounds' error is below SLIP_TOLERANCE[mode]: mu times the change of |u_t+| (all the shift reads),
+less the slack the contact's rows leave (a bound that moves within its row's slack leaves the
+solution where it is).
 Each contact's step is scaled by the secant of its last two passes (:func:`_secant`: a contact switching
 between sticking and sliding no longer cycles), or, for the sliding contacts that hold a row active in a
 QP of at most NEWTON_UP_TO coordinates, is a Newton step on all their shifts at once (the solution's
@@ -62,6 +65,7 @@ from ..dynamics import (
     point_placements,
 )
 from ..kernels.contact import (
+    SLIP_SPEED,
     contact_row_ids,
     newton_moves,
     pyramids,
@@ -70,7 +74,7 @@ from ..kernels.contact import (
     slips,
     unpacked,
 )
-from ..kernels.solver import ACTIVE_SET_FLOOR
+from ..kernels.solver import ACTIVE_SET_FLOOR, matched_values
 from .base import LEVELS, ConstraintModule, Context, Rows, is_active
 
 # More than a contact's rows (its pyramid's facets, at most options.MAXIMA["friction_facets"]): a row's
@@ -343,10 +347,13 @@ class ContactModule(ConstraintModule[ContactBatch]):
         self._joint_jacobians = np.zeros((6, 0))
         # the rows a solve posed first, and its context: its later passes re-shift their bounds
         self._posed: tuple[Context, Rows[ContactBatch]] | None = None
+        # the contact keys of the last velocity-level solution, 1 where the contact stuck, else 0
+        self._stuck: tuple[np.ndarray, np.ndarray] | None = None
 
     def rows(self, ctx: Context) -> Rows[ContactBatch] | None:
         contacts = ctx.contacts
         if not len(contacts):
+            self._stuck = None
             return None
         level = ctx.level
         lagged: FrictionIterate = ctx.lagged.get(id(self), _FIRST_PASS)
@@ -365,8 +372,9 @@ class ContactModule(ConstraintModule[ContactBatch]):
         # read-only, as the blanks are: one compiled signature (numba types writability)
         drift = _read_only(_drifts(ctx, contacts, self.radii)) if level == "acceleration" else no_drift
         cone = (self.cos, self.sin, self.mode == "pyramid")
+        first = no_slip if level != "velocity" else self._stuck_start(contacts, no_slip)
         iterate = (
-            no_slip if lagged.slip is None else _read_only(lagged.slip),
+            first if lagged.slip is None else _read_only(lagged.slip),
             no_stops if lagged.stops is None else _read_only(lagged.stops),
             no_force if lagged.normal is None else _read_only(lagged.normal),
         )
@@ -387,6 +395,17 @@ class ContactModule(ConstraintModule[ContactBatch]):
         posed = Rows(rows, bound, False, labels, batch, force, joints=read, ids=batch.row_ids)
         self._posed = (ctx, posed)
         return posed
+
+    def _stuck_start(self, contacts: Contacts, no_slip: np.ndarray) -> np.ndarray:
+        """The slips a velocity-level solve starts from (read-only): none (zero) for the contacts that
+        stuck in the last one, matched by key, the current one (NaN, ``no_slip``) for the others."""
+        if self._stuck is None or contacts.key is None:
+            return no_slip
+        stuck = np.empty(len(contacts))
+        if not matched_values(*self._stuck, contacts.key, stuck):
+            return no_slip
+        start = np.where(stuck[:, None] == 1.0, 0.0, no_slip)
+        return _read_only(start)
 
     def _jacobians(self, data: pin.Data) -> np.ndarray:
         """The joint Jacobians data.J (6, nv): a view of Pinocchio's array that follows every pass on
@@ -445,6 +464,8 @@ class ContactModule(ConstraintModule[ContactBatch]):
             slip, residual = slips(
                 b.packed, b.slip, b.starts, x, normals, mu, rows.J, rows.bound, *joints, *self.supports[1:]
             )
+            if ctx.level == "velocity":  # the next step's start: the last pass's slips
+                self._remember(b.contacts.key, slip)
             if residual > SLIP_TOLERANCE[self.mode]:
                 lagged = self._iterate(ctx)
                 lagged.passes += 1
@@ -459,6 +480,14 @@ class ContactModule(ConstraintModule[ContactBatch]):
                 lagged.slip, lagged.secant = _secant(b.slip, slip, lagged.secant, _newton(ctx, rows))
                 changed = True
         return changed
+
+    def _remember(self, key: np.ndarray | None, slip: np.ndarray) -> None:
+        """Which contacts (by ``key``) stuck at the slips ``slip`` (m, 3) of a velocity-level pass."""
+        if key is None:
+            self._stuck = None
+            return
+        stuck = _dot(slip, slip) <= SLIP_SPEED**2
+        self._stuck = (key, stuck.astype(float))
 
     def _iterate(self, ctx: Context) -> FrictionIterate:
         """This solve's iterate, made at its first update."""

@@ -394,22 +394,3 @@ def primal_answer(L, first, z, n_w, W, lam, x, multipliers):  # type: ignore[no-
     multipliers[:] = 0.0
     for j in range(n_w):
         multipliers[W[j]] = lam[j]
-
-
-@njit(cache=True)
-def matched_multipliers(ids, multipliers, new, start):  # type: ignore[no-untyped-def]
-    """start[i] = the multiplier of the row of ``ids`` whose id is ``new[i]`` (the first such), 0 where
-    none is; whether any of them is nonzero (see :func:`gaussim.solver.dual.matched_start`)."""
-    order = np.argsort(ids, kind="mergesort")  # stable: equal ids keep their order
-    found = False
-    for i in range(len(new)):
-        low, high = 0, len(order)
-        while low < high:  # the first sorted id >= new[i]
-            middle = (low + high) // 2
-            if ids[order[middle]] < new[i]:
-                low = middle + 1
-            else:
-                high = middle
-        start[i] = multipliers[order[low]] if low < len(order) and ids[order[low]] == new[i] else 0.0
-        found |= start[i] != 0.0
-    return found

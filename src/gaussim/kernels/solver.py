@@ -404,3 +404,24 @@ def within(values, limit):  # type: ignore[no-untyped-def]
         if value < 0 or value >= limit:
             return False
     return True
+
+
+@njit(cache=True)
+def matched_values(ids, values, new, out):  # type: ignore[no-untyped-def]
+    """out[i] = the value of the entry of ``ids`` whose id is ``new[i]`` (the first such), 0 where none
+    is; whether any of them is nonzero. What a step carries to the next by id (rows and contacts come
+    and go): the dual start (:func:`gaussim.solver.dual.matched_start`), the contacts that stuck
+    (:class:`gaussim.constraints.contact.ContactModule`)."""
+    order = np.argsort(ids, kind="mergesort")  # stable: equal ids keep their order
+    found = False
+    for i in range(len(new)):
+        low, high = 0, len(order)
+        while low < high:  # the first sorted id >= new[i]
+            middle = (low + high) // 2
+            if ids[order[middle]] < new[i]:
+                low = middle + 1
+            else:
+                high = middle
+        out[i] = values[order[low]] if low < len(order) and ids[order[low]] == new[i] else 0.0
+        found |= out[i] != 0.0
+    return found

@@ -29,11 +29,11 @@ from ..kernels.dual import (
     dual_iterations,
     envelope_cholesky,
     free_products,
-    matched_multipliers,
     primal_answer,
     start_set,
     transformed_rows,
 )
+from ..kernels.solver import matched_values
 from .certificate import Solution, Status, checked
 
 _OPTIMAL = 1  # DAQP's exitflag of an optimal solution
@@ -256,4 +256,4 @@ def matched_start(last: tuple[np.ndarray, np.ndarray] | None, new: np.ndarray) -
     if last is None or not len(last[1]):
         return None
     start = np.empty(len(new))
-    return start if matched_multipliers(*last, new, start) else None
+    return start if matched_values(*last, new, start) else None
