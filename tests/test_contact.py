@@ -355,11 +355,18 @@ def test_slip_update_matches_its_plain_statement():
     joints, world, support = np.ones(m, np.int64), np.zeros(m, np.int64), np.array([0, 0, nv])
 
     def both(bound):
-        got = slips(packed, slip, starts, x, normal, mu, rows, bound, joints, world, support, np.arange(nv))
-        return got, _slips_reference(J, slip, starts, x, normal, mu, rows, bound)
+        start = np.empty((m, 3))
+        got, residual, stuck = slips(
+            packed, slip, starts, x, normal, mu, rows, bound, joints, world, support, np.arange(nv), start
+        )
+        sticks = np.linalg.norm(got, axis=1) <= SLIP_SPEED  # the next solve starts them stuck
+        np.testing.assert_array_equal(start, np.where(sticks[:, None], np.zeros((m, 3)), np.nan))
+        assert stuck == sticks.any()
+        return (got, residual), _slips_reference(J, slip, starts, x, normal, mu, rows, bound)
 
     (got, residual), (expected, expected_residual) = both(bound)
     np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-15)
+    assert np.linalg.norm(got[3]) < SLIP_SPEED  # the resting one sticks
     np.testing.assert_array_equal(got[[1, 3]], slip[[1, 3]])  # the sticking and the resting
     assert residual == pytest.approx(expected_residual, rel=1e-12)
     assert residual > 0.1  # the moving contacts' changes are of order one

@@ -65,7 +65,6 @@ from ..dynamics import (
     point_placements,
 )
 from ..kernels.contact import (
-    SLIP_SPEED,
     contact_row_ids,
     newton_moves,
     pyramids,
@@ -347,7 +346,8 @@ class ContactModule(ConstraintModule[ContactBatch]):
         self._joint_jacobians = np.zeros((6, 0))
         # the rows a solve posed first, and its context: its later passes re-shift their bounds
         self._posed: tuple[Context, Rows[ContactBatch]] | None = None
-        # the contact keys of the last velocity-level solution, 1 where the contact stuck, else 0
+        # the last velocity-level solution's contact keys and the slips the next one starts from
+        # (:meth:`_stuck_start`), when a contact stuck
         self._stuck: tuple[np.ndarray, np.ndarray] | None = None
 
     def rows(self, ctx: Context) -> Rows[ContactBatch] | None:
@@ -401,11 +401,13 @@ class ContactModule(ConstraintModule[ContactBatch]):
         stuck in the last one, matched by key, the current one (NaN, ``no_slip``) for the others."""
         if self._stuck is None or contacts.key is None:
             return no_slip
+        key, start = self._stuck
+        if contacts.key is key:  # the detector's layout of the last step: the same contacts, in order
+            return start
         stuck = np.empty(len(contacts))
-        if not matched_values(*self._stuck, contacts.key, stuck):
+        if not matched_values(key, np.isfinite(start[:, 0]).astype(float), contacts.key, stuck):
             return no_slip
-        start = np.where(stuck[:, None] == 1.0, 0.0, no_slip)
-        return _read_only(start)
+        return _read_only(np.where(stuck[:, None] == 1.0, 0.0, no_slip))
 
     def _jacobians(self, data: pin.Data) -> np.ndarray:
         """The joint Jacobians data.J (6, nv): a view of Pinocchio's array that follows every pass on
@@ -461,11 +463,24 @@ class ContactModule(ConstraintModule[ContactBatch]):
         if b.shifts and not b.relaxed:
             mu = b.contacts.friction
             joints = (b.contacts.joint, b.contacts.other_joint)
-            slip, residual = slips(
-                b.packed, b.slip, b.starts, x, normals, mu, rows.J, rows.bound, *joints, *self.supports[1:]
+            start = np.empty((m, 3))  # the next step's start, from the last pass's slips
+            slip, residual, stuck = slips(
+                b.packed,
+                b.slip,
+                b.starts,
+                x,
+                normals,
+                mu,
+                rows.J,
+                rows.bound,
+                *joints,
+                *self.supports[1:],
+                start,
             )
-            if ctx.level == "velocity":  # the next step's start: the last pass's slips
-                self._remember(b.contacts.key, slip)
+            if ctx.level == "velocity":
+                self._stuck = (
+                    (b.contacts.key, _read_only(start)) if stuck and b.contacts.key is not None else None
+                )
             if residual > SLIP_TOLERANCE[self.mode]:
                 lagged = self._iterate(ctx)
                 lagged.passes += 1
@@ -480,14 +495,6 @@ class ContactModule(ConstraintModule[ContactBatch]):
                 lagged.slip, lagged.secant = _secant(b.slip, slip, lagged.secant, _newton(ctx, rows))
                 changed = True
         return changed
-
-    def _remember(self, key: np.ndarray | None, slip: np.ndarray) -> None:
-        """Which contacts (by ``key``) stuck at the slips ``slip`` (m, 3) of a velocity-level pass."""
-        if key is None:
-            self._stuck = None
-            return
-        stuck = _dot(slip, slip) <= SLIP_SPEED**2
-        self._stuck = (key, stuck.astype(float))
 
     def _iterate(self, ctx: Context) -> FrictionIterate:
         """This solve's iterate, made at its first update."""

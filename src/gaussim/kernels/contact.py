@@ -203,7 +203,19 @@ def pyramids(  # type: ignore[no-untyped-def]
 
 @njit(cache=True)
 def slips(
-    packed, slip, starts, x, normal, mu, rows, bound, joints, other_joints, support_starts, support_columns
+    packed,
+    slip,
+    starts,
+    x,
+    normal,
+    mu,
+    rows,
+    bound,
+    joints,
+    other_joints,
+    support_starts,
+    support_columns,
+    start,
 ):  # type: ignore[no-untyped-def]
     """(the slips (m, 3) of solution x for the contacts that refine their shift (one with a full
     pyramid) and are moving (a sticking contact has no shift to refine), the others' unchanged; the
@@ -211,10 +223,12 @@ def slips(
     shift reads; its cut below SLIP_SPEED adds at most mu SLIP_SPEED, which passes would not remove),
     less the slack its rows ``rows`` x >= ``bound`` leave at x (a bound that moves within its row's
     slack leaves x the solution). ``packed`` and ``starts`` are :func:`pyramids`', the rest what it
-    reads, ``slip`` (m, 3) the slips the QP's shift used. (In scalars, no array per contact: this runs
-    after every QP with friction.)"""
+    reads, ``slip`` (m, 3) the slips the QP's shift used. Fills ``start`` (m, 3), the slips a next
+    solve starts from: zero for the contacts that stick (those slips within SLIP_SPEED), NaN (the
+    current one) for the others, and returns whether any sticks. (In scalars, no array per contact:
+    this runs after every QP with friction.)"""
     J = unpacked(packed, len(normal), len(x))[0]
-    result, residual = slip.copy(), 0.0
+    result, residual, stuck = slip.copy(), 0.0, False
     for i in range(len(slip)):
         a, b = joints[i], other_joints[i]
         moving, speed, u0, u1, u2 = _moving_slip(
@@ -230,7 +244,10 @@ def slips(
                     )
                 residual = max(residual, error - max(slack, 0.0))
             result[i, 0], result[i, 1], result[i, 2] = u0, u1, u2
-    return result, residual
+        sticks = result[i, 0] ** 2 + result[i, 1] ** 2 + result[i, 2] ** 2 <= SLIP_SPEED**2
+        start[i, 0] = start[i, 1] = start[i, 2] = 0.0 if sticks else np.nan
+        stuck |= sticks
+    return result, residual, stuck
 
 
 @njit(cache=True, inline="always")

@@ -79,7 +79,8 @@ SIGNATURES = {
     "contact.newton_moves": ["f2r f2r f2r f1 f i i1 f1 f1r f2 f2 f*2 f2"],
     "contact.shifted_bounds": [f"f1 i1 {mu} f2 f2 f1" for mu in ("f1", "f1r")],
     "contact.slips": [
-        f"f1 f2 i1 f1 f2 {mu} f2 f1 {joints} {joints} i1 i1" for joints, mu in (("i1", "f1"), ("i1r", "f1r"))
+        f"f1 f2 i1 f1 f2 {mu} f2 f1 {joints} {joints} i1 i1 f2"
+        for joints, mu in (("i1", "f1"), ("i1r", "f1r"))
     ],
     # the equalities (A, b) or the inequalities (C, l) of a problem are read-only when empty
     "solver.kkt_residuals": [f"f2 f1 {sides} f1 f1 f1" for sides in _SIDES],
