@@ -478,9 +478,8 @@ class ContactModule(ConstraintModule[ContactBatch]):
                 start,
             )
             if ctx.level == "velocity":
-                self._stuck = (
-                    (b.contacts.key, _read_only(start)) if stuck and b.contacts.key is not None else None
-                )
+                start.setflags(False)  # type: ignore[call-arg]  # write=False: read-only, as the blanks are
+                self._stuck = (b.contacts.key, start) if stuck and b.contacts.key is not None else None
             if residual > SLIP_TOLERANCE[self.mode]:
                 lagged = self._iterate(ctx)
                 lagged.passes += 1
