@@ -277,6 +277,20 @@ def test_a_contact_keeps_its_key_and_its_rows_their_ids_from_step_to_step():
     assert rows.ids().tolist() == ids[0][16:]
 
 
+def test_point_keys_are_each_points_pair_and_rank_among_its_pairs_points():
+    """The compiled keys against their statement, counted point by point: pair * MAX_POINTS + rank,
+    the rank capped at MAX_POINTS - 1 (a pair with more points), and each pair's first point and count."""
+    from gaussim.kernels.pairs import point_keys
+
+    owner = np.array([0, 0, 0, 3, 5, 5] + [7] * (MAX_POINTS + 2) + [9], dtype=np.int64)
+    keys = np.empty(len(owner), np.int64)
+    starts, counts = point_keys(owner, MAX_POINTS, keys)
+    ranks = [sum(1 for earlier in owner[:i] if earlier == pair) for i, pair in enumerate(owner.tolist())]
+    assert keys.tolist() == [p * MAX_POINTS + min(r, MAX_POINTS - 1) for p, r in zip(owner.tolist(), ranks)]
+    assert starts.tolist() == [0, 3, 4, 6, 8 + MAX_POINTS]
+    assert counts.tolist() == [3, 1, 2, MAX_POINTS + 2, 1]
+
+
 def test_the_broad_phase_bounds_every_gap_and_sends_only_near_pairs_to_coal(monkeypatch):
     """Free objects of every shape, a pendulum's bob (off its joint) and a table at random poses: the
     broad phase's gaps are the bounding spheres' at Pinocchio's geometry placements, and within the

@@ -12,6 +12,7 @@ import pinocchio as pin
 
 from ..dynamics import Supports, joint_jacobians
 from ..kernels.collision import closing, in_pair_order
+from ..kernels.pairs import point_keys
 from ..scene import Scene
 from .boxes import BoxPairs
 from .contacts import MAX_POINTS, NO_CONTACTS, NOTHING_FOUND, Contacts, Piece
@@ -99,6 +100,9 @@ class ContactDetector:
         self.restitution = np.array([pair.restitution for pair in self.pairs])
         self.joint = np.array([pair.joint for pair in self.pairs], dtype=int)
         self.other_joint = np.array([pair.other_joint for pair in self.pairs], dtype=int)
+        # each pair's names as object arrays: a layout takes them for all its points in one indexing
+        self._geometry = np.array([pair.geometry for pair in self.pairs] + [""], dtype=object)[:-1]
+        self._obstacle = np.array([pair.obstacle_name for pair in self.pairs] + [""], dtype=object)[:-1]
         self._layouts: dict[bytes, tuple] = {}  # what does not move, per set of touching pairs
 
     def forget(self) -> None:
@@ -201,20 +205,20 @@ class ContactDetector:
 
     def _layout(self, owner: np.ndarray) -> tuple:
         """What the contacts of pairs ``owner`` (one entry per point, sorted) have that does not move."""
-        pairs, counts = np.unique(owner, return_counts=True)
-        chosen = [self.pairs[k] for k in owner.tolist()]
-        rank = np.arange(len(owner)) - np.searchsorted(owner, owner)  # each point's among its pair's
-        ids = owner.astype(np.int64) * MAX_POINTS + np.minimum(rank, MAX_POINTS - 1)
+        keys = np.empty(len(owner), np.int64)
+        starts, counts = point_keys(owner, MAX_POINTS, keys)
         arrays = [
             self.joint[owner],
             self.other_joint[owner],
             self.friction[owner],
             self.restitution[owner],
-            ids,
+            keys,
         ]
         for array in arrays:
             array.flags.writeable = False  # shared by every step with these pairs touching
         names = [
-            name for k, n in zip(pairs.tolist(), counts.tolist()) for name in self.pairs[k].contact_names(n)
+            name
+            for k, n in zip(owner[starts].tolist(), counts.tolist())
+            for name in self.pairs[k].contact_names(n)
         ]
-        return (names, [pair.geometry for pair in chosen], [pair.obstacle_name for pair in chosen], *arrays)
+        return (names, self._geometry[owner].tolist(), self._obstacle[owner].tolist(), *arrays)

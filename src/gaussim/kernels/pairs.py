@@ -129,6 +129,23 @@ def gathered(owner, near, answer, gaps, normals, points, sizes, least):  # type:
 
 
 @njit(cache=True)
+def point_keys(owner, max_points, keys):  # type: ignore[no-untyped-def]
+    """Each point's key into ``keys`` (its declared pair ``owner`` (sorted) times ``max_points``
+    plus its rank among that pair's points, at most ``max_points - 1``), and (the first point of each
+    pair, their counts)."""
+    m = len(owner)
+    starts, runs = np.empty(m, np.int64), 0
+    for i in range(m):
+        if i == 0 or owner[i] != owner[i - 1]:
+            starts[runs], runs = i, runs + 1
+        keys[i] = owner[i] * max_points + min(i - starts[runs - 1], max_points - 1)
+    counts = np.empty(runs, np.int64)
+    for r in range(runs):
+        counts[r] = (starts[r + 1] if r + 1 < runs else m) - starts[r]
+    return starts[:runs], counts
+
+
+@njit(cache=True)
 def order(points, count, R, p):  # type: ignore[no-untyped-def]
     """Sorts the first ``count`` points by their coordinates on the robot's geometry (at R, p), rounded
     to 0.1 mm, x first (the order of :meth:`gaussim.collision.narrow.NarrowPhase._patch`); returns

@@ -59,6 +59,7 @@ SIGNATURES = {
     "collision.ground_hulls": ["f3r i1 f2 f3 i2 i2 i1 i1 f2 f1 f1 f3 f f*2 f1 f1 i1"],
     "pairs.sphere_gaps": ["f3r i2 f3 f1 f1 f3 f f1"],
     "pairs.nearby": ["f1 f"],
+    "pairs.point_keys": ["i1 i i1"],
     "pairs.gathered": ["i1 i1 i1 f1 f2 f3 i1 f"],
     "pairs.support_gaps": ["f3r i2 f2 i1 f1 f3 f3 f1 f f1"],
     "boxes.box_pairs": ["f3r i2 f4 f3 f3 b1 i1 f i1 f1 f2 f3 i1"],
