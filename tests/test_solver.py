@@ -518,6 +518,33 @@ def test_daqp_solves_a_problem_whose_bounds_moved_on_the_factors_it_holds(monkey
     assert np.abs(second.x - first.x).max() > 1e-4  # the shift moved the answer
 
 
+@pytest.mark.parametrize("solver", DUAL_SOLVERS)
+def test_a_later_pass_on_the_rows_the_dual_method_holds_goes_to_it_first(monkeypatch, solver):
+    """A robot-sized problem (18 coordinates: small enough for the active-set candidate) that the dual
+    method solved: its friction pass (the same rows, bounds shifted) is solved by the method on the
+    factors and working set it holds, the candidate not tried, with ProxQP's x of the shifted problem
+    (eps_abs 1e-12); a problem of new rows goes to the candidate first, as before."""
+    from gaussim.solver import proxqp
+
+    problem = _pyramid_problem(np.random.default_rng(3), 3, 8, True, 0)
+    tried = []
+    candidate = proxqp.active_set_candidate
+    monkeypatch.setattr(proxqp, "active_set_candidate", lambda *a: tried.append(1) or candidate(*a))
+    gauss = GaussSolver(gaussim.Options(solver=solver))
+    first = gauss.solve(problem)  # no last solution: the dual method answers
+    assert first.certificate.status is SOLVED_BY[solver] and not tried
+    shifted = GaussProblem(problem.H, problem.g, problem.A, problem.b, problem.C, problem.l - 1e-3, [])
+    shifted.rows_key = problem.rows_key  # the same rows, as assemble keeps them for a friction pass
+    second = gauss.solve(shifted)
+    assert second.certificate.status is SOLVED_BY[solver] and not tried
+    difference = second.x - _tight_proxqp(shifted)
+    assert np.sqrt(difference @ problem.H @ difference) < 1e-8
+    assert np.abs(second.x - first.x).max() > 1e-5  # the shift moved the answer
+    anew = GaussProblem(problem.H, problem.g, problem.A, problem.b, problem.C.copy(), shifted.l, [])
+    gauss.solve(anew)
+    assert tried  # new rows: the candidate first
+
+
 class _Given(ConstraintModule):
     """A module whose rows a test hands to assemble."""
 

@@ -63,6 +63,11 @@ class SparseDualActiveSet:
         self._size = -1  # the working set's size, -1 when it holds no solve's
         self._last: tuple[np.ndarray, np.ndarray] | None = None  # the last solution's row ids, multipliers
 
+    def holds(self, problem: GaussProblem) -> bool:
+        """Whether it holds the factors of ``problem``'s rows and the working set of a solve on them (a
+        later friction pass of the same step)."""
+        return self._size >= 0 and self._key is not None and problem.rows_key == self._key
+
     def solve(self, problem: GaussProblem) -> Solution | None:
         """The method's solution of ``problem`` (rows met to eps_abs) when it finds one and the relative
         KKT residual certifies it to ``tolerance``, else None (ProxQP then solves)."""
@@ -171,6 +176,10 @@ class DaqpActiveSet:
         self._ids: np.ndarray | None = None  # the row ids of the problem the workspace holds
         # the last solution's row ids and multipliers: the working set a new problem starts from
         self._last: tuple[np.ndarray, np.ndarray] | None = None
+
+    def holds(self, problem: GaussProblem) -> bool:
+        """Whether its workspace holds ``problem``'s rows (a later friction pass of the same step)."""
+        return self._model is not None and problem.rows_key == self._key
 
     def solve(self, problem: GaussProblem) -> Solution | None:
         """DAQP's solution of ``problem`` (rows met to eps_abs) when it is optimal and the relative

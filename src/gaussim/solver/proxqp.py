@@ -105,6 +105,12 @@ class GaussSolver:
         self, problem: GaussProblem, x_free: np.ndarray | None, dims: tuple[int, int, int], warm: bool = True
     ) -> Solution:
         p = problem
+        # a later friction pass on the rows whose factors the dual method holds: on those and its
+        # working set first, where the candidates factor the rows afresh
+        method = self._dual
+        held = method is not None and method.holds(p)
+        if method is not None and held and (dual := method.solve(problem)) is not None:
+            return dual
         if warm and dims == self._solved:
             last = self._warm(problem, *self._last, 0.0, self._on_active_set(dims[0]))
             if last is not None:
@@ -112,10 +118,8 @@ class GaussSolver:
         free = None if x_free is None else _free_motion(problem, x_free, self.options.eps_abs)
         if free is not None:
             return free
-        if self._dual is not None:
-            dual = self._dual.solve(problem)
-            if dual is not None:
-                return dual
+        if method is not None and not held and (dual := method.solve(problem)) is not None:
+            return dual
         _, equalities, inequalities = _sides(p)
         if dims != self._dims:
             self._fresh(p, dims, equalities, inequalities)
