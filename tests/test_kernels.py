@@ -63,7 +63,8 @@ def recording(name, dispatcher):
     return call
 
 STAGES = ("actuation", "assembly", "collision.boxes", "collision.cylinders", "collision.ground",
-          "collision.margin", "collision.narrow", "collision.primitives", "constraints.base",
+          "collision.driver", "collision.margin", "collision.narrow", "collision.primitives",
+          "constraints.base", "constraints.limits",
           "constraints.contact", "dynamics", "integrator", "solver.active_set", "solver.certificate",
           "solver.dual", "solver.islands", "solver.proxqp")
 for stage in STAGES:

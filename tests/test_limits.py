@@ -43,3 +43,39 @@ def test_limits_are_not_built_unless_declared(pendulum):
     state = run(sim, sim.reset(np.array([0.4])), 200, tau=np.array([20.0]))
     assert state.q[0] > 0.5
     assert [m.name for m in sim.modules] == []
+
+
+def test_the_compiled_activity_rule_is_the_plain_one_at_every_level():
+    """Which constraints restrict x (docs/FORMULATION.md section 2), compiled, against the rule stated
+    with numpy on values around its thresholds (NaN included): at the velocity level phi + dt min(rate, 0)
+    <= margin; at the impulse and acceleration levels that closing within the active tolerance, and a
+    rate that does not separate or a violated phi. The joint limits' kernel gives the same rows."""
+    from gaussim.kernels.contact import near_limits, restricting
+
+    dt, margin, tolerance, threshold = 1e-3, 2e-3, 1e-6, 1e-4
+    values = np.array([-1.0, -1e-3, -1e-6, -1e-9, 0.0, 1e-9, 1e-6, 1e-4, 2e-3, 1.0, np.nan])
+    phi, rate = (a.ravel() for a in np.meshgrid(values, 1e3 * values))
+    closing = phi + dt * np.minimum(rate, 0.0)
+    expected = {
+        0: closing <= margin,
+        1: (closing <= tolerance) & ((rate <= threshold) | (phi < -tolerance)),
+    }
+    expected[2] = expected[1]
+    for level, want in expected.items():
+        got = restricting(level, phi, rate, dt, margin, tolerance, threshold)
+        np.testing.assert_array_equal(got, want)
+        assert want.any() and not want.all()
+    signs = np.where(np.arange(len(phi)) % 2, -1.0, 1.0)  # lower and upper limits
+    q, v = np.arange(len(phi)) * 0.1, np.arange(len(phi)) * 0.01
+    limits = q - phi / signs  # sign (q - limit) = phi
+    index = np.arange(len(phi), dtype=np.int64)
+    v = rate / signs
+    got_phi, got_rate, active = np.empty(len(phi)), np.empty(len(phi)), np.empty(len(phi), np.int64)
+    count = near_limits(
+        q, v, index, index, signs, limits, 0, (dt, margin, tolerance, threshold), got_phi, got_rate, active
+    )
+    np.testing.assert_allclose(got_phi, phi, atol=1e-12)  # q - limit rounds
+    np.testing.assert_array_equal(got_rate, rate)
+    plain = got_phi + dt * np.minimum(got_rate, 0.0) <= margin  # the rule on the kernel's own phi
+    assert active[:count].tolist() == np.flatnonzero(plain).tolist()
+    assert 0 < count < len(phi)

@@ -21,7 +21,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..collision import Contacts
-from ..kernels.contact import bound_of
+from ..kernels.contact import bound_of, restricting
 from ..options import Options
 
 if TYPE_CHECKING:
@@ -187,9 +187,7 @@ def is_active(ctx: Context, phi: np.ndarray, rate: np.ndarray, margin: float) ->
     -active_tolerance: its stabilised bound brings it back however fast it separates, where dropping
     it let Solo-12's feet take turns sinking at dt = 10 ms).
     """
-    options = ctx.options
-    closing = phi + options.dt * np.minimum(rate, 0.0)
-    if ctx.level == "velocity":
-        return closing <= margin
-    tolerance = options.active_tolerance
-    return (closing <= tolerance) & ((rate <= options.restitution_threshold) | (phi < -tolerance))
+    o = ctx.options
+    return restricting(  # type: ignore[no-any-return]
+        LEVELS[ctx.level], phi, rate, o.dt, margin, o.active_tolerance, o.restitution_threshold
+    )

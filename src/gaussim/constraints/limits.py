@@ -11,7 +11,8 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from .base import ConstraintModule, Context, Rows, is_active, stabilised_bound
+from ..kernels.contact import near_limits
+from .base import LEVELS, ConstraintModule, Context, Rows, stabilised_bound
 
 
 @dataclass
@@ -46,20 +47,31 @@ class LimitModule(ConstraintModule[np.ndarray]):
                     signs.append(sign)
                     bounds.append(value)
                     labels.append((model.names[joint_id], side))
-        self.idx_q, self.idx_v = np.array(idx_q, dtype=int), np.array(idx_v, dtype=int)
-        self.signs, self.limits, self.labels = np.array(signs), np.array(bounds), labels
+        self.idx_q, self.idx_v = np.array(idx_q, dtype=np.int64), np.array(idx_v, dtype=np.int64)
+        self.signs, self.limits, self.labels = (
+            np.array(signs, dtype=float),
+            np.array(bounds, dtype=float),
+            labels,
+        )
+        # each limit's phi and rate, and the indices of the active ones (filled by near_limits)
+        self._phi, self._rate = np.empty(len(signs)), np.empty(len(signs))
+        self._active = np.empty(len(signs), dtype=np.int64)
 
     def rows(self, ctx: Context) -> Rows[np.ndarray] | None:
         if not len(self.signs):
             return None
-        phi = self.signs * (ctx.q[self.idx_q] - self.limits)
-        rate = self.signs * ctx.v[self.idx_v]
-        active = np.flatnonzero(is_active(ctx, phi, rate, ctx.options.limit_margin))
-        if not len(active):
+        o = ctx.options
+        bounds = (o.dt, o.limit_margin, o.active_tolerance, o.restitution_threshold)
+        count = near_limits(
+            ctx.q, ctx.v, self.idx_q, self.idx_v, self.signs, self.limits, LEVELS[ctx.level], bounds,
+            self._phi, self._rate, self._active,
+        )  # fmt: skip
+        if not count:
             return None
-        J = np.zeros((len(active), ctx.model.nv))
-        J[np.arange(len(active)), self.idx_v[active]] = self.signs[active]
-        bound = stabilised_bound(ctx, phi[active], rate[active], 0.0, True)
+        active = self._active[:count].copy()  # the rows' own: the buffer is the next call's
+        J = np.zeros((count, ctx.model.nv))
+        J[np.arange(count), self.idx_v[active]] = self.signs[active]
+        bound = stabilised_bound(ctx, self._phi[active], self._rate[active], 0.0, True)
 
         def labels() -> list[str]:
             return [f"limit {self.labels[i][0]} {self.labels[i][1]}" for i in active]

@@ -22,6 +22,42 @@ def bound_of(level, dt, stabilisation, phi, rate, drift, unilateral):  # type: i
     return -drift - 2.0 * gain * rate - gain * gain * phi
 
 
+@njit(cache=True, inline="always")
+def restricts(level, phi, rate, dt, margin, tolerance, threshold):  # type: ignore[no-untyped-def]
+    """:func:`gaussim.constraints.base.is_active` for one constraint at a level code (its LEVELS);
+    callable from compiled code."""
+    closing = phi + dt * min(rate, 0.0)  # min(NaN, 0) is NaN: a NaN rate is inactive, as in numpy
+    if level == 0:
+        return closing <= margin
+    return closing <= tolerance and (rate <= threshold or phi < -tolerance)
+
+
+@njit(cache=True)
+def restricting(level, phi, rate, dt, margin, tolerance, threshold):  # type: ignore[no-untyped-def]
+    """:func:`restricts` of each constraint (phi, rate (k,)), shape (k,)."""
+    result = np.empty(len(phi), np.bool_)
+    for i in range(len(phi)):
+        result[i] = restricts(level, phi[i], rate[i], dt, margin, tolerance, threshold)
+    return result
+
+
+@njit(cache=True)
+def near_limits(q, v, idx_q, idx_v, signs, limits, level, bounds, phi, rate, active):  # type: ignore[no-untyped-def]
+    """The joint limits' phi = sign (q[idx_q] - limit) and rate = sign v[idx_v] into ``phi`` and
+    ``rate``, and the indices of the limits that restrict x at ``level`` (:func:`restricts`, ``bounds``
+    its (dt, margin, tolerance, threshold)) into ``active``; returns their number (in scalars: this runs
+    every step of a robot with limits)."""
+    dt, margin, tolerance, threshold = bounds
+    count = 0
+    for i in range(len(signs)):
+        phi[i] = signs[i] * (q[idx_q[i]] - limits[i])
+        rate[i] = signs[i] * v[idx_v[i]]
+        if restricts(level, phi[i], rate[i], dt, margin, tolerance, threshold):
+            active[count] = i
+            count += 1
+    return count
+
+
 # Below this tangential speed a contact sticks: no sliding force at the acceleration level, no De
 # Saxce shift (a lagged slip that small is the step's own error, which mu would amplify) [m/s].
 SLIP_SPEED = 1e-4
