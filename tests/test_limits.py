@@ -50,7 +50,7 @@ def test_the_compiled_activity_rule_is_the_plain_one_at_every_level():
     with numpy on values around its thresholds (NaN included): at the velocity level phi + dt min(rate, 0)
     <= margin; at the impulse and acceleration levels that closing within the active tolerance, and a
     rate that does not separate or a violated phi. The joint limits' kernel gives the same rows."""
-    from gaussim.kernels.contact import near_limits, restricting
+    from gaussim.kernels.contact import bound_of, near_limits, restricting
 
     dt, margin, tolerance, threshold = 1e-3, 2e-3, 1e-6, 1e-4
     values = np.array([-1.0, -1e-3, -1e-6, -1e-9, 0.0, 1e-9, 1e-6, 1e-4, 2e-3, 1.0, np.nan])
@@ -66,16 +66,17 @@ def test_the_compiled_activity_rule_is_the_plain_one_at_every_level():
         np.testing.assert_array_equal(got, want)
         assert want.any() and not want.all()
     signs = np.where(np.arange(len(phi)) % 2, -1.0, 1.0)  # lower and upper limits
-    q, v = np.arange(len(phi)) * 0.1, np.arange(len(phi)) * 0.01
-    limits = q - phi / signs  # sign (q - limit) = phi
+    q = np.arange(len(phi)) * 0.1
+    limits, v = q - phi / signs, rate / signs  # sign (q - limit) = phi (to round-off), sign v = rate
     index = np.arange(len(phi), dtype=np.int64)
-    v = rate / signs
-    got_phi, got_rate, active = np.empty(len(phi)), np.empty(len(phi)), np.empty(len(phi), np.int64)
-    count = near_limits(
-        q, v, index, index, signs, limits, 0, (dt, margin, tolerance, threshold), got_phi, got_rate, active
-    )
-    np.testing.assert_allclose(got_phi, phi, atol=1e-12)  # q - limit rounds
-    np.testing.assert_array_equal(got_rate, rate)
-    plain = got_phi + dt * np.minimum(got_rate, 0.0) <= margin  # the rule on the kernel's own phi
-    assert active[:count].tolist() == np.flatnonzero(plain).tolist()
-    assert 0 < count < len(phi)
+    active, bound = np.empty(len(phi), np.int64), np.empty(len(phi))
+    stabilisation = 0.2
+    settings = (dt, margin, tolerance, threshold, stabilisation)
+    for level in (0, 2):
+        count = near_limits(q, v, index, index, signs, limits, level, settings, active, bound)
+        kept = signs * (q - limits)  # phi as the kernel rounds it
+        plain = restricting(level, kept, rate, dt, margin, tolerance, threshold)
+        assert active[:count].tolist() == np.flatnonzero(plain).tolist() and 0 < count < len(phi)
+        chosen = active[:count]
+        want = bound_of(level, dt, stabilisation, kept[chosen], rate[chosen], 0.0, True)
+        np.testing.assert_array_equal(bound[:count], want)

@@ -12,7 +12,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..kernels.contact import near_limits
-from .base import LEVELS, ConstraintModule, Context, Rows, stabilised_bound
+from .base import LEVELS, ConstraintModule, Context, Rows
 
 
 @dataclass
@@ -53,25 +53,27 @@ class LimitModule(ConstraintModule[np.ndarray]):
             np.array(bounds, dtype=float),
             labels,
         )
-        # each limit's phi and rate, and the indices of the active ones (filled by near_limits)
-        self._phi, self._rate = np.empty(len(signs)), np.empty(len(signs))
-        self._active = np.empty(len(signs), dtype=np.int64)
+        # the active limits' indices and bounds (filled by near_limits)
+        self._active, self._bound = np.empty(len(signs), dtype=np.int64), np.empty(len(signs))
 
     def rows(self, ctx: Context) -> Rows[np.ndarray] | None:
         if not len(self.signs):
             return None
         o = ctx.options
-        bounds = (o.dt, o.limit_margin, o.active_tolerance, o.restitution_threshold)
+        settings = (o.dt, o.limit_margin, o.active_tolerance, o.restitution_threshold, o.stabilisation)
         count = near_limits(
-            ctx.q, ctx.v, self.idx_q, self.idx_v, self.signs, self.limits, LEVELS[ctx.level], bounds,
-            self._phi, self._rate, self._active,
+            ctx.q, ctx.v, self.idx_q, self.idx_v, self.signs, self.limits, LEVELS[ctx.level], settings,
+            self._active, self._bound,
         )  # fmt: skip
         if not count:
             return None
-        active = self._active[:count].copy()  # the rows' own: the buffer is the next call's
+        active, bound = (
+            self._active[:count].copy(),
+            self._bound[:count].copy(),
+        )  # the buffers are the next call's
         J = np.zeros((count, ctx.model.nv))
-        J[np.arange(count), self.idx_v[active]] = self.signs[active]
-        bound = stabilised_bound(ctx, self._phi[active], self._rate[active], 0.0, True)
+        for row, i in enumerate(active.tolist()):  # a few rows: cheaper than numpy's fancy indexing
+            J[row, self.idx_v[i]] = self.signs[i]
 
         def labels() -> list[str]:
             return [f"limit {self.labels[i][0]} {self.labels[i][1]}" for i in active]

@@ -42,18 +42,19 @@ def restricting(level, phi, rate, dt, margin, tolerance, threshold):  # type: ig
 
 
 @njit(cache=True)
-def near_limits(q, v, idx_q, idx_v, signs, limits, level, bounds, phi, rate, active):  # type: ignore[no-untyped-def]
-    """The joint limits' phi = sign (q[idx_q] - limit) and rate = sign v[idx_v] into ``phi`` and
-    ``rate``, and the indices of the limits that restrict x at ``level`` (:func:`restricts`, ``bounds``
-    its (dt, margin, tolerance, threshold)) into ``active``; returns their number (in scalars: this runs
-    every step of a robot with limits)."""
-    dt, margin, tolerance, threshold = bounds
+def near_limits(q, v, idx_q, idx_v, signs, limits, level, settings, active, bound):  # type: ignore[no-untyped-def]
+    """The joint limits that restrict x at ``level`` (:func:`restricts` of phi = sign (q[idx_q] - limit)
+    and its rate sign v[idx_v]): their indices into ``active`` and their rows' bounds (:func:`bound_of`)
+    into ``bound``; returns their number. ``settings``: (dt, margin, tolerance, threshold,
+    stabilisation). (In scalars: this runs every step of a robot with limits.)"""
+    dt, margin, tolerance, threshold, stabilisation = settings
     count = 0
     for i in range(len(signs)):
-        phi[i] = signs[i] * (q[idx_q[i]] - limits[i])
-        rate[i] = signs[i] * v[idx_v[i]]
-        if restricts(level, phi[i], rate[i], dt, margin, tolerance, threshold):
+        phi = signs[i] * (q[idx_q[i]] - limits[i])
+        rate = signs[i] * v[idx_v[i]]
+        if restricts(level, phi, rate, dt, margin, tolerance, threshold):
             active[count] = i
+            bound[count] = bound_of(level, dt, stabilisation, phi, rate, 0.0, True)
             count += 1
     return count
 

@@ -68,7 +68,7 @@ SIGNATURES = {
     "collision.in_pair_order": ["i1 f2 f2 f1"],
     "collision.travel": ["i1 i1 f1 f1r f1 f f f1"],
     "collision.closing": [f"f2F f2 i1 i1 i1 i1 f2 f2 f1 {v} f1 f f f1" for v in ("f1r", "f1")],
-    "contact.near_limits": ["f1r f1r i1 i1 f1 f1 i f*4 f1 f1 i1", "f1r f1 i1 i1 f1 f1 i f*4 f1 f1 i1"],
+    "contact.near_limits": ["f1r f1r i1 i1 f1 f1 i f*5 i1 f1", "f1r f1 i1 i1 f1 f1 i f*5 i1 f1"],
     "contact.restricting": ["i f1 f1 f f f f"],
     "contact.unpacked": ["f1 i i"],
     "contact.pyramids": [
