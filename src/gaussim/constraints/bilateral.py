@@ -71,19 +71,24 @@ class BilateralModule(ConstraintModule[list[int]]):
 
     def rows(self, ctx: Context) -> Rows[list[int]] | None:
         acceleration = ctx.level == "acceleration"
-        J_rows, bounds, labels = [], [], []
-        for name, a, b, orientation in self.constraints:
+        J_rows, phis, drifts = [], [], []
+        for _, a, b, orientation in self.constraints:
             p_a, R_a, J_a, d_a = a.kinematics(ctx, acceleration)
             p_b, R_b, J_b, d_b = b.kinematics(ctx, acceleration)
-            phi = p_a - p_b
-            if orientation:
-                phi = np.concatenate([phi, pin.log3(R_a @ R_b.T)])
+            phi = np.concatenate([p_a - p_b, pin.log3(R_a @ R_b.T)]) if orientation else p_a - p_b
             m = len(phi)
-            J = (J_a - J_b)[:m]
-            bounds.append(stabilised_bound(ctx, phi, J @ ctx.v, (d_a - d_b)[:m], False))
-            J_rows.append(J)
-            labels += [f"{name} row {i}" for i in range(m)]
-        return Rows(np.vstack(J_rows), np.concatenate(bounds), True, lambda: labels, [len(b) for b in bounds])
+            J_rows.append((J_a - J_b)[:m])
+            phis.append(phi)
+            drifts.append((d_a - d_b)[:m])
+        J, phi = np.vstack(J_rows), np.concatenate(phis)
+        # every constraint's bounds in one call (the ufunc's call from Python costs more than its work)
+        bound = stabilised_bound(ctx, phi, J @ ctx.v, np.concatenate(drifts), False)
+        counts = [len(p) for p in phis]
+
+        def labels() -> list[str]:
+            return [f"{name} row {i}" for (name, *_), m in zip(self.constraints, counts) for i in range(m)]
+
+        return Rows(J, bound, True, labels, counts)
 
     def reactions(
         self, rows: Rows[list[int]], multipliers: np.ndarray, scale: float
