@@ -101,8 +101,8 @@ class ContactDetector:
         self.joint = np.array([pair.joint for pair in self.pairs], dtype=int)
         self.other_joint = np.array([pair.other_joint for pair in self.pairs], dtype=int)
         # each pair's names as object arrays: a layout takes them for all its points in one indexing
-        self._geometry = np.array([pair.geometry for pair in self.pairs] + [""], dtype=object)[:-1]
-        self._obstacle = np.array([pair.obstacle_name for pair in self.pairs] + [""], dtype=object)[:-1]
+        self._geometry = np.array([pair.geometry for pair in self.pairs], dtype=object)
+        self._obstacle = np.array([pair.obstacle_name for pair in self.pairs], dtype=object)
         self._layouts: dict[bytes, tuple] = {}  # what does not move, per set of touching pairs
 
     def forget(self) -> None:

@@ -48,11 +48,8 @@ class LimitModule(ConstraintModule[np.ndarray]):
                     bounds.append(value)
                     labels.append((model.names[joint_id], side))
         self.idx_q, self.idx_v = np.array(idx_q, dtype=np.int64), np.array(idx_v, dtype=np.int64)
-        self.signs, self.limits, self.labels = (
-            np.array(signs, dtype=float),
-            np.array(bounds, dtype=float),
-            labels,
-        )
+        self.signs, self.limits = np.array(signs, dtype=float), np.array(bounds, dtype=float)
+        self.labels = labels
         # the active limits' indices and bounds (filled by near_limits)
         self._active, self._bound = np.empty(len(signs), dtype=np.int64), np.empty(len(signs))
 
@@ -67,10 +64,8 @@ class LimitModule(ConstraintModule[np.ndarray]):
         )  # fmt: skip
         if not count:
             return None
-        active, bound = (
-            self._active[:count].copy(),
-            self._bound[:count].copy(),
-        )  # the buffers are the next call's
+        # copies: the buffers are the next call's
+        active, bound = self._active[:count].copy(), self._bound[:count].copy()
         J = np.zeros((count, ctx.model.nv))
         for row, i in enumerate(active.tolist()):  # a few rows: cheaper than numpy's fancy indexing
             J[row, self.idx_v[i]] = self.signs[i]
