@@ -14,6 +14,7 @@ from .kernels.dynamics import (
     armed,
     constant_terms,
     floating_terms,
+    frame_accelerations,
     free_velocity,
     linear_term,
     loaded,
@@ -126,9 +127,8 @@ class FloatingBases:
     def frame_acceleration(self, v: np.ndarray) -> np.ndarray:
         """The body-frame acceleration -w x v_l of each base's origin at fixed world velocity, zeros
         elsewhere, shape (nv,): ABA's acceleration less the gauss problem's (its drift terms add it)."""
-        c = np.zeros(len(v))
-        for i in self.velocity:
-            c[i : i + 3] = -np.cross(v[i + 3 : i + 6], v[i : i + 3])
+        c = np.empty(len(v))
+        frame_accelerations(v, self.velocity, c)
         return c
 
 

@@ -233,6 +233,16 @@ def factored_solve(U, D, parents, subtree, f, x):  # type: ignore[no-untyped-def
 
 
 @njit(cache=True)
+def frame_accelerations(v, bases, out):  # type: ignore[no-untyped-def]
+    """Each base's -w x v_l into ``out`` at its linear velocity coordinates (``bases``: their first
+    index), zero elsewhere (see :meth:`gaussim.dynamics.FloatingBases.frame_acceleration`)."""
+    out[:] = 0.0
+    for i in bases:
+        w0, w1, w2, u0, u1, u2 = v[i + 3], v[i + 4], v[i + 5], v[i], v[i + 1], v[i + 2]
+        out[i], out[i + 1], out[i + 2] = w2 * u1 - w1 * u2, w0 * u2 - w2 * u0, w1 * u0 - w0 * u1
+
+
+@njit(cache=True)
 def negated_product(M, x):  # type: ignore[no-untyped-def]
     """-M x."""
     result = np.empty(M.shape[0])

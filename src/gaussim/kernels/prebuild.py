@@ -36,6 +36,7 @@ SIGNATURES = {
     "dynamics.free_velocity": ["f1r f1 f f1 i1 f3 b1"],
     "dynamics.floating_terms": ["f1r f1 f b i1 f3 b1", "f1 f1 f b i1 f3 b1"],
     "dynamics.negated_product": ["f2 f1"],
+    "dynamics.frame_accelerations": ["f1r i1 f1", "f1 i1 f1"],
     "dynamics.point_jacobians_into": ["f3 f2F f2 i1 i1 i1r i1r f2", "f3 f2F f2 i1 i1 i1 i1 f2"],
     "dynamics.unloaded": ["f2 f1 i1 b1"],
     "dynamics.loaded": ["i2 f1 i1 b1"],
