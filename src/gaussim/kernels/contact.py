@@ -1,4 +1,6 @@
-"""Compiled kernels of the contact rows (:mod:`gaussim.constraints.contact`)."""
+"""Compiled kernels of the contact rows (:mod:`gaussim.constraints.contact`), and the rules every
+module's unilateral rows share (:func:`bound_of`, :func:`restricts`) with the joint limits' pass
+(:mod:`gaussim.constraints.limits`) that reads them."""
 
 from __future__ import annotations
 

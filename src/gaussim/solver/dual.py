@@ -66,7 +66,12 @@ class SparseDualActiveSet:
     def holds(self, problem: GaussProblem) -> bool:
         """Whether it holds the factors of ``problem``'s rows and the working set of a solve on them (a
         later friction pass of the same step)."""
-        return self._size >= 0 and self._key is not None and problem.rows_key == self._key
+        return self._size >= 0 and self._factored(problem)
+
+    def _factored(self, p: GaussProblem) -> bool:
+        """Whether its factors and sparse rows are ``p``'s (the key of the problem they were set up for
+        spares comparing H and the rows)."""
+        return self._key is not None and p.rows_key == self._key and len(p.b) == self._n_eq
 
     def solve(self, problem: GaussProblem) -> Solution | None:
         """The method's solution of ``problem`` (rows met to eps_abs) when it finds one and the relative
@@ -74,8 +79,7 @@ class SparseDualActiveSet:
         p = problem
         n_eq = len(p.b)
         lower = np.ascontiguousarray(np.concatenate((p.b, p.l)) if n_eq else p.l, dtype=float)
-        held = self._key is not None and p.rows_key == self._key and n_eq == self._n_eq
-        if not held and not self._setup(p, n_eq):
+        if not self._factored(p) and not self._setup(p, n_eq):
             return None
         if self._g is None or not np.array_equal(self._g, p.g):
             self._g = np.array(p.g, dtype=float)
