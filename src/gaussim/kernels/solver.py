@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..linalg import backward, cholesky, dot, forward, independent_cholesky, matvec
+from ..linalg import backward, cholesky, dot, forward, forward_columns, independent_cholesky, matvec
 
 
 @njit(cache=True, fastmath={"reassoc", "contract"})  # summed in any order: its products vectorize
@@ -97,11 +97,13 @@ def _delassus(L, A, C, chosen):  # type: ignore[no-untyped-def]
     n_eq, nv = A.shape[0], L.shape[0]
     rows = np.flatnonzero(chosen)
     k = n_eq + len(rows)
-    K = np.empty((k, nv))
-    for i in range(k):
-        for j in range(nv):
-            K[i, j] = A[i, j] if i < n_eq else C[rows[i - n_eq], j]
-    W = forward(L, K)
+    KT = np.empty((nv, k))  # K^T: L^-1 K^T solves its columns at once (forward_columns)
+    for j in range(nv):
+        for i in range(n_eq):
+            KT[j, i] = A[i, j]
+        for i in range(len(rows)):
+            KT[j, n_eq + i] = C[rows[i], j]
+    W = forward_columns(L, KT).T.copy()
     G = np.empty((k, k))
     for i in range(k):
         for j in range(i + 1):
