@@ -13,10 +13,10 @@ from .exceptions import InvalidState, SolverError
 from .kernels.dynamics import (
     armed,
     constant_terms,
+    factored_terms,
     floating_terms,
     frame_accelerations,
     free_velocity,
-    linear_term,
     loaded,
     mirrored,
     negated_product,
@@ -193,6 +193,22 @@ class MassStructure:
         return cls(parents, subtree, np.zeros((nv, nv)), np.zeros((nv, nv)), np.zeros(nv))
 
 
+class TreeFactors(NamedTuple):
+    """Views of Pinocchio's factors M = U D U^T in a model's data (filled by ``pin.cholesky.decompose``)
+    and the joint tree they follow: what :func:`~gaussim.kernels.dynamics.factored_terms` reads."""
+
+    U: np.ndarray
+    D: np.ndarray
+    parents: np.ndarray
+    subtree: np.ndarray
+
+    @classmethod
+    def of(cls, data: pin.Data) -> TreeFactors:
+        """The views of ``data``'s factors (they follow every decomposition of that data)."""
+        parents = np.array(data.parents_fromRow, dtype=np.int64)
+        return cls(data.U, data.D, parents, np.array(data.nvSubtree_fromRow, dtype=np.int64))
+
+
 class DynamicsStage:
     """Stage 1 for one Pinocchio model and data: each step's free motion and, when a constraint needs
     it, its Gauss problem.
@@ -208,6 +224,7 @@ class DynamicsStage:
         self.model, self.data = model, data
         self.bases = FloatingBases.of(model)
         self.structure = MassStructure.of(model, data)
+        self.factors = TreeFactors.of(data) if self.structure is None else None
         self._base_args = (self.bases.velocity, self.bases.inertias, self.bases.rigid)
         self._posed = True  # the last step posed a Gauss problem
         self._dynamics: Dynamics | None = None
@@ -231,7 +248,7 @@ class DynamicsStage:
         if acceleration or self._posed:
             self._posed, self.reach = False, None
             self._dynamics = compute_dynamics(
-                self.model, self.data, q, v, tau, dt, acceleration, self.bases, self.structure
+                self.model, self.data, q, v, tau, dt, acceleration, self.bases, self.structure, self.factors
             )
             return self._dynamics.x_free
         # the WORLD convention fills data.oMi, and costs less than LOCAL
@@ -265,6 +282,7 @@ def compute_dynamics(
     acceleration: bool = False,
     bases: FloatingBases | None = None,
     structure: MassStructure | None = None,
+    factors: TreeFactors | None = None,
 ) -> Dynamics:
     """M, joint placements and Jacobians (one CRBA pass, none for a constant M), b (RNEA), and the free
     Gauss problem of the velocity level or, with ``acceleration``, of the acceleration level, for a
@@ -275,49 +293,44 @@ def compute_dynamics(
     ``tau`` (nv,) are the joint torques; raises :class:`InvalidState` when they are not finite
     (checked here, in the kernel that reads them). The ``bases`` (default: the model's) are posed as
     :class:`FloatingBases` says. With a ``structure``, M is its buffer and every product and solve
-    runs on it.
+    runs on it; without, M is dense and factored by Pinocchio into ``factors`` (default: ``data``'s).
     """
     if len(tau) != model.nv:  # the kernel reads nv entries
         raise InvalidState(f"tau must have shape ({model.nv},), got {np.shape(tau)}")
     bases = FloatingBases.of(model) if bases is None else bases
     base_args = (bases.velocity, bases.inertias, bases.rigid)
-    h = 0.0 if acceleration else dt
-    constant = structure is not None and structure.constant
-    if constant:  # data.oMi and data.J (WORLD), b, then one kernel
-        assert structure is not None
+    x_free = np.empty(len(v))
+    if structure is None:  # a copy of data.M; the WORLD convention also fills data.oMi, data.J
+        M = pin.crba(model, data, q, _WORLD)
+        nle = pin.nonLinearEffects(model, data, q, v)
+        pin.cholesky.decompose(model, data)
+        tree = TreeFactors.of(data) if factors is None else factors
+        g = factored_terms(M, *tree, v, tau, nle, dt, acceleration, *base_args, x_free)
+    elif structure.constant:  # data.oMi and data.J (WORLD), b, then one kernel
         pin.computeJointJacobians(model, data, q)
         nle = pin.nonLinearEffects(model, data, q, v)
         parts = (structure.M, structure.U, structure.D, structure.parents, structure.subtree)
-        x_free = np.empty(len(v))
+        M = structure.M
         g = constant_terms(
             *parts, structure.armature(model), v, tau, nle, dt, acceleration, *base_args, x_free
         )
-        M, finite = structure.M, g is not None
-    elif structure is None:
-        # a copy of data.M; the WORLD convention also fills data.oMi, data.J
-        M, f, g = pin.crba(model, data, q, _WORLD), np.empty(len(v)), np.empty(len(v))
-        finite = linear_term(M, v, tau, pin.nonLinearEffects(model, data, q, v), h, f, g)
     else:  # M's upper triangle, b, data.oMi and data.J (WORLD), O(nv)
         pin.crba(model, data, q, _WORLD)  # not computeAllTerms: its centroidal and energy terms go unread
         pin.nonLinearEffects(model, data, q, v)
         M, f = structure.M, np.empty(len(v))
-        finite = structured_terms(data.M, structure.subtree, v, tau, data.nle, h, M, f)
-        g = -f
-    if not finite:
+        h = 0.0 if acceleration else dt
+        if structured_terms(data.M, structure.subtree, v, tau, data.nle, h, M, f):
+            structured_solve(M, structure.parents, structure.subtree, f, structure.U, structure.D, x_free)
+            g = -f
+            if len(bases):
+                floating_terms(v, x_free, dt, acceleration, *base_args)
+                g = -structured_product(M, structure.subtree, x_free)
+        else:
+            g = None
+    if g is None:
         raise InvalidState.non_finite("tau", tau)
     if acceleration:  # the drifts of the bases' velocity coordinates: the frame's turn is part of them
         pin.forwardKinematics(model, data, q, v, bases.frame_acceleration(v))
-    if constant:
-        return Dynamics(M, g, x_free)
-    if structure is None:
-        pin.cholesky.decompose(model, data)
-        x_free = pin.cholesky.solve(model, data, f)
-    else:
-        x_free = np.empty(len(v))
-        structured_solve(M, structure.parents, structure.subtree, f, structure.U, structure.D, x_free)
-    if len(bases):
-        floating_terms(v, x_free, dt, acceleration, *base_args)
-        g = _negated(M, x_free, structure)
     return Dynamics(M, g, x_free)
 
 

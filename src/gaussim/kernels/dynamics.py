@@ -9,20 +9,31 @@ from numba import njit
 from ..linalg import cross, dot, finite, solve3
 
 
-@njit(cache=True)
-def linear_term(M, v, tau, nle, dt, f, g):  # type: ignore[no-untyped-def]
-    """Fill f = M v + dt F at the velocity level (dt > 0), F at the acceleration level (dt = 0), with
-    F = tau - b, and g = -f; False when tau is not finite."""
-    for i in range(len(nle)):
+@njit(cache=True, fastmath={"reassoc", "contract"})
+def factored_terms(M, U, D, parents, subtree, v, tau, nle, dt, acceleration, bases, inertias, rigid, x):  # type: ignore[no-untyped-def]
+    """The free motion x (nv,) and the linear term g (returned; None when tau is not finite) of a dense
+    M with its factors M = U D U^T (Pinocchio's cholesky::decompose, on the joint tree ``parents``,
+    ``subtree``, see :func:`structured_solve`): f = M v + dt F at the velocity level, F at the
+    acceleration level, F = tau - nle; x = M^-1 f, the floating ``bases`` posed as
+    :func:`floating_terms` poses them; g = -M x (-f without bases), in one call."""
+    n = len(v)
+    f = np.empty(n)
+    for i in range(n):
         if not np.isfinite(tau[i]):
-            return False
+            return None
         f[i] = tau[i] - nle[i]
-    if dt > 0:
-        for i in range(len(f)):
+    if not acceleration:
+        for i in range(n):
             f[i] = dot(M[i], v) + dt * f[i]
-    for i in range(len(f)):
-        g[i] = -f[i]
-    return True
+    factored_solve(U, D, parents, subtree, f, x)
+    if not len(bases):  # x = M^-1 f is the solution: g = -f
+        for i in range(n):
+            f[i] = -f[i]
+        return f
+    floating_terms(v, x, dt, acceleration, bases, inertias, rigid)
+    for i in range(n):
+        f[i] = -dot(M[i], x)
+    return f
 
 
 @njit(cache=True)
@@ -122,8 +133,7 @@ def mirrored(upper, subtree, M):  # type: ignore[no-untyped-def]
 
 @njit(cache=True)
 def structured_terms(upper, subtree, v, tau, nle, dt, M, f):  # type: ignore[no-untyped-def]
-    """:func:`linear_term` on M's joint structure: M :func:`mirrored` from ``upper`` and
-    :func:`momentum_terms`."""
+    """M :func:`mirrored` from ``upper`` on its joint structure, and f there (:func:`momentum_terms`)."""
     mirrored(upper, subtree, M)
     return momentum_terms(M, subtree, v, tau, nle, dt, f)
 

@@ -27,11 +27,11 @@ _SIDES = ("f2 f1 f2 f1", "f2 f1 f2r f1r", "f2r f1r f2 f1")
 # The signatures the shipped scenes call the kernels with from Python (both schemes): tests/test_kernels.py
 # checks that the main job needs no other.
 SIGNATURES = {
-    "dynamics.linear_term": [
-        "f2 f1 f1r f1 f f1 f1",
-        "f2 f1 f1 f1 f f1 f1",
-        "f2 f1r f1 f1 f f1 f1",
-        "f2 f1r f1r f1 f f1 f1",
+    "dynamics.factored_terms": [
+        f"f2 {U} f1 i1 i1 {v} {tau} f1 f b i1 f3 b1 f1"
+        for U in ("f2F", "f2")  # Pinocchio's U: column-major, C as well at nv = 1
+        for v in ("f1", "f1r")
+        for tau in ("f1", "f1r")
     ],
     "dynamics.free_velocity": ["f1r f1 f f1 i1 f3 b1"],
     "dynamics.floating_terms": ["f1r f1 f b i1 f3 b1", "f1 f1 f b i1 f3 b1"],
