@@ -598,6 +598,7 @@ def test_a_pass_that_moves_bounds_alone_keeps_the_stacked_rows_and_daqps_factors
     pushed = GaussProblem(saved.H, saved.g * (1 + 1e-3), shifted.A, shifted.b, shifted.C, shifted.l, [])
     pushed.rows_key = shifted.rows_key
     third = gauss.solve(pushed)
+    assert third.certificate.status is SOLVED_BY[solver]  # its own answer, not ProxQP's after a refusal
     assert len(setups) == SETUPS_FOR_A_NEW_G[solver]
     difference = third.x - _tight_proxqp(pushed)
     assert np.sqrt(difference @ saved.H @ difference) < 1e-8

