@@ -324,7 +324,7 @@ def compute_dynamics(
             g = -f
             if len(bases):
                 floating_terms(v, x_free, dt, acceleration, *base_args)
-                g = -structured_product(M, structure.subtree, x_free)
+                g = _negated(M, x_free, structure)
         else:
             g = None
     if g is None:
