@@ -163,8 +163,9 @@ def test_a_rounded_hull_at_the_margin_keeps_its_deepest_vertex():
     directions = np.array([[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0]])
     order = np.empty(2, np.int64)
     picked = np.full(5, -7, np.int64)
+    heights = ground[:3] @ X[:3] + ground[3]
     picks, _ = _outline(
-        ground, np.eye(3), np.zeros(3), X, 2, rounding, directions, lowest - rounding,
+        np.eye(3), np.zeros(3), X, heights, 2, rounding, directions, lowest - rounding,
         (PATCH_TOLERANCE, PATCH_MIN_EXTENT), lowest, order, picked, 0, -1,
     )  # fmt: skip
     assert picked[:picks].tolist() == [0]

@@ -49,6 +49,7 @@ class Actuation:
         self._shapes = {(self.nv,), (len(actuated),)}
         # the padded torque and damping: zero outside the actuated coordinates, always
         self._padded, self._padded_damping = np.zeros(self.nv), np.zeros(self.nv)
+        self._damped = np.empty(self.nv)  # tau - D v of a damped step
         self._zero = np.zeros(self.nv)
         self._zero.flags.writeable = False
         self._undamped = np.zeros(0)  # the previous damping of a step that had none
@@ -67,8 +68,9 @@ class Actuation:
             return full
         D = self._full(damping, "damping", self._padded_damping)
         assert v is not None
-        code, damped, same = damped_torque(
-            full, D, v, self._undamped if self.damping is None else self.damping
+        damped = self._damped
+        code, same = damped_torque(
+            full, D, v, self._undamped if self.damping is None else self.damping, damped
         )
         if code == 1:
             raise InvalidState.non_finite("tau", full)

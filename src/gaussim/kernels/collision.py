@@ -54,6 +54,7 @@ def ground_hulls(
     c = np.empty(4)  # the ground seen from the joint: (n^T R, n^T p - height)
     R, p = np.empty((3, 3)), np.empty(3)  # hull k's joint's placement
     order = np.empty(size, np.int64)
+    heights = np.empty(size)  # of a widely touching hull's vertices: each of its scans reads them
     picked = np.empty(2 * directions.shape[1] + 1, np.int64)
     most = count * len(picked)  # at most: two outlines and the deepest
     pairs_out, points_out = np.empty(most, np.int64), np.empty((most, 3))
@@ -89,13 +90,14 @@ def ground_hulls(
         turned = (c[0] - narrow_at[k, 0]) ** 2 + (c[1] - narrow_at[k, 1]) ** 2 + (c[2] - narrow_at[k, 2]) ** 2
         narrow = turned <= turn2[k]  # False where no verdict was kept (NaN)
         if not narrow:
-            narrow = _spans_within(c, X, sizes[k], lowest + tolerance + NARROW_SLACK, extent)
+            _heights(c, X, sizes[k], heights)
+            narrow = _spans_within(X, heights, sizes[k], lowest + tolerance + NARROW_SLACK, extent)
             for j in range(3):
                 narrow_at[k, j] = c[j] if narrow else np.nan
         if narrow:
             picked[0], picks = i, 1
         else:
-            outline = (c, R, p, X, sizes[k], rounding[k], directions[k], margin)
+            outline = (R, p, X, heights, sizes[k], rounding[k], directions[k], margin)
             picks, n = _outline(*outline, (tolerance, extent), lowest, order, picked, 0, -1)
             if tolerance > base:  # a widened outline's extremes may all be high: the resting patch's
                 picks, _ = _outline(*outline, (base, extent), lowest, order, picked, picks, n)  # too,
@@ -119,26 +121,34 @@ def _height(c, X, v):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def _sublevel(c, X, size, bound, order):  # type: ignore[no-untyped-def]
-    """The number n of the hull's ``size`` vertices at most ``bound`` above the ground ``c``, their
-    indices written into ``order[:n]`` in ascending order (the outline's passes then read them alone,
-    not the thousands of vertices of a mesh's hull)."""
+def _heights(c, X, size, out):  # type: ignore[no-untyped-def]
+    """The heights of the hull's ``size`` vertices above the ground ``c`` into ``out[:size]``, as
+    :func:`_height` rounds them (one pass that vectorizes, which each scan of the vertices then reads)."""
+    for v in range(size):
+        out[v] = _height(c, X, v)
+
+
+@njit(cache=True)
+def _sublevel(heights, size, bound, order):  # type: ignore[no-untyped-def]
+    """The number n of the hull's ``size`` vertices at most ``bound`` above the ground (their
+    ``heights``), their indices written into ``order[:n]`` in ascending order (the outline's passes
+    then read them alone, not the thousands of vertices of a mesh's hull)."""
     n = 0
     for v in range(size):
-        if _height(c, X, v) <= bound:
+        if heights[v] <= bound:
             order[n] = v
             n += 1
     return n
 
 
 @njit(cache=True)
-def _spans_within(c, X, size, bound, extent):  # type: ignore[no-untyped-def]
-    """Whether the hull's ``size`` vertices at most ``bound`` above the ground ``c`` span at most
-    ``extent`` (their bounding box in the joint's frame); the search stops at the first vertex that
-    makes them span more."""
+def _spans_within(X, heights, size, bound, extent):  # type: ignore[no-untyped-def]
+    """Whether the hull's ``size`` vertices at most ``bound`` above the ground (their ``heights``) span
+    at most ``extent`` (their bounding box in the joint's frame); the search stops at the first
+    vertex that makes them span more."""
     low, high = _unbounded()
     for v in range(size):
-        if _height(c, X, v) <= bound:
+        if heights[v] <= bound:
             for j in range(3):
                 low[j], high[j] = min(low[j], X[j, v]), max(high[j], X[j, v])
             if _extent(low, high) > extent:
@@ -147,13 +157,13 @@ def _spans_within(c, X, size, bound, extent):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def _within(c, X, order, n, bound):  # type: ignore[no-untyped-def]
-    """The number of the vertices ``order[:n]`` at most ``bound`` above the ground ``c``, moved to the
-    front of ``order`` in their order."""
+def _within(heights, order, n, bound):  # type: ignore[no-untyped-def]
+    """The number of the vertices ``order[:n]`` at most ``bound`` above the ground (their
+    ``heights``), moved to the front of ``order`` in their order."""
     kept = 0
     for t in range(n):
         v = order[t]
-        if _height(c, X, v) <= bound:
+        if heights[v] <= bound:
             order[kept] = v
             kept += 1
     return kept
@@ -170,9 +180,11 @@ def _pick(picked, picks, v):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def _outline(c, R, p, X, size, rounding, directions, margin, patch, lowest, order, picked, picks, known):  # type: ignore[no-untyped-def]
-    """A hull touching widely (ground ``c`` seen from its joint at (R, p), its ``size`` vertices X,
-    the deepest at height ``lowest``): adds to ``picked[:picks]`` its vertices within the patch
+def _outline(
+    R, p, X, heights, size, rounding, directions, margin, patch, lowest, order, picked, picks, known
+):  # type: ignore[no-untyped-def]
+    """A hull touching widely (its joint at (R, p), its ``size`` vertices X at ``heights`` above the
+    ground, the deepest at ``lowest``): adds to ``picked[:picks]`` its vertices within the patch
     tolerance of the deepest (or penetrating) that are extreme along ``directions`` (the second half
     the first's opposites), or the deepest alone when they span at most PATCH_MIN_EXTENT; returns the
     new count and the number n of the vertices it read, which it leaves in ``order[:n]`` in ascending
@@ -182,7 +194,7 @@ def _outline(c, R, p, X, size, rounding, directions, margin, patch, lowest, orde
     bound = max(0.0, min(margin, lowest - rounding + tolerance))
     # at least the deepest's own height: bound + rounding may round below it when the margin clamps
     bound = max(bound + rounding, lowest)
-    n = _sublevel(c, X, size, bound, order) if known < 0 else _within(c, X, order, known, bound)
+    n = _sublevel(heights, size, bound, order) if known < 0 else _within(heights, order, known, bound)
     half = directions.shape[0] // 2  # directions[half + d] is -directions[d]
     low, high = _unbounded()
     deepest, least = -1, np.inf
@@ -196,7 +208,7 @@ def _outline(c, R, p, X, size, rounding, directions, margin, patch, lowest, orde
         low[0], high[0] = min(low[0], w0), max(high[0], w0)
         low[1], high[1] = min(low[1], w1), max(high[1], w1)
         low[2], high[2] = min(low[2], w2), max(high[2], w2)
-        height = _height(c, X, v)
+        height = heights[v]
         if height < least:
             deepest, least = v, height
         for d in range(half):

@@ -55,7 +55,7 @@ SIGNATURES = {
     "integrator.displacement": ["f1 f f1"],
     "integrator.midpoint_turns": ["f1r f1 f i1 b1 f1"],
     "integrator.move_bases": ["f1r f1 f1 f i1 i1"],
-    "actuation.damped_torque": ["f1 f1 f1r f1"],
+    "actuation.damped_torque": ["f1 f1 f1r f1 f1"],
     # the joints' placements: one array whatever the scene (gaussim.kernels.pairs)
     "collision.ground_hulls": ["f3r i1 f2 f3 i2 i2 i1 i1 f2 f1 f1 f3 f f*2 f1 f1 i1"],
     "pairs.sphere_gaps": ["f3r i2 f3 f1 f1 f3 f f1"],
