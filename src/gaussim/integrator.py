@@ -19,7 +19,9 @@ import numpy as np
 import pinocchio as pin
 
 from .dynamics import FloatingBases
-from .kernels.integrator import displacement, midpoint_turns, move_bases
+from .kernels.integrator import displacement, move_bases
+
+_NO_BASES = np.zeros(0, dtype=bool)  # ``free`` when no base turns by the midpoint rule
 
 
 def integrate(
@@ -38,10 +40,8 @@ def integrate(
     ``free`` (k,): which bases turn by the midpoint rule (rigid bases no row touched; None: none).
     The velocity returned is ``v_next`` itself unless a floating base re-expresses it.
     """
-    if not displacement(v_next, dt, scratch):
+    if not displacement(v, v_next, dt, bases.velocity, _NO_BASES if free is None else free, scratch):
         return None
-    if free is not None:
-        midpoint_turns(v, v_next, dt, bases.velocity, free, scratch)
     q_next = pin.integrate(model, q, scratch)
     if not len(bases):
         return q_next, v_next

@@ -53,7 +53,6 @@ class MarginSchedule:
         self.turn_levers = sparse_rows(
             [_turn_levers(model, p) if k in read else np.zeros(model.nv) for k, p in enumerate(pairs)]
         )
-        self._turning = bool(read)
         # travel's per-pair closing, which only its maximum is read from
         self.turns, self._closing = np.zeros(len(pairs)), np.zeros(len(pairs))
         self.distance = 0.0
@@ -84,9 +83,7 @@ class MarginSchedule:
             if self.clearance - 2 * coarse > self.base_margin:
                 self.clearance -= coarse
                 return False
-        distance = travel(*self.levers, v, x, dt, x_scale, self._closing)
-        if self._turning:
-            travel(*self.turn_levers, v, x, dt, x_scale, self.turns)
+        distance = travel(*self.levers, *self.turn_levers, v, x, dt, x_scale, self._closing, self.turns)
         self.clearance -= distance
         self.distance = distance
         needed = self.base_margin + distance

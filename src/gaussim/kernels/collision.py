@@ -258,10 +258,20 @@ def in_pair_order(pairs, points, normals, gaps):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def travel(starts, coordinates, levers, v, x, dt, x_scale, each):  # type: ignore[no-untyped-def]
+def travel(
+    starts, coordinates, levers, turn_starts, turn_coordinates, turn_levers, v, x, dt, x_scale, each, turns
+):  # type: ignore[no-untyped-def]
     """The farthest a pair can close in a step: max_k dt sum_i levers[k, i] (|v_i| + x_scale |x_i|),
     the levers in CSR form (row starts, coordinates, values; see MarginSchedule.levers); each pair's
-    sum, times dt, is written into ``each``."""
+    sum, times dt, is written into ``each``, and the same sums of the turn levers (CSR too: the most
+    each pair can turn) into ``turns`` (one call: this runs every step that may detect)."""
+    _bounds(turn_starts, turn_coordinates, turn_levers, v, x, dt, x_scale, turns)
+    return dt * _bounds(starts, coordinates, levers, v, x, dt, x_scale, each)
+
+
+@njit(cache=True, inline="always")
+def _bounds(starts, coordinates, levers, v, x, dt, x_scale, each):  # type: ignore[no-untyped-def]
+    """:func:`travel`'s sums of one CSR matrix of levers into ``each``; returns the largest, over dt."""
     farthest = 0.0
     for k in range(len(starts) - 1):
         total = 0.0
@@ -270,7 +280,7 @@ def travel(starts, coordinates, levers, v, x, dt, x_scale, each):  # type: ignor
             total += levers[j] * (abs(v[i]) + x_scale * abs(x[i]))
         each[k] = dt * total
         farthest = max(farthest, total)
-    return dt * farthest
+    return farthest
 
 
 @njit(cache=True)

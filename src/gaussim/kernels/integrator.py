@@ -1,5 +1,5 @@
-"""Compiled kernels of the integrator (:mod:`gaussim.integrator`): the displacement, the free bodies'
-midpoint turns, the floating bases' moves."""
+"""Compiled kernels of the integrator (:mod:`gaussim.integrator`): the displacement (with the free
+bodies' midpoint turns), the floating bases' moves."""
 
 from __future__ import annotations
 
@@ -10,18 +10,13 @@ from ..linalg import finite
 
 
 @njit(cache=True)
-def displacement(v, dt, out):  # type: ignore[no-untyped-def]
-    """out = dt v; False when v is not finite."""
-    for i in range(len(v)):
-        out[i] = dt * v[i]
-    return finite(v)
-
-
-@njit(cache=True)
-def midpoint_turns(v, v_next, dt, velocity, free, out):  # type: ignore[no-untyped-def]
-    """For each ``free`` base, its turn in the displacement ``out``: the rotation vector of the Cayley
-    map of dt w_m, 2 atan(dt |w_m| / 2) w_m / |w_m|."""
-    for k in range(len(velocity)):
+def displacement(v, v_next, dt, velocity, free, out):  # type: ignore[no-untyped-def]
+    """out = dt v_next, with each ``free`` base's turn (bases ``velocity``'s first coordinates) the
+    rotation vector of the Cayley map of dt w_m, 2 atan(dt |w_m| / 2) w_m / |w_m|, w_m the midpoint
+    of v's and v_next's angular velocities; False when v_next is not finite."""
+    for i in range(len(v_next)):
+        out[i] = dt * v_next[i]
+    for k in range(len(free)):
         if free[k]:
             i = velocity[k] + 3
             m0, m1, m2 = (
@@ -33,6 +28,7 @@ def midpoint_turns(v, v_next, dt, velocity, free, out):  # type: ignore[no-untyp
             if speed > 0.0:
                 scale = 2.0 * np.arctan(0.5 * dt * speed) / speed
                 out[i], out[i + 1], out[i + 2] = scale * m0, scale * m1, scale * m2
+    return finite(v_next)
 
 
 @njit(cache=True)

@@ -52,8 +52,7 @@ SIGNATURES = {
     "dynamics.constant_terms": [
         f"f2 f2 f1 i1 i1 f1*3 {v} {tau} f1 f b i1 f3 b1 f1" for v in ("f1", "f1r") for tau in ("f1", "f1r")
     ],
-    "integrator.displacement": ["f1 f f1"],
-    "integrator.midpoint_turns": ["f1r f1 f i1 b1 f1"],
+    "integrator.displacement": ["f1r f1 f i1 b1 f1"],
     "integrator.move_bases": ["f1r f1 f1 f i1 i1"],
     "actuation.damped_torque": ["f1 f1 f1r f1 f1"],
     # the joints' placements: one array whatever the scene (gaussim.kernels.pairs)
@@ -67,7 +66,7 @@ SIGNATURES = {
     "primitives.primitive_pairs": ["f3r i2 f4 f3 i2 f3 i1 f i1 f1 f2 f3 i1"],
     "cylinders.ground_cylinders": ["f3r i2 f4 f3 f2 f2 i1 f i1 f1 f2 f3 i1"],
     "collision.in_pair_order": ["i1 f2 f2 f1"],
-    "collision.travel": ["i1 i1 f1 f1r f1 f f f1"],
+    "collision.travel": ["i1 i1 f1 i1 i1 f1 f1r f1 f f f1 f1"],
     "collision.closing": [f"f2F f2 i1 i1 i1 i1 f2 f2 f1 {v} f1 f f f1" for v in ("f1r", "f1")],
     "contact.near_limits": ["f1r f1r i1 i1 f1 f1 i f*5 i1 f1", "f1r f1 i1 i1 f1 f1 i f*5 i1 f1"],
     "contact.restricting": ["i f1 f1 f f f f"],
