@@ -406,6 +406,22 @@ def test_the_scene_suite_runs_the_same_scene_in_every_engine(capsys, tmp_path):
     )
 
 
+def test_a_regenerated_section_keeps_its_notes_and_its_neighbours(tmp_path):
+    """``write_section`` replaces a section's generated text and keeps the hand-written ``### ``
+    subsections under it and the sections around it; a new title is appended."""
+    from gaussim.bench.scenes import write_section
+
+    path = tmp_path / "benchmarks.md"
+    path.write_text("# Doc\n\n## A\n\nold table\n\n### Notes\n\nwhy A is slow\n\n## B\n\nb text\n")
+    write_section(path, "A", "new table")
+    assert path.read_text() == (
+        "# Doc\n\n## A\n\nnew table\n\n### Notes\n\nwhy A is slow\n\n## B\n\nb text\n"
+    )
+    write_section(path, "B", "b again")
+    write_section(path, "C", "c text")
+    assert path.read_text().endswith("why A is slow\n\n## B\n\nb again\n\n## C\n\nc text\n")
+
+
 def test_matched_accuracy_on_motion_picks_the_cheapest_setting_that_meets_each_tolerance():
     """The rolling ball against its closed form: gaussim's error falls with dt (first order) and the
     table names, per tolerance, the cheapest run that meets it."""

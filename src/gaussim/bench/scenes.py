@@ -593,7 +593,8 @@ KKT residual its largest (of the steps' certificates)."""
 
 def write_section(path: Path, title: str, text: str) -> None:
     """Put ``text`` under the heading ``## title`` of the markdown file ``path``, replacing that
-    section (up to the next ``## `` heading) when there is one, else appending it."""
+    section (up to the next ``## `` heading) when there is one, else appending it. The replaced
+    section's ``### `` subsections are hand-written notes on its table: they are kept, after ``text``."""
     from ..files import atomic_path
 
     old = path.read_text() if path.exists() else ""
@@ -601,8 +602,11 @@ def write_section(path: Path, title: str, text: str) -> None:
     section = f"{heading}\n{text.strip()}\n"
     if heading in old:
         before, after = old.split(heading, 1)
-        rest = after.split("\n## ", 1)
-        new = before + section + ("\n## " + rest[1] if len(rest) > 1 else "")
+        body, *rest = after.split("\n## ", 1)
+        notes = body.split("\n### ", 1)
+        if len(notes) > 1:
+            section += "\n### " + notes[1].rstrip("\n") + "\n"
+        new = before + section + ("\n## " + rest[0] if rest else "")
     else:
         new = old.rstrip("\n") + ("\n\n" if old else "") + section
     with atomic_path(path) as tmp:
