@@ -34,25 +34,27 @@ from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
 import numpy as np
-import pinocchio as pin
 
 import gaussim
 from gaussim.bench.provenance import made, python_loop
-from gaussim.collision import ContactDetector
 from gaussim.exceptions import GaussimError, GaussimWarning
 from gaussim.robot import example_robot_names
-from gaussim.scenefile import place_on_ground
+from gaussim.scenefile import (
+    HOLD_KD_PER_KG,
+    HOLD_KP_PER_KG,
+    ROBOT_CLEARANCE,
+    ground_below,
+    place_on_ground,
+    start_configuration,
+)
 
 PASSES = ("hold", "zero")
 OUTCOMES = ("ok", "refused", "failed", "exploded", "crash", "timeout")
 DT = 1e-3
-CLEARANCE = 0.01  # [m]
 # A state this far gone is an explosion: no robot of the corpora moves at 1 km/s or leaves 100 m.
 MAX_SPEED, MAX_DISTANCE = 1e3, 100.0
 # The issue's target on the spread of a run's step times: its p90 within this many times its median.
 P90_SPREAD = 3.0
-# PD hold gains per kilogram of robot [N m / rad / kg], [N m s / rad / kg]
-KP_PER_KG, KD_PER_KG = 20.0, 0.5
 
 
 @dataclass
@@ -92,31 +94,17 @@ def corpus(random_urdfs: int) -> list[tuple[str, str, str]]:
     return entries
 
 
-def initial(robot: gaussim.Robot) -> np.ndarray:
-    """The robot's ``standing`` (or other first named) configuration, else its neutral one."""
-    named = robot.reference_configurations
-    for key in ("standing", "half_sitting", *named):
-        if key in named:
-            return robot.configuration(key)
-    return robot.neutral()
-
-
 def scene_and_start(robot: gaussim.Robot) -> tuple[gaussim.Scene, np.ndarray]:
-    """The robot above a ground (every geometry against it, limits on) and its start."""
-    ground = gaussim.Ground()
-    scene = gaussim.Scene(robot, ground=ground, joint_limits=True)
-    # the start as reset leaves it (clamped into the limits), before it is placed
+    """The robot above a ground (every geometry against it, limits on) and its start: as
+    ``gaussim run ROBOT`` makes them (:func:`gaussim.scenefile.robot_scene_text`), from the start
+    clamped into the limits as reset leaves it."""
+    scene = gaussim.Scene(robot, ground=gaussim.Ground(), joint_limits=True)
     probe = gaussim.Simulator(scene, gaussim.Options(start_penetration=1e9))
-    q = probe.reset(initial(robot)).q
-    if robot.floating:  # twice: the first distance, from afar, is coal's estimate for some meshes
-        return scene, place_on_ground(scene, place_on_ground(scene, q, CLEARANCE), CLEARANCE)
-    data = robot.model.createData()
-    pin.forwardKinematics(robot.model, data, q)
-    height = 0.0
-    for _ in range(3):  # a mesh deep in the ground has its depth estimated: again from nearer
-        height += float(ContactDetector(scene, margin=1e3).detect(data).gap.min()) - CLEARANCE
-        scene = gaussim.Scene(robot, ground=gaussim.Ground(height=height), joint_limits=True)
-    return scene, q
+    q = probe.reset(robot.configuration(start_configuration(robot))).q
+    if robot.floating:
+        return scene, place_on_ground(scene, q, ROBOT_CLEARANCE)
+    ground = gaussim.Ground(height=ground_below(robot, q, ROBOT_CLEARANCE))
+    return gaussim.Scene(robot, ground=ground, joint_limits=True), q
 
 
 def simulate(robot: gaussim.Robot, run: str, duration: float, row: Row) -> None:
@@ -128,7 +116,7 @@ def simulate(robot: gaussim.Robot, run: str, duration: float, row: Row) -> None:
     actuated = slice(6, model.nv) if robot.floating else slice(0, model.nv)
     hold = run == "hold" and model.nv > (6 if robot.floating else 0)
     gain = max(robot.mass, 1.0)
-    pd = gaussim.control.PDHold(model, q0, KP_PER_KG * gain, KD_PER_KG * gain, actuated, DT)
+    pd = gaussim.control.PDHold(model, q0, HOLD_KP_PER_KG * gain, HOLD_KD_PER_KG * gain, actuated, DT)
     times, penetration, kkt = [], 0.0, 0.0
     for _ in range(round(duration / DT)):
         command = pd(state) if hold else gaussim.control.Command(None)

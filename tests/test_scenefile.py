@@ -352,3 +352,70 @@ def test_a_bare_name_reads_the_shipped_scene(tmp_path, monkeypatch):
     listed = r"solo12_walk: file: cannot read it: .*shipped scenes: .*solo12_standing"
     with pytest.raises(SceneFileError, match=listed):
         load_scene("solo12_walk")
+
+
+DATA = Path(__file__).parent / "data"
+
+
+def _lowest_gap(spec):
+    """The least gap to the ground at the scene's start (the first step detects from it)."""
+    sim = gaussim.Simulator(spec.scene, spec.options.replace(contact_margin=10.0))
+    sim.step(sim.reset(spec.initial.q))
+    return min(c.gap for c in sim.last_step.contacts)
+
+
+def test_a_robot_given_for_a_scene_runs_held_on_the_ground(tmp_path, monkeypatch):
+    """``gaussim run ROBOT``: a robot's name or its URDF, MJCF or SDF file loads as the scene of that robot
+    alone: its first named configuration, 1 cm above the ground (a fixed base: the ground 1 cm below its
+    lowest geometry), every collision geometry against it, limits on, held by a PD posture hold."""
+    monkeypatch.chdir(tmp_path)
+    solo = load_scene("solo12")  # a name: floating, from its standing configuration
+    standing = solo.robot.configuration("standing")
+    assert solo.robot.floating and solo.scene.joint_limits
+    assert np.array_equal(solo.initial.q[3:], standing[3:]) and _lowest_gap(solo) == pytest.approx(
+        0.01, abs=1e-9
+    )
+    assert len(solo.scene.pairs) == len(solo.robot.collision_model.geometryObjects)
+    solo.duration = 0.5
+    log = gaussim.run(solo)
+    joints = log.q[:, 7:]
+    # held: the legs keep their posture under the robot's weight, the base rests above the ground
+    assert np.abs(joints - standing[7:]).max() < 0.05 and log.q[-1, 2] > 0.8 * solo.initial.q[2]
+    for path, key in (
+        (ROBOTS_DIR / "pendulum.urdf", "urdf"),
+        (DATA / "hopper.xml", "mjcf"),
+        (DATA / "walker.sdf", "sdf"),
+    ):
+        spec = load_scene(path)
+        assert f'{key} = "{path.resolve()}"' in spec.text
+        assert _lowest_gap(spec) == pytest.approx(0.01, abs=1e-6), path.name
+        spec.duration = 0.05
+        assert gaussim.run(spec).complete
+
+
+def test_a_robot_without_collision_geometry_runs_without_a_ground(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    with pytest.warns(gaussim.GaussimWarning, match="no collision geometry"):
+        spec = load_scene("asr_twodof")
+    assert not spec.scene.obstacles and "[ground]" not in spec.text
+    spec.duration = 0.05
+    assert gaussim.run(spec).complete
+
+
+def test_gaussim_run_robot_writes_its_scene_to_edit(tmp_path, monkeypatch, capsys):
+    """The CLI writes the scene it made beside the run log; running that file runs the same; a file of
+    that name the user changed is left alone."""
+    from gaussim.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    urdf = str(ROBOTS_DIR / "double_pendulum.urdf")
+    assert main(["run", urdf, "--duration", "0.05", "--quiet"]) == 0
+    written = tmp_path / "out" / "double_pendulum.toml"
+    assert f"written to {Path('out') / 'double_pendulum.toml'}" in capsys.readouterr().err
+    assert written.read_text() == load_scene(urdf).text
+    assert main(["run", str(written), "--duration", "0.05", "--quiet", "--out", "again.runlog"]) == 0
+    first, again = gaussim.RunLog.load("out/double_pendulum.runlog"), gaussim.RunLog.load("again.runlog")
+    assert np.array_equal(first.q, again.q)
+    written.write_text(written.read_text().replace("kp = ", "kp = 1"))
+    assert main(["run", urdf, "--duration", "0.05", "--quiet"]) == 0
+    assert "is left as it is" in capsys.readouterr().err and "kp = 1" in written.read_text()

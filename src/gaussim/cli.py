@@ -61,7 +61,8 @@ def main(argv: list[str] | None = None) -> int:
     run.add_argument(
         "scene",
         type=Path,
-        help="scene file (TOML), or the name of a shipped one (robots/scenes: solo12_standing, ...)",
+        help="scene file (TOML), or the name of a shipped one (robots/scenes: solo12_standing, ...); or a "
+        "robot (a URDF, MJCF or SDF file, or a name such as solo12), run in a scene of its own",
     )
     run.add_argument(
         "--out",
@@ -110,7 +111,7 @@ def main(argv: list[str] | None = None) -> int:
     )
 
     inspect = commands.add_parser("inspect", help="describe a scene's robot, constraints and QP size")
-    inspect.add_argument("scene", type=Path, help="scene file (TOML)")
+    inspect.add_argument("scene", type=Path, help="scene file (TOML), or a robot (see gaussim run)")
 
     forces = commands.add_parser("forces", help="export the per-contact force time series of a run log")
     forces.add_argument("log", type=Path, help="run log directory (written by gaussim run)")
@@ -156,7 +157,7 @@ def main(argv: list[str] | None = None) -> int:
         "and summary kept in OUT, the summaries gathered in OUT/results.parquet. Started again, it skips "
         "the runs OUT holds. See docs/sweeps.md.",
     )
-    sweep.add_argument("scene", type=Path, help="a scene file (TOML)")
+    sweep.add_argument("scene", type=Path, help="a scene file (TOML), or a robot (see gaussim run)")
     sweep.add_argument(
         "--vary",
         action="append",
@@ -450,7 +451,7 @@ def _run(args: argparse.Namespace) -> int:
         compile_notice,
         run,
     )
-    from .scenefile import load_scene
+    from .scenefile import load_scene, names_robot
 
     if args.plot:
         from .plots import plot_path
@@ -464,6 +465,9 @@ def _run(args: argparse.Namespace) -> int:
             raise InvalidOptions("--duration", f"must be a finite number > 0, got {args.duration}")
         spec.duration = args.duration
     out = args.out or Path("out") / f"{args.scene.stem}.runlog"
+    if names_robot(args.scene):
+        told = _robot_scene_file(spec.text, out.with_suffix(".toml"))
+        _say(f"gaussim: {args.scene} is a robot, not a scene file: {told}", sys.stderr)
     started = time.time()
     checkpoint_steps = CHECKPOINT_STEPS if args.checkpoint_steps is None else args.checkpoint_steps
     if checkpoint_steps < 1:
@@ -529,6 +533,18 @@ def _run(args: argparse.Namespace) -> int:
             else:
                 _serve(f"the run's replay is at {viewer.url}")
     return EXIT_OK
+
+
+def _robot_scene_file(text: str, path: Path) -> str:
+    """Write the scene of a robot run by itself (``text``) to ``path``, unless a different file is
+    there (a user's edit of the last one); returns what the run tells of it."""
+    said = "it runs in the scene gaussim writes for it (its first lines say what it holds)"
+    if path.is_file() and path.read_text() != text:
+        return f"{said}; {path}, which differs from it, is left as it is (run that file to use it)"
+    check_writable(path, "scene")
+    with atomic_path(path) as tmp:
+        tmp.write_text(text)
+    return f"{said}, written to {path}: edit it and run that file"
 
 
 def _arrow_option(parser: argparse.ArgumentParser) -> None:

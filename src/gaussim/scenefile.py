@@ -1,7 +1,7 @@
 """Scene files: a TOML description of what to simulate, validated with errors that name the key.
 
 One robot:
-    [robot]        name = "solo12" | urdf = "path.urdf", package_dirs = [...], floating_base = bool
+    [robot]        name = "solo12" | urdf | mjcf | sdf = "path", package_dirs = [...], floating_base = bool
     [initial]      configuration = "standing" | q = [...];  v = [...];  ground_clearance = 0.01
     [control]      type = "zero" | "constant" (tau = [...]) | "pd" (target = name | [...], kp, kd)
 or several bodies, one table each (in place of [robot], [initial] and [control]):
@@ -24,13 +24,17 @@ then:
     [simulation]   duration = 2.0
     [options]      any field of gaussim.Options (dt, scheme, friction_mode, ...)
 
-Relative paths are taken from the scene file's folder. Unknown keys are errors.
+Relative paths are taken from the scene file's folder. Unknown keys are errors. A robot in place of a
+scene file (a URDF, MJCF or SDF path, or a robot's name) runs in the scene :func:`robot_scene_text`
+writes for it.
 """
 
 from __future__ import annotations
 
+import json
 import re
 import tomllib
+import warnings
 from dataclasses import dataclass, fields
 from functools import partial
 from pathlib import Path
@@ -42,13 +46,13 @@ import pinocchio as pin
 from .control import Command, Controller, PDHold, command, constant_torque, zero_torque
 from .exceptions import GaussimError, InvalidOptions, InvalidRobot, shown
 from .options import Options, is_real
-from .robot import ROBOTS_DIR, Robot, load_robot
+from .robot import ROBOTS_DIR, SUFFIXES, Robot, example_robot_names, load_robot
 from .scene import Anchor, Box, Ground, LoopClosure, Scene, Sphere
 from .state import BodyState, State
 from .world import SHAPES, Body, FreeBody, Material, World, pose
 
 SECTIONS = {
-    "robot": {"name", "urdf", "package_dirs", "floating_base"},
+    "robot": {"name", "urdf", "mjcf", "sdf", "package_dirs", "floating_base"},
     "bodies": {
         "name",
         "robot",
@@ -106,6 +110,23 @@ SHAPE_KEYS = ("size", "radius", "length", "path", "scale", "mass", "density")
 MAX_TORQUE = 1e6
 # where a field a Scene names (its constructor's argument) sits in a scene file
 SCENE_FIELDS = {"contacts": "contacts.pairs", "self_contact": "contacts"}
+# The scene of a robot run by itself: it starts this high above the ground [m] from its first named
+# configuration of these (else its first, else neutral), held there by a PD posture hold of gains per
+# kilogram of robot (at least 1 kg) [N m/rad], [N m s/rad], for this long [s].
+ROBOT_CLEARANCE = 0.01
+START_CONFIGURATIONS = ("standing", "half_sitting")
+HOLD_KP_PER_KG, HOLD_KD_PER_KG = 20.0, 0.5
+ROBOT_DURATION = 2.0
+# A body is placed at its clearance above the ground again from nearer, up to this many times, until
+# within this [m] of it.
+PLACEMENTS, PLACED = 3, 1e-9
+
+
+def start_configuration(robot: Robot) -> str:
+    """The configuration a robot run by itself starts from: its first named one of
+    START_CONFIGURATIONS, else its first, else neutral."""
+    named = robot.reference_configurations
+    return next((n for n in (*START_CONFIGURATIONS, *named) if n in named), "neutral")
 
 
 class SceneFileError(InvalidOptions):
@@ -162,13 +183,19 @@ def load_scene(path: str | Path, **overrides: Any) -> SceneSpec:
         SceneFileError: unreadable TOML, unknown key, wrong type or value (names file and key).
         GaussimError: an unknown robot, frame or geometry (the message lists the valid names).
     """
-    path = shipped_scene(Path(path))
+    path = Path(path)
+    if names_robot(path):
+        return load_scene_text(robot_scene_text(str(path)), path, **overrides)
+    path = shipped_scene(path)
     try:
         raw = path.read_bytes()
     except OSError as err:
         names = ", ".join(sorted(p.stem for p in (ROBOTS_DIR / "scenes").glob("*.toml")))
         raise SceneFileError(
-            path, "file", f"cannot read it: {err.strerror} (shipped scenes: {names})"
+            path,
+            "file",
+            f"cannot read it: {err.strerror} (shipped scenes: {names}; or a robot: a URDF, MJCF or SDF "
+            "file, or a robot's name such as solo12)",
         ) from err
     try:
         text = raw.decode("utf-8")
@@ -186,6 +213,85 @@ def shipped_scene(path: Path) -> Path:
         return path
     shipped = ROBOTS_DIR / "scenes" / path.with_suffix(".toml").name
     return shipped if shipped.is_file() else path
+
+
+def names_robot(path: Path) -> bool:
+    """Whether a scene argument names a robot rather than a scene file: a URDF, MJCF or SDF file (told
+    by its suffix), or a robot's name (of robots/ or example-robot-data) that is no shipped scene."""
+    if path.suffix in SUFFIXES:
+        return True
+    if path.exists() or path.parent != Path() or shipped_scene(path) != path:
+        return False
+    return (ROBOTS_DIR / f"{path}.urdf").is_file() or str(path) in example_robot_names()
+
+
+def robot_scene_text(source: str) -> str:
+    """The scene file of a robot run by itself (``gaussim run ROBOT``): the robot ``source`` (a URDF,
+    MJCF or SDF path, or a robot's name, as :func:`~gaussim.robot.load_robot` takes them) on a ground,
+    every collision geometry against it, joint limits on, from :func:`start_configuration`
+    ROBOT_CLEARANCE above the ground (a fixed-base
+    robot: the ground that far below its lowest geometry), held there by a PD posture hold, for
+    ROBOT_DURATION. A robot without collision geometry gets no ground (it would fall through it)."""
+    with warnings.catch_warnings():  # the scene's own load of the robot gives them
+        warnings.simplefilter("ignore")
+        robot = load_robot(source)
+    path = Path(source)
+    if path.suffix in SUFFIXES:
+        key, value = {".urdf": "urdf", ".sdf": "sdf"}.get(path.suffix, "mjcf"), str(path.resolve())
+    else:
+        key, value = "name", source
+    start = start_configuration(robot)
+    touches = bool(robot.collision_model.ngeoms)
+    base = "floating" if robot.floating else "fixed (floating_base = true drops it)"
+    lines = [
+        f"# {robot.name} run by itself (gaussim run {source}), its base {base}: "
+        + (
+            "on the ground, every collision geometry\n# against it"
+            if touches
+            else "no collision geometry, no\n# ground"
+        )
+        + f", joint limits on, a PD hold of its {start} configuration. Edit it and run it as a scene file.",
+        "[robot]",
+        f"{key} = {json.dumps(value)}",
+        "",
+        "[initial]",
+        f"configuration = {json.dumps(start)}",
+    ]
+    if touches and robot.floating:
+        lines += [f"ground_clearance = {ROBOT_CLEARANCE}", "", "[ground]"]
+    elif touches:
+        height = ground_below(robot, robot.configuration(start), ROBOT_CLEARANCE)
+        lines += ["", "[ground]", f"height = {height:.6g}"]
+    lines += ["", "[limits]", "enabled = true"]
+    if robot.model.nv > (6 if robot.floating else 0):
+        gain = max(robot.mass, 1.0)
+        lines += [
+            "",
+            "[control]",
+            'type = "pd"',
+            f"target = {json.dumps(start)}",
+            f"kp = {HOLD_KP_PER_KG * gain:.4g}",
+            f"kd = {HOLD_KD_PER_KG * gain:.4g}",
+        ]
+    lines += ["", "[simulation]", f"duration = {ROBOT_DURATION}", "", "[options]", "dt = 1e-3"]
+    return "\n".join(lines) + "\n"
+
+
+def ground_below(robot: Robot, q: np.ndarray, clearance: float) -> float:
+    """The height [m] of a ground ``clearance`` below the lowest collision geometry of the fixed-base
+    ``robot`` at ``q``."""
+    from .collision import ContactDetector
+
+    data = robot.model.createData()
+    pin.forwardKinematics(robot.model, data, q)
+    height = 0.0
+    for _ in range(PLACEMENTS):  # as place_on_ground's
+        detector = ContactDetector(Scene(robot, ground=Ground(height=height)), margin=1e3)
+        error = float(detector.detect(data).gap.min()) - clearance
+        height += error
+        if abs(error) <= PLACED:
+            break
+    return height
 
 
 def load_scene_text(text: str, path: str | Path, **overrides: Any) -> SceneSpec:
@@ -334,15 +440,20 @@ class _Reader:
 
     def robot(self) -> Robot:
         section = self.table("robot")
-        if ("name" in section) == ("urdf" in section):
-            self.fail("robot", "give exactly one of name (example-robot-data or robots/) or urdf (a path)")
+        given = [key for key in ("name", "urdf", "mjcf", "sdf") if key in section]
+        if len(given) != 1:
+            self.fail(
+                "robot",
+                "give exactly one of name (example-robot-data or robots/), urdf, mjcf or sdf (a path)",
+            )
+        key = f"robot.{given[0]}"
         floating = section.get("floating_base")
         if floating is not None:
             self.boolean("robot.floating_base", floating)
         dirs = self.folders("robot.package_dirs", section.get("package_dirs", []))
-        if "urdf" in section:
-            return self.load("robot.urdf", self.file("robot.urdf", section["urdf"]), dirs, floating)
-        return self.load("robot.name", self.string("robot.name", section["name"]), dirs, floating)
+        if given[0] != "name":
+            return self.load(key, self.file(key, section[given[0]]), dirs, floating)
+        return self.load(key, self.string(key, section["name"]), dirs, floating)
 
     def folders(self, key: str, dirs: Any) -> list[str]:
         if not (isinstance(dirs, list) and all(isinstance(d, str) for d in dirs)):
@@ -659,15 +770,20 @@ def place_on_ground(scene: Scene, q: np.ndarray, clearance: float, body: str | N
         raise InvalidOptions("ground_clearance", "needs a [ground]")
     robot = scene.robot
     data = robot.model.createData()
-    pin.forwardKinematics(robot.model, data, q)
-    contacts = ContactDetector(scene, margin=1e3).detect(data)
-    gaps = [
-        gap
-        for gap, geometry, obstacle in zip(contacts.gap, contacts.geometry, contacts.obstacle)
-        if obstacle == grounds[0].name and scene.world.body_of(geometry) == layout.name
-    ]
-    if not gaps:
-        raise InvalidOptions("ground_clearance", "no declared contact pair involves the ground")
     q = q.copy()
-    q[layout.q.start : layout.q.start + 3] += (clearance - min(gaps)) * np.asarray(grounds[0].normal)
+    for _ in range(
+        PLACEMENTS
+    ):  # coal estimates a mesh's distance from afar, and its depth deep in the ground
+        pin.forwardKinematics(robot.model, data, q)
+        contacts = ContactDetector(scene, margin=1e3).detect(data)
+        gaps = [
+            gap
+            for gap, geometry, obstacle in zip(contacts.gap, contacts.geometry, contacts.obstacle)
+            if obstacle == grounds[0].name and scene.world.body_of(geometry) == layout.name
+        ]
+        if not gaps:
+            raise InvalidOptions("ground_clearance", "no declared contact pair involves the ground")
+        q[layout.q.start : layout.q.start + 3] += (clearance - min(gaps)) * np.asarray(grounds[0].normal)
+        if abs(clearance - min(gaps)) <= PLACED:
+            break
     return q
