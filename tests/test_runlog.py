@@ -403,3 +403,14 @@ def test_inspect_lists_the_bodies_and_their_pairs(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "  arm: robot pendulum; q[26:27], v[24:25]; fixed base at (2, 0, 0) m, 1 actuated" in out
     assert "    solo - crate: 17: solo/base_link_0/crate/box, " in out and ", ... (11 more)\n" in out
+
+
+def test_cli_tells_gaussims_warnings_as_its_own_lines(tmp_path):
+    """The command prints a GaussimWarning as ``gaussim: warning: ...``, not as Python shows it (the
+    gaussim source file and line that raised it)."""
+    scene = tmp_path / "outside.toml"
+    scene.write_text('[robot]\nname = "pendulum"\n[initial]\nq = [1.0]\n[limits]\nenabled = true\n')
+    result = _cli("run", str(scene), "--duration", "0.01", "--quiet", "--out", str(tmp_path / "run.runlog"))
+    assert result.returncode == 0, result.stderr
+    assert "gaussim: warning: the initial configuration has joints outside their limits" in result.stderr
+    assert "GaussimWarning" not in result.stderr and ".py:" not in result.stderr

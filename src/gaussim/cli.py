@@ -13,10 +13,19 @@ import re
 import signal
 import sys
 import time
+import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
-from .exceptions import ContactError, GaussimError, InvalidOptions, InvalidRobot, InvalidState, SolverError
+from .exceptions import (
+    ContactError,
+    GaussimError,
+    GaussimWarning,
+    InvalidOptions,
+    InvalidRobot,
+    InvalidState,
+    SolverError,
+)
 from .files import atomic_path, check_writable
 from .options import FRICTION_MODES, SCHEMES
 from .stops import STOP_SIGNALS
@@ -197,6 +206,8 @@ def main(argv: list[str] | None = None) -> int:
     sweep.add_argument("--quiet", action="store_true", help="no progress lines")
 
     args = parser.parse_args(argv)
+    if argv is None:  # the command: gaussim's warnings told as its errors are (a caller's stay as they are)
+        warnings.showwarning = _show_warning
     saved = {s: signal.getsignal(s) for s in STOP_SIGNALS}
     for stop in (signal.SIGTERM, signal.SIGHUP):  # stop as a Ctrl-C does: the viewers' servers stopped
         if signal.getsignal(stop) == signal.SIG_DFL:
@@ -231,6 +242,18 @@ def main(argv: list[str] | None = None) -> int:
         if argv is not None:  # called in-process (not as the command): its caller's handling as it was
             for s, handling in saved.items():
                 signal.signal(s, handling)
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None):  # type: ignore[no-untyped-def]
+    """``warnings.showwarning`` of the command: a GaussimWarning as ``gaussim: warning: ...`` (its
+    message names the file, body or joint; where in gaussim it was raised is no help to a user)."""
+    if issubclass(category, GaussimWarning):
+        _say(f"gaussim: warning: {message}", sys.stderr if file is None else file)
+    else:
+        _SHOW_WARNING(message, category, filename, lineno, file, line)
+
+
+_SHOW_WARNING = warnings.showwarning
 
 
 def _ignore_stops() -> None:
