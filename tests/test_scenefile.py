@@ -419,3 +419,22 @@ def test_gaussim_run_robot_writes_its_scene_to_edit(tmp_path, monkeypatch, capsy
     written.write_text(written.read_text().replace("kp = ", "kp = 1"))
     assert main(["run", urdf, "--duration", "0.05", "--quiet"]) == 0
     assert "is left as it is" in capsys.readouterr().err and "kp = 1" in written.read_text()
+
+
+def test_a_robot_whose_named_start_is_outside_its_limits_starts_clamped_and_placed(tmp_path, monkeypatch):
+    """kinova's arm_up has a joint 1.9 rad outside its limits: its scene starts (and holds) it clamped
+    into them, with the ground placed 1 cm below that configuration, not the named one."""
+    import warnings
+
+    monkeypatch.chdir(tmp_path)
+    spec = load_scene("kinova")
+    model = spec.robot.model
+    assert "clamped into the joint limits: 'j2s6s200_joint_3' at -1.571" in spec.text
+    assert np.all(spec.initial.q >= model.lowerPositionLimit) and np.all(
+        spec.initial.q <= model.upperPositionLimit
+    )
+    assert _lowest_gap(spec) == pytest.approx(0.01, abs=1e-6)
+    spec.duration = 0.05
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", gaussim.GaussimWarning)  # no start clamped by the run
+        assert gaussim.run(spec).complete

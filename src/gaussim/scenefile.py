@@ -228,10 +228,12 @@ def names_robot(path: Path) -> bool:
 def robot_scene_text(source: str) -> str:
     """The scene file of a robot run by itself (``gaussim run ROBOT``): the robot ``source`` (a URDF,
     MJCF or SDF path, or a robot's name, as :func:`~gaussim.robot.load_robot` takes them) on a ground,
-    every collision geometry against it, joint limits on, from :func:`start_configuration`
-    ROBOT_CLEARANCE above the ground (a fixed-base
-    robot: the ground that far below its lowest geometry), held there by a PD posture hold, for
-    ROBOT_DURATION. A robot without collision geometry gets no ground (it would fall through it)."""
+    every collision geometry against it, joint limits on, from :func:`start_configuration` (clamped
+    into the limits) ROBOT_CLEARANCE above the ground (a fixed-base robot: the ground that far below
+    its lowest geometry), held there by a PD posture hold, for ROBOT_DURATION. A robot without
+    collision geometry gets no ground (it would fall through it)."""
+    from .simulator import within_limits
+
     with warnings.catch_warnings():  # the scene's own load of the robot gives them
         warnings.simplefilter("ignore")
         robot = load_robot(source)
@@ -241,6 +243,9 @@ def robot_scene_text(source: str) -> str:
     else:
         key, value = "name", source
     start = start_configuration(robot)
+    q, outside = within_limits(robot.model, robot.configuration(start))
+    # the named configuration, or the one clamped into the limits as numbers
+    posture = json.dumps(start) if not outside else json.dumps(q.tolist())
     touches = bool(robot.collision_model.ngeoms)
     base = "floating" if robot.floating else "fixed (floating_base = true drops it)"
     lines = [
@@ -251,16 +256,17 @@ def robot_scene_text(source: str) -> str:
             else "no collision geometry, no\n# ground"
         )
         + f", joint limits on, a PD hold of its {start} configuration. Edit it and run it as a scene file.",
+        *([f"# Its {start} configuration clamped into the joint limits: {outside}."] if outside else []),
         "[robot]",
         f"{key} = {json.dumps(value)}",
         "",
         "[initial]",
-        f"configuration = {json.dumps(start)}",
+        f"{'q' if outside else 'configuration'} = {posture}",
     ]
     if touches and robot.floating:
         lines += [f"ground_clearance = {ROBOT_CLEARANCE}", "", "[ground]"]
     elif touches:
-        height = ground_below(robot, robot.configuration(start), ROBOT_CLEARANCE)
+        height = ground_below(robot, q, ROBOT_CLEARANCE)
         lines += ["", "[ground]", f"height = {height:.6g}"]
     lines += ["", "[limits]", "enabled = true"]
     if robot.model.nv > (6 if robot.floating else 0):
@@ -269,7 +275,7 @@ def robot_scene_text(source: str) -> str:
             "",
             "[control]",
             'type = "pd"',
-            f"target = {json.dumps(start)}",
+            f"target = {posture}",
             f"kp = {HOLD_KP_PER_KG * gain:.4g}",
             f"kd = {HOLD_KD_PER_KG * gain:.4g}",
         ]

@@ -141,23 +141,14 @@ class Simulator:
         joint (the limit rows would snap it back in one step, at any speed)."""
         if not self.scene.joint_limits:
             return state
-        model = self.model
-        one = [model.joints[j].idx_q for j in range(1, model.njoints) if model.joints[j].nq == 1]
-        q, lower, upper = state.q[one], model.lowerPositionLimit[one], model.upperPositionLimit[one]
-        outside = [k for k in range(len(one)) if not lower[k] <= q[k] <= upper[k]]
-        if not outside:
+        clamped, listed = within_limits(self.model, state.q)
+        if not listed:
             return state
-        names = [model.names[j] for j in range(1, model.njoints) if model.joints[j].nq == 1]
-        listed = ", ".join(
-            f"'{names[k]}' at {q[k]:.4g} (limits {lower[k]:.4g}, {upper[k]:.4g})" for k in outside
-        )
         warnings.warn(
             f"the initial configuration has joints outside their limits, clamped into them: {listed}",
             GaussimWarning,
             stacklevel=3,
         )
-        clamped = state.q.copy()
-        clamped[one] = np.clip(q, lower, upper)
         return State(state.t, clamped, state.v, self.world)
 
     def _check_overlap(self, state: State) -> None:
@@ -325,3 +316,18 @@ def _unit_parts(model: pin.Model) -> list[tuple[slice, str]]:
                 )
             start += kind.nq
     return parts
+
+
+def within_limits(model: pin.Model, q: np.ndarray) -> tuple[np.ndarray, str]:
+    """``q`` with its one-coordinate joints clamped into their position limits, and the joints it
+    moved, listed with their values and limits ("" when none)."""
+    one = [j for j in range(1, model.njoints) if model.joints[j].nq == 1]
+    at = [model.joints[j].idx_q for j in one]
+    lower, upper = model.lowerPositionLimit[at], model.upperPositionLimit[at]
+    outside = [k for k in range(len(at)) if not lower[k] <= q[at[k]] <= upper[k]]
+    clamped = q.copy()
+    clamped[at] = np.clip(q[at], lower, upper)
+    listed = ", ".join(
+        f"'{model.names[one[k]]}' at {q[at[k]]:.4g} (limits {lower[k]:.4g}, {upper[k]:.4g})" for k in outside
+    )
+    return clamped, listed
