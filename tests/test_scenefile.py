@@ -438,3 +438,20 @@ def test_a_robot_whose_named_start_is_outside_its_limits_starts_clamped_and_plac
     with warnings.catch_warnings():
         warnings.simplefilter("error", gaussim.GaussimWarning)  # no start clamped by the run
         assert gaussim.run(spec).complete
+
+
+def test_a_file_of_one_rigid_body_floats_and_comes_to_rest_on_the_ground(tmp_path, monkeypatch):
+    """robots/box.urdf (no joint: fixed, nothing would move) runs floating, as PyBullet loads such a file:
+    dropped from 1 cm it rests on its 0.1 m side, its centre at 0.05 m; a file that fails for another
+    reason keeps its own error."""
+    monkeypatch.chdir(tmp_path)
+    spec = load_scene("box")
+    assert spec.robot.floating and spec.robot.model.nv == 6 and "floating_base = true" in spec.text
+    assert "[control]" not in spec.text and _lowest_gap(spec) == pytest.approx(0.01, abs=1e-9)
+    spec.duration = 0.5
+    log = gaussim.run(spec)
+    assert log.q[-1, 2] == pytest.approx(0.05, abs=1e-4) and np.abs(log.v[-1]).max() < 1e-3
+    broken = tmp_path / "broken.urdf"
+    broken.write_text("<robot name='b'><link name='a'>")
+    with pytest.raises(gaussim.InvalidRobot, match="not well-formed XML"):
+        load_scene(broken)

@@ -231,12 +231,12 @@ def robot_scene_text(source: str) -> str:
     every collision geometry against it, joint limits on, from :func:`start_configuration` (clamped
     into the limits) ROBOT_CLEARANCE above the ground (a fixed-base robot: the ground that far below
     its lowest geometry), held there by a PD posture hold, for ROBOT_DURATION. A robot without
-    collision geometry gets no ground (it would fall through it)."""
+    collision geometry gets no ground (it would fall through it); a file of one rigid body floats."""
     from .simulator import within_limits
 
     with warnings.catch_warnings():  # the scene's own load of the robot gives them
         warnings.simplefilter("ignore")
-        robot = load_robot(source)
+        robot, floated = _robot_of(source)
     path = Path(source)
     if path.suffix in SUFFIXES:
         key, value = {".urdf": "urdf", ".sdf": "sdf"}.get(path.suffix, "mjcf"), str(path.resolve())
@@ -247,6 +247,7 @@ def robot_scene_text(source: str) -> str:
     # the named configuration, or the one clamped into the limits as numbers
     posture = json.dumps(start) if not outside else json.dumps(q.tolist())
     touches = bool(robot.collision_model.ngeoms)
+    actuated = robot.model.nv > (6 if robot.floating else 0)
     base = "floating" if robot.floating else "fixed (floating_base = true drops it)"
     lines = [
         f"# {robot.name} run by itself (gaussim run {source}), its base {base}: "
@@ -255,10 +256,12 @@ def robot_scene_text(source: str) -> str:
             if touches
             else "no collision geometry, no\n# ground"
         )
-        + f", joint limits on, a PD hold of its {start} configuration. Edit it and run it as a scene file.",
+        + (f", joint limits on, a PD hold of its {start} configuration" if actuated else ", no joint")
+        + ". Edit it and run it as a scene file.",
         *([f"# Its {start} configuration clamped into the joint limits: {outside}."] if outside else []),
         "[robot]",
         f"{key} = {json.dumps(value)}",
+        *(["floating_base = true  # a lone rigid body moves only with a floating base"] if floated else []),
         "",
         "[initial]",
         f"{'q' if outside else 'configuration'} = {posture}",
@@ -269,7 +272,7 @@ def robot_scene_text(source: str) -> str:
         height = ground_below(robot, q, ROBOT_CLEARANCE)
         lines += ["", "[ground]", f"height = {height:.6g}"]
     lines += ["", "[limits]", "enabled = true"]
-    if robot.model.nv > (6 if robot.floating else 0):
+    if actuated:
         gain = max(robot.mass, 1.0)
         lines += [
             "",
@@ -281,6 +284,21 @@ def robot_scene_text(source: str) -> str:
         ]
     lines += ["", "[simulation]", f"duration = {ROBOT_DURATION}", "", "[options]", "dt = 1e-3"]
     return "\n".join(lines) + "\n"
+
+
+def _robot_of(source: str) -> tuple[Robot, bool]:
+    """The robot ``source`` names, as its file or name says, and False; or, for a file of one rigid
+    body (no joint: nothing would move), that body floating, and True (PyBullet's default)."""
+    try:
+        return load_robot(source), False
+    except InvalidRobot as err:
+        try:
+            robot = load_robot(source, floating_base=True)
+        except GaussimError:
+            raise err from None
+        if robot.model.nv != 6:  # more than one body: the first error stands
+            raise err from None
+        return robot, True
 
 
 def ground_below(robot: Robot, q: np.ndarray, clearance: float) -> float:
