@@ -455,3 +455,16 @@ def test_a_file_of_one_rigid_body_floats_and_comes_to_rest_on_the_ground(tmp_pat
     broken.write_text("<robot name='b'><link name='a'>")
     with pytest.raises(gaussim.InvalidRobot, match="not well-formed XML"):
         load_scene(broken)
+
+
+def test_a_robot_run_by_itself_is_loaded_once(tmp_path, monkeypatch):
+    """Writing the robot's scene loads it; reading that scene takes the same robot (a mesh-heavy robot's
+    load is seconds: G1 with hands, 3.3 s)."""
+    import gaussim.scenefile as scenefile
+
+    calls = []
+    load = scenefile.load_robot
+    monkeypatch.setattr(scenefile, "load_robot", lambda *a, **k: calls.append(a) or load(*a, **k))
+    monkeypatch.chdir(tmp_path)
+    spec = load_scene("solo12")
+    assert len(calls) == 1 and spec.robot.name == "solo12"

@@ -108,6 +108,8 @@ SHAPE_KEYS = ("size", "radius", "length", "path", "scale", "mass", "density")
 # The largest joint torque a scene may command [N m] (Talos's strongest joint gives 300): beyond it the
 # QP's rows span hundreds of orders of magnitude and ProxQP stops without a motion (tau = 1e300)
 MAX_TORQUE = 1e6
+# robots already loaded, by (source, floating_base) as a [robot] table gives them
+Loaded = dict[tuple[str, bool | None], Robot]
 # where a field a Scene names (its constructor's argument) sits in a scene file
 SCENE_FIELDS = {"contacts": "contacts.pairs", "self_contact": "contacts"}
 # The scene of a robot run by itself: it starts this high above the ground [m] from its first named
@@ -185,7 +187,8 @@ def load_scene(path: str | Path, **overrides: Any) -> SceneSpec:
     """
     path = Path(path)
     if names_robot(path):
-        return load_scene_text(robot_scene_text(str(path)), path, **overrides)
+        text, robot, source = _robot_scene(str(path))
+        return _read(text, path, overrides, {source: robot})  # the robot is loaded once
     path = shipped_scene(path)
     try:
         raw = path.read_bytes()
@@ -232,11 +235,15 @@ def robot_scene_text(source: str) -> str:
     into the limits) ROBOT_CLEARANCE above the ground (a fixed-base robot: the ground that far below
     its lowest geometry), held there by a PD posture hold, for ROBOT_DURATION. A robot without
     collision geometry gets no ground (it would fall through it); a file of one rigid body floats."""
+    return _robot_scene(source)[0]
+
+
+def _robot_scene(source: str) -> tuple[str, Robot, tuple[str, bool | None]]:
+    """:func:`robot_scene_text`'s text, the robot it loaded, and the (source, floating_base) that the
+    text's [robot] table loads it from."""
     from .simulator import within_limits
 
-    with warnings.catch_warnings():  # the scene's own load of the robot gives them
-        warnings.simplefilter("ignore")
-        robot, floated = _robot_of(source)
+    robot, floated = _robot_of(source)
     path = Path(source)
     if path.suffix in SUFFIXES:
         key, value = {".urdf": "urdf", ".sdf": "sdf"}.get(path.suffix, "mjcf"), str(path.resolve())
@@ -283,22 +290,28 @@ def robot_scene_text(source: str) -> str:
             f"kd = {HOLD_KD_PER_KG * gain:.4g}",
         ]
     lines += ["", "[simulation]", f"duration = {ROBOT_DURATION}", "", "[options]", "dt = 1e-3"]
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines) + "\n", robot, (value, True if floated else None)
 
 
 def _robot_of(source: str) -> tuple[Robot, bool]:
     """The robot ``source`` names, as its file or name says, and False; or, for a file of one rigid
-    body (no joint: nothing would move), that body floating, and True (PyBullet's default)."""
-    try:
-        return load_robot(source), False
-    except InvalidRobot as err:
+    body (no joint: nothing would move), that body floating, and True (PyBullet's default). The
+    warnings of the load that made it are given, once."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
         try:
-            robot = load_robot(source, floating_base=True)
-        except GaussimError:
-            raise err from None
-        if robot.model.nv != 6:  # more than one body: the first error stands
-            raise err from None
-        return robot, True
+            robot, floated = load_robot(source), False
+        except InvalidRobot as err:
+            caught.clear()
+            try:
+                robot, floated = load_robot(source, floating_base=True), True
+            except GaussimError:
+                raise err from None
+            if robot.model.nv != 6:  # more than one body: the first error stands
+                raise err from None
+    for warning in caught:
+        warnings.warn(warning.message, warning.category, stacklevel=4)
+    return robot, floated
 
 
 def ground_below(robot: Robot, q: np.ndarray, clearance: float) -> float:
@@ -321,18 +334,22 @@ def ground_below(robot: Robot, q: np.ndarray, clearance: float) -> float:
 def load_scene_text(text: str, path: str | Path, **overrides: Any) -> SceneSpec:
     """Like :func:`load_scene`, for scene text said to come from ``path`` (relative robot paths are
     resolved against its folder; a run log keeps its scene this way)."""
-    path = Path(path)
+    return _read(text, Path(path), overrides)
+
+
+def _read(text: str, path: Path, overrides: dict[str, Any], loaded: Loaded | None = None) -> SceneSpec:
+    """:func:`load_scene_text`, its [robot] table taken from ``loaded`` where that holds the robot it
+    names ((source, floating_base): a robot already loaded to write the text)."""
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
         raise SceneFileError(path, "toml", str(err)) from err
-    reader = _Reader(path, data)
-    return reader.build(text, overrides)
+    return _Reader(path, data, loaded or {}).build(text, overrides)
 
 
 class _Reader:
-    def __init__(self, path: Path, data: dict[str, Any]) -> None:
-        self.path, self.data = path, data
+    def __init__(self, path: Path, data: dict[str, Any], loaded: Loaded) -> None:
+        self.path, self.data, self.loaded = path, data, loaded
         for key in data:
             if key not in SECTIONS:
                 self.fail(key, f"unknown section; known: {', '.join(sorted(SECTIONS))}")
@@ -492,6 +509,8 @@ class _Reader:
         return target
 
     def load(self, key: str, source: str | Path, dirs: list[str], floating: bool | None) -> Robot:
+        if not dirs and (str(source), floating) in self.loaded:
+            return self.loaded[str(source), floating]
         return self.wrap(key, lambda: load_robot(source, package_dirs=dirs, floating_base=floating))
 
     def bodies(self) -> list[_BodyEntry]:
@@ -795,9 +814,8 @@ def place_on_ground(scene: Scene, q: np.ndarray, clearance: float, body: str | N
     robot = scene.robot
     data = robot.model.createData()
     q = q.copy()
-    for _ in range(
-        PLACEMENTS
-    ):  # coal estimates a mesh's distance from afar, and its depth deep in the ground
+    # again from nearer: coal estimates a mesh's distance from afar, and its depth deep in the ground
+    for _ in range(PLACEMENTS):
         pin.forwardKinematics(robot.model, data, q)
         contacts = ContactDetector(scene, margin=1e3).detect(data)
         gaps = [
