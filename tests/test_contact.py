@@ -659,3 +659,30 @@ def test_a_resting_contacts_rows_do_not_turn_with_the_round_off_of_its_slip(box,
             assert posed.J.shape[0] == 16  # four corners, four facets each: sticking
             rows.append(posed.J)
         assert all(np.array_equal(rows[0], r) for r in rows[1:]) == same
+
+
+@pytest.mark.parametrize("noise", [1e-10, 1e-9])
+def test_the_round_off_of_a_resting_contacts_gap_does_not_make_it_jitter(box, monkeypatch, noise):
+    """A box resting flat whose contacts' gaps carry a narrowphase's round-off (capsules and boxes on
+    one another: 1e-10 to 1e-9 m, either sign, from step to step). A closing row that let such a gap
+    close within the step moved the box by gap / dt (a micro-metre per second at 1e-9 m and dt 1 ms),
+    and a settled bin jittered forever at that speed (its QPs solved again at every step); within
+    GAP_TOLERANCE a gap is contact, and the box rests exactly."""
+    from gaussim.collision import driver
+    from gaussim.kernels.contact import GAP_TOLERANCE
+
+    assert noise <= GAP_TOLERANCE
+    rng = np.random.default_rng(7)
+    found = driver.ContactDetector.contacts
+
+    def noisy(self, *args):
+        contacts = found(self, *args)
+        contacts.gap = contacts.gap + noise * rng.uniform(-1.0, 1.0, len(contacts.gap))
+        return contacts
+
+    monkeypatch.setattr(driver.ContactDetector, "contacts", noisy)
+    scene = gaussim.Scene(box, ground=gaussim.Ground(friction=0.5))
+    sim = gaussim.Simulator(scene, gaussim.Options(dt=1e-3))
+    speeds = []
+    run(sim, sim.reset(at_height(box, HALF_HEIGHT)), 200, each=lambda s: speeds.append(np.abs(s.v).max()))
+    assert max(speeds[100:]) < 1e-12

@@ -167,7 +167,8 @@ def stabilised_bound(
         unilateral: True for phi >= 0 (an open gap may close exactly within the step).
 
     At the velocity level a gap closes in one step at most and a violation is removed at the rate
-    ``stabilisation / dt``; at the acceleration level a critically damped Baumgarte term with time
+    ``stabilisation / dt`` (a unilateral gap within :data:`~gaussim.kernels.contact.GAP_TOLERANCE` is
+    kept as it is: round-off); at the acceleration level a critically damped Baumgarte term with time
     constant dt / stabilisation does the same; at the impulse level the rows only stop the approach.
     """
     o = ctx.options

@@ -11,12 +11,19 @@ from ..linalg import cross, dot, solve
 from .dynamics import point_jacobians_into, support_dot
 from .solver import active_floor, bound_response
 
+# A unilateral row's gap within this is contact at the velocity level (the row keeps it, closing none
+# and pushing out none): a resting contact's gap carries the narrowphase's round-off, 1e-10 to 1e-9 m
+# between capsules and boxes, which a closing row turned into gap / dt of jitter [m or rad].
+GAP_TOLERANCE = 1e-8
+
 
 @vectorize(["float64(int64, float64, float64, float64, float64, float64, boolean)"], cache=True)
 def bound_of(level, dt, stabilisation, phi, rate, drift, unilateral):  # type: ignore[no-untyped-def]
     """:func:`gaussim.constraints.base.stabilised_bound` for a level code (its LEVELS), elementwise;
     callable from compiled code."""
     if level == 0:
+        if unilateral and abs(phi) <= GAP_TOLERANCE:  # touching: its gap is the narrowphase's round-off
+            return 0.0
         return -(1.0 / dt if phi >= 0 and unilateral else stabilisation / dt) * phi
     if level == 1:
         return 0.0
