@@ -80,3 +80,27 @@ def test_the_corpus_table_says_when_and_on_what_it_was_made(tmp_path):
     assert re.search(r"a fixed Python loop \(3,000,000 additions\) took \d\.\d\d s before the run", text)
     assert "1 robots: 0 simulate both passes, 1 are refused with a reason, 0 neither." in text
     assert out.with_suffix(".csv").exists()
+
+
+def test_a_pass_times_each_step_by_the_least_of_its_runs(monkeypatch):
+    """A pass's step times are the least of TIMING_RUNS runs, step by step, when the runs end in the
+    same state (gaussim is deterministic); a run that ends elsewhere is said, and its times not read."""
+    import numpy as np
+
+    runs = iter([([1.0, 5.0, 2.0, 9.0], 0.5), ([3.0, 1.0, 2.0, 4.0], 0.5)])
+
+    def run(robot, pass_name, duration, row):
+        times, q = next(runs)
+        return np.array(times), (np.array([q]), np.zeros(1))
+
+    monkeypatch.setattr(corpus, "_run", run)
+    monkeypatch.setattr(corpus, "TIMING_RUNS", 2)
+    row = corpus.Row("r", "c", "hold")
+    corpus.simulate(None, "hold", 0.004, row)
+    assert (row.median_ms, row.p90_ms) == (np.median([1, 1, 2, 4]), np.percentile([1, 1, 2, 4], 90))
+    assert row.message == ""
+    runs = iter([([1.0, 5.0, 2.0, 9.0], 0.5), ([1.0] * 4, 0.7)])
+    row = corpus.Row("r", "c", "hold")
+    corpus.simulate(None, "hold", 0.004, row)
+    assert row.p90_ms == np.percentile([1, 5, 2, 9], 90)
+    assert "differed" in row.message
