@@ -115,9 +115,10 @@ def scene_and_start(robot: gaussim.Robot) -> tuple[gaussim.Scene, np.ndarray]:
 def simulate(robot: gaussim.Robot, run: str, duration: float, row: Row) -> None:
     """Run one pass, filling ``row`` with its outcome and measures; its step times are the least of
     TIMING_RUNS runs of the same trajectory, step by step."""
-    times, end = _run(robot, run, duration, row)
+    start = scene_and_start(robot)
+    times, end = _run(robot, *start, run, duration, row)
     for _ in range(TIMING_RUNS - 1):
-        again, again_end = _run(robot, run, duration, Row(row.robot, row.corpus, row.run))
+        again, again_end = _run(robot, *start, run, duration, Row(row.robot, row.corpus, row.run))
         if len(again) != len(times) or not all(np.array_equal(a, b) for a, b in zip(end, again_end)):
             row.message = "step times of one run: a second run's trajectory differed"
             break
@@ -126,11 +127,10 @@ def simulate(robot: gaussim.Robot, run: str, duration: float, row: Row) -> None:
 
 
 def _run(
-    robot: gaussim.Robot, run: str, duration: float, row: Row
+    robot: gaussim.Robot, scene: gaussim.Scene, q0: np.ndarray, run: str, duration: float, row: Row
 ) -> tuple[np.ndarray, tuple[np.ndarray, ...]]:
-    """One run of a pass, filling ``row`` (but its step times): the step times [ms] and the last
-    state's (q, v)."""
-    scene, q0 = scene_and_start(robot)
+    """One run of a pass from ``q0`` in ``scene``, filling ``row`` (but its step times): the step
+    times [ms] and the last state's (q, v)."""
     sim = gaussim.Simulator(scene, gaussim.Options(dt=DT))
     state = sim.reset(q0)
     model = sim.model

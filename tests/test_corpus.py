@@ -11,6 +11,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pybullet_data
 import pytest
 
@@ -85,14 +86,13 @@ def test_the_corpus_table_says_when_and_on_what_it_was_made(tmp_path):
 def test_a_pass_times_each_step_by_the_least_of_its_runs(monkeypatch):
     """A pass's step times are the least of TIMING_RUNS runs, step by step, when the runs end in the
     same state (gaussim is deterministic); a run that ends elsewhere is said, and its times not read."""
-    import numpy as np
-
     runs = iter([([1.0, 5.0, 2.0, 9.0], 0.5), ([3.0, 1.0, 2.0, 4.0], 0.5)])
 
-    def run(robot, pass_name, duration, row):
+    def run(robot, scene, q0, pass_name, duration, row):
         times, q = next(runs)
         return np.array(times), (np.array([q]), np.zeros(1))
 
+    monkeypatch.setattr(corpus, "scene_and_start", lambda robot: (None, None))
     monkeypatch.setattr(corpus, "_run", run)
     monkeypatch.setattr(corpus, "TIMING_RUNS", 2)
     row = corpus.Row("r", "c", "hold")
