@@ -102,10 +102,23 @@ def test_non_unit_quaternion(sim, ball):
 
 
 def test_unknown_robot_lists_choices():
-    with pytest.raises(gaussim.RobotNotFound, match=r"no robot 'solo13'.*known names:.*solo12"):
+    with pytest.raises(
+        gaussim.RobotNotFound, match=r"no robot 'solo13'.*did you mean solo12.*known names:.*solo12"
+    ):
         gaussim.load_robot("solo13")
-    with pytest.raises(gaussim.RobotNotFound, match=r"no robot 'missing.urdf'"):
+    with pytest.raises(gaussim.RobotNotFound) as caught:
+        gaussim.load_robot("no_such_robot_at_all")
+    assert str(caught.value).count("double_pendulum,") == 1, "a name of robots/ and example-robot-data, once"
+    with pytest.raises(gaussim.RobotNotFound, match=r"^no robot 'missing.urdf': no such file$"):
         gaussim.load_robot("missing.urdf")
+
+
+def test_a_mistyped_scene_name_is_offered_the_close_ones(capsys):
+    code, err = _cli(capsys, "inspect", "box_stak")
+    assert (
+        code == 2
+        and "box_stak: file: cannot read it: No such file or directory (did you mean box_stack?" in err
+    )
 
 
 def test_malformed_urdf_names_the_file(tmp_path):
@@ -232,9 +245,29 @@ def test_bad_options_name_the_field(field, value):
         gaussim.Options(**{field: value})
 
 
+def test_a_bad_override_of_a_scene_file_is_the_callers_not_the_files():
+    """``load_scene(path, dt=-1)`` blamed the file: ``pendulum_limits.toml: options.dt: ...``."""
+    path = SCENES / "pendulum_limits.toml"
+    with pytest.raises(gaussim.InvalidOptions, match=r"^dt: must be a finite number > 0, got -1") as caught:
+        gaussim.load_scene(path, dt=-1)
+    assert "pendulum_limits" not in str(caught.value)
+    assert gaussim.load_scene(path, dt=2e-3).options.dt == 2e-3
+
+
+@pytest.mark.parametrize("duration", [-1.0, 0.0, float("nan"), float("inf"), "1"])
+def test_a_bad_duration_set_on_a_spec_is_refused_by_run(duration):
+    """``spec.duration = -1`` ran one step, NaN raised numpy's ValueError (tried as a new user would)."""
+    spec = gaussim.load_scene(SCENES / "pendulum_limits.toml")
+    spec.duration = duration
+    with pytest.raises(gaussim.InvalidOptions, match=r"^duration: must be a finite number > 0 \[s\], got"):
+        gaussim.run(spec)
+
+
 def test_unknown_option_lists_known():
-    with pytest.raises(gaussim.InvalidOptions, match=r"unknown option; known:.*dt"):
-        gaussim.Options().replace(timestep=1e-3)
+    """Made or replaced (``Options(dtt=...)`` raised a bare TypeError: tried as a new user would)."""
+    for make in (lambda: gaussim.Options(dtt=1e-3), lambda: gaussim.Options().replace(timestep=1e-3)):
+        with pytest.raises(gaussim.InvalidOptions, match=r"^(dtt|timestep): unknown option; known:.*dt"):
+            make()
 
 
 @pytest.mark.parametrize(
@@ -587,7 +620,7 @@ LOG_FAULTS = {  # item 15: each leaked a traceback; item 16: format_version was 
     "bad-json": ({"options": np.array("{dt: 1")}, "options: not JSON"),
     "unknown-option": (
         {"options": np.array('{"timestep": 1}')},
-        "options: must be a JSON object of Options fields",
+        "options.timestep: unknown option; known: active_tolerance",
     ),
     "bad-option": ({"options": np.array('{"dt": -1}')}, "options.dt: must be a finite number > 0"),
     "wrong-shape": ({"v": np.zeros((4, 2))}, "'tau' has shape (3, 6), where 'v' has nv = 2"),
@@ -728,7 +761,8 @@ DIRECTORY_FAULTS = {  # the run log directory (header.json and its chunks), as L
     ),
     "bodies": (lambda h, c: {**h, "bodies": "solo"}, None, "'bodies' must be a list of body names"),
     "robot": (lambda h, c: {**h, "robot": 12}, None, "'robot' must be a str, got 12"),
-    "options": (lambda h, c: {**h, "options": {"timestep": 1}}, None, "options: must be a JSON object"),
+    "options": (lambda h, c: {**h, "options": {"timestep": 1}}, None, "options.timestep: unknown option"),
+    "not-options": (lambda h, c: {**h, "options": [1]}, None, "options: must be a JSON object"),
     "shape": (None, {"v": np.zeros((4, 2))}, "damaged run log: 'v' has shape (4, 2)"),
     "missing": (None, {"q": None}, "damaged run log: no array 'q'"),
 }

@@ -51,7 +51,7 @@ def _short_from(path, log):
     return spec
 
 
-def test_interrupted_run_keeps_the_steps_made(tmp_path):
+def test_interrupted_run_keeps_the_steps_made(tmp_path, capsys):
     out = tmp_path / "run.npz"
     spec = _short("ball_bounce", 500)
     control = spec.controller
@@ -67,6 +67,12 @@ def test_interrupted_run_keeps_the_steps_made(tmp_path):
     log = gaussim.RunLog.load(out)
     assert not log.complete and "interrupted" in log.reason
     assert log.steps == 120 and len(log.t) == 121
+    # the commands read it, and say that its run did not finish (a user reads a log as the whole run)
+    from gaussim.cli import main
+
+    assert main(["forces", str(out), "--csv", str(tmp_path / "f.csv")]) == 0
+    err = capsys.readouterr().err
+    assert f"note: {out} holds the 120 steps of a run that did not finish: interrupted (Ctrl-C)" in err, err
 
 
 def test_a_ctrl_c_inside_compiled_code_is_an_interruption(tmp_path):
@@ -173,7 +179,7 @@ def test_parquet_round_trip(tmp_path):
         (
             ["run", str(SCENES / "ball_bounce.toml"), "--dt", "-1"],
             2,
-            "options.dt: must be a finite number > 0",
+            "--dt: must be a finite number > 0, got -1.0",
         ),
         (["forces", "missing.npz", "--csv", "x.csv"], 2, "missing.npz: cannot read it: No such file"),
     ],

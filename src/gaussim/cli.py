@@ -28,7 +28,7 @@ from .exceptions import (
 )
 from .files import atomic_path, check_writable
 from .options import FRICTION_MODES, SCHEMES
-from .stops import STOP_SIGNALS
+from .stops import STOP_SIGNALS, interrupt, taken_stop
 
 if TYPE_CHECKING:
     from .scene import Scene
@@ -39,6 +39,8 @@ EXIT_OK, EXIT_FAILURE, EXIT_BAD_INPUT = 0, 1, 2
 SIMULATION_FAILURES = (SolverError, ContactError)
 # the contact pairs of two bodies that `gaussim inspect` names (the others are counted)
 PAIRS_SHOWN = 6
+# a replay page's name ends in one of these (another may be the scene, mistyped)
+PAGE_SUFFIXES = (".html", ".htm")
 # control characters (but newline and tab): a name in a file must not drive the terminal
 _CONTROL = re.compile(r"[\x00-\x08\x0b-\x1f\x7f-\x9f]")
 
@@ -209,9 +211,9 @@ def main(argv: list[str] | None = None) -> int:
     if argv is None:  # the command: gaussim's warnings told as its errors are (a caller's stay as they are)
         warnings.showwarning = _show_warning
     saved = {s: signal.getsignal(s) for s in STOP_SIGNALS}
-    for stop in (signal.SIGTERM, signal.SIGHUP):  # stop as a Ctrl-C does: the viewers' servers stopped
-        if signal.getsignal(stop) == signal.SIG_DFL:
-            signal.signal(stop, signal.default_int_handler)
+    for stop, default in saved.items():  # each stops as a Ctrl-C does: the viewers' servers stopped
+        if default in (signal.SIG_DFL, signal.default_int_handler):
+            signal.signal(stop, interrupt)
     try:
         commands_ = {
             "run": _run,
@@ -239,6 +241,7 @@ def main(argv: list[str] | None = None) -> int:
         _say(f"gaussim: {err}", sys.stderr)
         return EXIT_BAD_INPUT
     finally:
+        taken_stop()  # a stop this command had: none for a later run in the same process
         if argv is not None:  # called in-process (not as the command): its caller's handling as it was
             for s, handling in saved.items():
                 signal.signal(s, handling)
@@ -480,12 +483,13 @@ def _run(args: argparse.Namespace) -> int:
         from .plots import plot_path
 
         plot_path(args.plot)  # before the run, not after it
+    if args.dt is not None:
+        _positive("--dt", args.dt)
     # placing the robot on the ground compiles kernels too
     with compile_notice(None if args.quiet else functools.partial(announce, sys.stderr)):
         spec = load_scene(args.scene, dt=args.dt, scheme=args.scheme, friction_mode=args.friction_mode)
     if args.duration is not None:
-        if not (math.isfinite(args.duration) and args.duration > 0):
-            raise InvalidOptions("--duration", f"must be a finite number > 0, got {args.duration}")
+        _positive("--duration", args.duration)
         spec.duration = args.duration
     out = args.out or Path("out") / f"{args.scene.stem}.runlog"
     if names_robot(args.scene):
@@ -495,9 +499,13 @@ def _run(args: argparse.Namespace) -> int:
     checkpoint_steps = CHECKPOINT_STEPS if args.checkpoint_steps is None else args.checkpoint_steps
     if checkpoint_steps < 1:
         raise InvalidOptions("--checkpoint-steps", f"must be >= 1, got {args.checkpoint_steps}")
-    for flag, path in (("--html", args.html), ("--plot", args.plot)):
-        if path is not None:
-            check_writable(path, flag)  # before the run, not after it
+    # before the run, not after it
+    if args.html is not None:
+        check_writable(args.html, "--html", PAGE_SUFFIXES)
+    if args.plot is not None:
+        check_writable(args.plot, "--plot")
+    if args.force_scale is not None:
+        _positive("--force-scale", args.force_scale)
     if is_run_log(out):
         print(f"gaussim: {out} holds a run log: it will be kept as {out}.prev", file=sys.stderr)
     viewer = None
@@ -577,16 +585,28 @@ def _arrow_option(parser: argparse.ArgumentParser) -> None:
 
 
 def _positive(flag: str, value: float) -> None:
-    if not value > 0:
-        raise InvalidOptions(flag, f"must be > 0, got {value}")
+    if not (math.isfinite(value) and value > 0):
+        raise InvalidOptions(flag, f"must be a finite number > 0, got {value}")
+
+
+def _read_log(path: Path):  # type: ignore[no-untyped-def]
+    """The run log at ``path``; said on stderr when its run did not finish (a user reads it as a whole)."""
+    from .runlog import RunLog
+
+    log = RunLog.load(path)
+    if not log.complete:
+        _say(
+            f"gaussim: note: {path} holds the {log.steps} steps of a run that did not finish: {log.reason}",
+            sys.stderr,
+        )
+    return log
 
 
 def _log_and_scene(path: Path):  # type: ignore[no-untyped-def]
     """A run log and the scene it was made from (its scene text is stored in it)."""
-    from .runlog import RunLog
     from .scenefile import load_scene_text
 
-    log = RunLog.load(path)
+    log = _read_log(path)
     if log.steps == 0:
         raise GaussimError(f"{path}: the run log holds no step")
     try:
@@ -610,8 +630,10 @@ def _replay(args: argparse.Namespace) -> int:
 
     _positive("--fps", args.fps)
     _positive("--speed", args.speed)
+    if args.force_scale is not None:
+        _positive("--force-scale", args.force_scale)
     if args.html:
-        check_writable(args.html, "--html")
+        check_writable(args.html, "--html", PAGE_SUFFIXES)
     log, scene = _log_and_scene(args.log)
     if args.html:
         print(f"replay page: {_write_replay(log, scene, args.html, args.force_scale, args.fps, args.speed)}")
@@ -728,11 +750,11 @@ def _pairs_by_body(scene: Scene) -> dict[tuple[str, str], list[str]]:
 
 
 def _forces(args: argparse.Namespace) -> int:
-    from .runlog import RunLog, write_forces
+    from .runlog import write_forces
 
     path, kind = (args.csv, "csv") if args.csv else (args.parquet, "parquet")
-    check_writable(path, f"--{kind}")
-    rows = write_forces(RunLog.load(args.log), path, kind)
+    check_writable(path, f"--{kind}", (f".{kind}",))
+    rows = write_forces(_read_log(args.log), path, kind)
     print(f"{rows} rows written to {path}")
     return EXIT_OK
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import reprlib
 from collections.abc import Iterable
+from difflib import get_close_matches
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:  # numpy is imported where used: the CLI's --help imports this module and no numpy
@@ -28,7 +29,7 @@ def shown(value: object) -> str:
 
 
 def _choices(known: Iterable[str], limit: int = 80) -> str:
-    names = sorted(known)
+    names = sorted(set(known))
     shown = ", ".join(names[:limit])
     return shown + (f", ... ({len(names) - limit} more)" if len(names) > limit else "")
 
@@ -36,10 +37,16 @@ def _choices(known: Iterable[str], limit: int = 80) -> str:
 class RobotNotFound(GaussimError):
     """A robot name is neither an example-robot-data robot nor an existing URDF file."""
 
-    def __init__(self, name: str, known: Iterable[str]) -> None:
+    def __init__(self, name: str, known: Iterable[str], file: bool = False) -> None:
+        if file:  # a path: the names are no help
+            super().__init__(f"no robot '{name}': no such file")
+            return
+        known = sorted(set(known))
+        close = get_close_matches(name, known, n=3)
+        meant = f" (did you mean {' or '.join(close)}?)" if close else ""
         super().__init__(
             f"no robot '{name}': not an existing URDF path and not an example-robot-data "
-            f"robot; known names: {_choices(known)}"
+            f"robot{meant}; known names: {_choices(known)}"
         )
 
 

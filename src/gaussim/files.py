@@ -49,12 +49,16 @@ def umask() -> int:
     return mask
 
 
-def check_writable(path: str | Path, what: str) -> Path:
+def check_writable(path: str | Path, what: str, suffixes: tuple[str, ...] = ()) -> Path:
     """Raise OutputError unless a file can be created at ``path`` (its folder made if missing): a folder
-    in its place, a read-only or missing parent that cannot be made. ``what`` names it in the message."""
+    in its place, a read-only or missing parent that cannot be made, or a name that does not end in one
+    of ``suffixes`` (when given: a slip such as ``--html scene.toml`` would overwrite the scene). ``what``
+    names it in the message."""
     path = Path(path)
     if path.is_dir():
         raise OutputError(f"{what} {path}: is a directory; give a file name")
+    if suffixes and path.suffix.lower() not in suffixes:
+        raise OutputError(f"{what} {path}: the file's name must end in {' or '.join(suffixes)}")
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".check", dir=path.parent)

@@ -87,6 +87,14 @@ class Options:
     start_penetration: float = 1e-3
     timings: bool = False
 
+    def __new__(cls, *args: object, **given: object) -> Options:
+        # an unknown keyword, named with the valid ones (the dataclass's own __init__ raises a bare TypeError)
+        known = {f.name for f in fields(cls)}
+        for key in given:
+            if key not in known:
+                raise InvalidOptions(key, f"unknown option; known: {', '.join(sorted(known))}")
+        return super().__new__(cls)
+
     def __post_init__(self) -> None:
         for f in fields(self):  # numpy scalars in, Python's out (they go to JSON in run logs)
             value = getattr(self, f.name)
@@ -115,10 +123,6 @@ class Options:
 
     def replace(self, **changes: object) -> Options:
         """Return a copy with some fields changed (validated again)."""
-        known = {f.name for f in fields(self)}
-        for key in changes:
-            if key not in known:
-                raise InvalidOptions(key, f"unknown option; known: {', '.join(sorted(known))}")
         values = {f.name: getattr(self, f.name) for f in fields(self)}
         values.update(changes)
         return Options(**values)  # type: ignore[arg-type]

@@ -70,7 +70,9 @@ def force_figure(log: RunLog, scene: Scene, bodies: Sequence[str] | None = None)
             )
     for mu in sorted(coefficients):
         ratio_ax.axhline(mu, color="k", ls="--", lw=1)
-        ratio_ax.annotate(f"mu = {mu:g}", (t[0], mu), xytext=(2, 2), textcoords="offset points")
+        ratio_ax.annotate(  # under its line, at the right: the line may be the panel's top
+            f"mu = {mu:g}", (t[-1], mu), xytext=(-2, -2), textcoords="offset points", ha="right", va="top"
+        )
     normal_ax.set_ylabel("normal force [N]")
     if shown and len(shown) <= 12:
         normal_ax.legend(fontsize="small", markerscale=4, ncol=2)
@@ -84,7 +86,8 @@ def force_figure(log: RunLog, scene: Scene, bodies: Sequence[str] | None = None)
     solver_ax.set_ylabel("KKT residual", color="C0")
     iterations_ax = solver_ax.twinx()
     iterations_ax.plot(steps_t, s["iterations"], lw=0.8, color="C3")
-    iterations_ax.set_ylabel("ProxQP iterations", color="C3")
+    iterations_ax.set_ylabel("solver iterations", color="C3")  # 0: the last solution or active set held
+    iterations_ax.set_ylim(0, 1.1 * max(1, int(s["iterations"].max(initial=0))))
     solver_ax.set_xlabel("t [s]")
     figure.suptitle(f"{log.robot}: contact forces{of} and solver")
     return figure

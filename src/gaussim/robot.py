@@ -231,7 +231,7 @@ def load_robot(
     local = ROBOTS_DIR / f"{name}.urdf"
     if path.suffix in SUFFIXES or path.exists():
         if not path.is_file():
-            raise RobotNotFound(str(name), _known_names())
+            raise RobotNotFound(str(name), _known_names(), file=True)
         return _from_file(path, tuple(package_dirs), floating_base, policies)
     if local.is_file():
         if str(name) in example_robot_names():  # the shipped robot comes first: say so

@@ -676,7 +676,10 @@ def _read_npz(path: Path) -> dict[str, np.ndarray]:
     except (
         ValueError
     ) as err:  # not numpy's words: they advise allow_pickle=True, which runs what a file holds
-        raise RunLogError(f"{path}: not a gaussim run log (one is a .npz archive of plain arrays)") from err
+        raise RunLogError(
+            f"{path}: not a gaussim run log (one is the directory `gaussim run` writes, or the .npz archive "
+            "of plain arrays RunLog.save writes)"
+        ) from err
     except Exception as err:  # zipfile reads a damaged archive's bytes as anything: encryption, a method
         what = f"{type(err).__name__}: {err}"
         raise RunLogError(f"{path}: a truncated or damaged .npz archive ({what})") from err
@@ -686,7 +689,7 @@ def _options(path: Path, options: object) -> Options:
     """The Options a log's header holds, or a RunLogError naming the file."""
     try:
         return Options(**options)  # type: ignore[arg-type]
-    except TypeError as err:  # not a dict, or an option this gaussim does not have
+    except TypeError as err:  # not a dict (an option this gaussim does not have: InvalidOptions)
         known = ", ".join(f.name for f in fields(Options))
         raise RunLogError(
             f"{path}: options: must be a JSON object of Options fields ({known}), got {shown(str(options))}"

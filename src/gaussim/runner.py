@@ -15,13 +15,14 @@ from numba.core import event
 from tqdm import tqdm
 
 from .control import command
-from .exceptions import GaussimError
+from .exceptions import GaussimError, InvalidOptions, shown
+from .options import is_real
 from .report import StepReport
 from .runlog import RunLog, RunLogWriter
 from .scenefile import SceneSpec
 from .simulator import Simulator
 from .state import State
-from .stops import STOP_SIGNALS
+from .stops import STOP_SIGNALS, taken_stop
 
 # While a run goes on, the steps recorded are written as a new chunk of its log this often [s of wall
 # time], and whenever this many are held in memory.
@@ -75,6 +76,8 @@ def run(
         observer: called with the state and the report after every step (e.g. a live viewer,
             :func:`gaussim.viewer.follow`).
     """
+    if not (is_real(spec.duration) and spec.duration > 0):  # a spec's fields are the caller's to set
+        raise InvalidOptions("duration", f"must be a finite number > 0 [s], got {shown(spec.duration)}")
     steps = max(1, round(spec.duration / spec.options.dt))
     line = _Progress(progress, steps) if progress is not None else None
     with compile_notice(line.compiling if line is not None else None):
@@ -159,6 +162,8 @@ def _stop_signals() -> Iterator[_Stop]:
     the background of a script) stays ignored; outside the main thread, where Python delivers no
     signal, Python's own handling applies."""
     stop = _Stop()
+    early = taken_stop()  # one that landed before: the run stops before its first step
+    stop.signal = None if early is None else _signal_name(early)
     if threading.current_thread() is not threading.main_thread():
         yield stop
         return

@@ -36,6 +36,7 @@ import re
 import tomllib
 import warnings
 from dataclasses import dataclass, fields
+from difflib import get_close_matches
 from functools import partial
 from pathlib import Path
 from typing import Any, NoReturn
@@ -193,12 +194,14 @@ def load_scene(path: str | Path, **overrides: Any) -> SceneSpec:
     try:
         raw = path.read_bytes()
     except OSError as err:
-        names = ", ".join(sorted(p.stem for p in (ROBOTS_DIR / "scenes").glob("*.toml")))
+        scenes = sorted(p.stem for p in (ROBOTS_DIR / "scenes").glob("*.toml"))
+        close = get_close_matches(str(path), [*scenes, *example_robot_names()], n=3)
+        meant = f"did you mean {' or '.join(close)}? " if close and path.parent == Path() else ""
         raise SceneFileError(
             path,
             "file",
-            f"cannot read it: {err.strerror} (shipped scenes: {names}; or a robot: a URDF, MJCF or SDF "
-            "file, or a robot's name such as solo12)",
+            f"cannot read it: {err.strerror} ({meant}shipped scenes: {', '.join(scenes)}; or a robot: a "
+            "URDF, MJCF or SDF file, or a robot's name such as solo12)",
         ) from err
     try:
         text = raw.decode("utf-8")
@@ -692,9 +695,9 @@ class _Reader:
         return name
 
     def options(self, overrides: dict[str, Any]) -> Options:
-        section = dict(self.table("options"))
-        section.update({k: v for k, v in overrides.items() if v is not None})
-        return self.wrap("options", lambda: Options(**section))
+        given = {k: v for k, v in overrides.items() if v is not None}
+        Options(**given)  # a bad override is the caller's, not the file's: its error names no file
+        return self.wrap("options", lambda: Options(**{**self.table("options"), **given}))
 
     def initial(self, scene: Scene) -> State:
         robot = scene.robot
