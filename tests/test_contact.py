@@ -1,6 +1,7 @@
 """Unilateral contacts, restitution and Coulomb friction against analytic solutions."""
 
 import time
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -9,6 +10,8 @@ import pytest
 import gaussim
 
 from .conftest import G, at_height, run
+
+SCENES = Path(__file__).resolve().parents[1] / "robots" / "scenes"
 
 SCHEMES = ["velocity", "acceleration"]
 RESTING_PENETRATION = 1e-6  # [m]
@@ -238,6 +241,72 @@ def test_box_face_contact_is_flagged_redundant(box):
     assert len(report.contacts) == 4, "a box face on the ground touches at its four corners"
     assert report.redundant
     assert report.total_contact_force()[2] == pytest.approx(box.mass * G, rel=1e-6)
+
+
+EVEN_SPLIT_RTOL = 1e-6  # the reported split's distance from the least-norm one, relative to the load
+
+
+@pytest.mark.parametrize("solver", ["dual", "proxqp"])
+def test_redundant_contacts_report_the_even_split_whichever_solver(box, solver):
+    """A box resting on its face: each corner carries a quarter of its weight and no friction. A dual
+    active-set answer is a vertex of the multipliers' set (3.68, 1.23, 1.23, 3.68 N, each at the cone's
+    edge, the corners pushing each other sideways: tried as a new user would, on box_stack); the least-norm
+    one of that set is reported, whichever solver found the (unique) motion."""
+    sim = gaussim.Simulator(gaussim.Scene(box, ground=gaussim.Ground()), gaussim.Options(solver=solver))
+    run(sim, sim.reset(at_height(box, HALF_HEIGHT)), 50)
+    report, weight = sim.last_step, box.mass * G
+    assert report.redundant and len(report.contacts) == 4
+    for contact in report.contacts:
+        assert contact.normal_force == pytest.approx(weight / 4, rel=EVEN_SPLIT_RTOL)
+        assert np.linalg.norm(contact.tangential_force) <= EVEN_SPLIT_RTOL * weight
+
+
+def test_a_resting_stack_reports_no_friction_and_each_box_its_load():
+    """robots/scenes/box_stack.toml at rest: every contact's friction is zero, and each box's four corners
+    share what rests on them evenly (the stack's weight above each interface: the top box's, two boxes',
+    all three)."""
+    spec = gaussim.load_scene(SCENES / "box_stack.toml")
+    sim = gaussim.Simulator(spec.scene, spec.options)
+    run(sim, sim.reset(spec.initial.q, spec.initial.v), 500)
+    report = sim.last_step
+    loads = {}
+    for contact in report.contacts:
+        pair = contact.geometry.split("_")[0] + "/" + contact.obstacle.split("_")[0]
+        loads.setdefault(pair, []).append(contact.normal_force)
+        assert np.linalg.norm(contact.tangential_force) <= EVEN_SPLIT_RTOL * contact.normal_force, (
+            contact.name
+        )
+    for pair in ("bottom/ground", "top/middle"):
+        forces = loads[pair]
+        assert len(forces) == 4 and np.ptp(forces) <= EVEN_SPLIT_RTOL * max(forces), (pair, forces)
+    assert sum(loads["bottom/ground"]) == pytest.approx(spec.robot.mass * G, rel=1e-6)
+
+
+def test_the_reported_reactions_certify_the_step_as_the_solvers_do(box):
+    """The reported multipliers of a resting box (a dual active-set vertex is the solver's) are another
+    point of the multipliers' set: they satisfy the step's KKT conditions, and their total force is the
+    solver's."""
+    from gaussim.solver.certificate import kkt_residuals
+
+    sim = gaussim.Simulator(gaussim.Scene(box, ground=gaussim.Ground()))
+    run(sim, sim.reset(at_height(box, HALF_HEIGHT)), 50)
+    report = sim.last_step
+    problem, x, solver_multipliers, eps_abs = report.solved
+    spread = np.concatenate([lam for _, _, lam in report._spread])
+    assert not np.allclose(spread, solver_multipliers), "the even split is another point of the set"
+    n_eq = len(problem.b)
+    relative = kkt_residuals(
+        problem.H, problem.g, problem.A, problem.b, problem.C, problem.l, x, spread[:n_eq], spread[n_eq:]
+    )[1]
+    assert relative <= 100 * eps_abs
+    solvers = [
+        force
+        for module, rows, lam in report.blocks
+        if module.name == "contact"
+        for force in module.reactions(rows, lam, report.scale)
+    ]
+    total = sum(c.force for c in solvers)
+    assert report.total_contact_force() == pytest.approx(total, rel=1e-7, abs=1e-9 * box.mass * G)
 
 
 def test_ball_is_not_redundant(ball):

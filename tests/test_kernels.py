@@ -66,7 +66,7 @@ STAGES = ("actuation", "assembly", "collision.boxes", "collision.cylinders", "co
           "collision.driver", "collision.margin", "collision.narrow", "collision.primitives",
           "constraints.base", "constraints.limits",
           "constraints.contact", "dynamics", "integrator", "solver.active_set", "solver.certificate",
-          "solver.dual", "solver.islands", "solver.proxqp")
+          "solver.dual", "solver.islands", "solver.proxqp", "solver.reactions")
 for stage in STAGES:
     module = importlib.import_module("gaussim." + stage)
     for attribute, value in list(vars(module).items()):
@@ -99,6 +99,7 @@ def test_the_build_compiles_every_signature_the_workload_calls():
         "contact.pyramids",
         "solver.islands",
         "dual.dual_iterations",
+        "solver.least_norm",
         *families,
     }, called
     missing = sorted((name, code) for name, code in called if code not in SIGNATURES.get(name, ()))

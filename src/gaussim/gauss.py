@@ -95,6 +95,8 @@ class GaussStage:
             asked = {id(module) for module in again}  # by identity: a user's module may define __eq__
             posed = [(module, module.rows(ctx) if id(module) in asked else rows) for module, rows in parts]
             parts = [(module, rows) for module, rows in posed if rows is not None]
+        assert problem is not None  # the loop posed one: it returns early when no module has rows
         report.blocks, report.scale = blocks, scale
+        report.solved = (problem, x, lam, self.options.eps_abs)
         mark("")
         return x

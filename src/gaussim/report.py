@@ -22,8 +22,10 @@ from .constraints import (
 )
 from .constraints.contact import contact_batch
 from .solver import Certificate
+from .solver.reactions import least_norm_multipliers
 
 if TYPE_CHECKING:
+    from .assembly import GaussProblem
     from .world import World
 
 # Relative singular-value threshold under which stacked contact Jacobians count as rank deficient.
@@ -97,6 +99,11 @@ class StepReport:
     # from multipliers to reactions (1 / dt at the velocity level: impulses to forces)
     blocks: Sequence[tuple[ConstraintModule, Rows, np.ndarray]] = field(default=(), repr=False)
     scale: float = field(default=1.0, repr=False)
+    # that QP, its answer x, its multipliers and eps_abs: the reactions reported are its least-norm
+    # multipliers (gaussim.solver.reactions), computed when first read
+    solved: tuple[GaussProblem, np.ndarray, np.ndarray, float] | None = field(
+        default=None, repr=False, compare=False
+    )
     # the bodies of the stepped world (set by the Simulator), for the forces between bodies
     world: World | None = field(default=None, repr=False, compare=False)
 
@@ -121,8 +128,20 @@ class StepReport:
         reports them from the multipliers of the step's last QP (forces [N], torques [N m]); empty when
         it held no rows."""
         return [
-            r for m, rows, lam in self.blocks if m.name == family for r in m.reactions(rows, lam, self.scale)
+            r for m, rows, lam in self._spread if m.name == family for r in m.reactions(rows, lam, self.scale)
         ]
+
+    @cached_property
+    def _spread(self) -> Sequence[tuple[ConstraintModule, Rows, np.ndarray]]:
+        """``blocks`` with the least-norm multipliers of the last QP's answer, which the reactions read
+        (where the rows holding it are redundant, a vertex of its multipliers' set is one of many). A QP
+        with a force applied outside it (the acceleration level's sliding friction, mu times the normal
+        multipliers it was solved with) keeps the solver's: the force goes with them."""
+        if self.solved is None or any(rows.force is not None for _, rows, _ in self.blocks):
+            return self.blocks
+        problem, x, multipliers, eps_abs = self.solved
+        lam = least_norm_multipliers(problem, x, multipliers, eps_abs)
+        return [(module, rows, lam[part]) for module, rows, part in problem.blocks]
 
     @cached_property
     def timings(self) -> dict[str, float]:

@@ -96,6 +96,8 @@ SIGNATURES = {
         "f2 f1 f2r f1r f2 f1 f1r f1 f f f1 f1",
     ],
     "solver.read_results": [f"f2 f1 {sides} f1 f1 f1" for sides in _SIDES],
+    # the reactions reported: the least-norm multipliers (A, C and l of the _SIDES)
+    "solver.least_norm": [f"f2 f1 {rows} f1 f f1" for rows in ("f2 f2 f1", "f2 f2r f1r", "f2r f2 f1")],
     # the scenes of several bodies: their islands, and each one's problem
     "solver.islands": [f"{a} {c} i2 i1 f1 i1 i" for a, c in (("f2r", "f2"), ("f2", "f2"), ("f2", "f2r"))],
     "solver.members": ["i1 i"],

@@ -427,3 +427,58 @@ def matched_values(ids, values, new, out):  # type: ignore[no-untyped-def]
         out[i] = values[order[low]] if low < len(order) and ids[order[low]] == new[i] else 0.0
         found |= out[i] != 0.0
     return found
+
+
+# The least-norm multipliers' Tikhonov shift, relative to the trace of K K^T, and the refinements that
+# take its answer to the least-norm one (iterated Tikhonov: each divides the error by 1 + sigma^2 / shift).
+LEAST_NORM_SHIFT = 1e-12
+LEAST_NORM_REFINEMENTS = 3
+
+
+@njit(cache=True, fastmath={"reassoc", "contract"})
+def least_norm(H, g, A, C, l, x, tolerance, out):  # type: ignore[no-untyped-def]
+    """The multipliers [y; z] of least norm with A^T y + C^T z = H x + g and z_i = 0 on the rows x does
+    not hold to ``tolerance`` (C_i x - l_i > tolerance max(1, |l_i|)), into ``out`` (n_eq + n_in), their
+    signs unconstrained (see :mod:`gaussim.solver.reactions`); returns the least of its z (-inf when
+    the system is not positive definite once shifted)."""
+    n_eq, nv = A.shape[0], H.shape[0]
+    columns = np.empty(n_eq + C.shape[0], np.int64)  # the rows that may carry a multiplier, of [A; C]
+    for i in range(n_eq):
+        columns[i] = i
+    m = n_eq
+    for i in range(C.shape[0]):
+        if dot(C[i], x) - l[i] <= tolerance * max(1.0, abs(l[i])):
+            columns[m] = n_eq + i
+            m += 1
+    K = np.empty((m, nv))  # K^T: the rows' generalized directions
+    for j in range(m):
+        K[j] = A[columns[j]] if columns[j] < n_eq else C[columns[j] - n_eq]
+    r = matvec(H, x) + g
+    G = np.zeros((nv, nv))  # K^T K, by loops: the build compiles without scipy's BLAS
+    for j in range(m):
+        for a in range(nv):
+            if K[j, a] != 0.0:
+                for c in range(nv):
+                    G[a, c] += K[j, a] * K[j, c]
+    trace = 0.0
+    for i in range(nv):
+        trace += G[i, i]
+    L = cholesky(G, max(LEAST_NORM_SHIFT * trace, 1e-300))
+    out[:] = 0.0
+    if L is None:
+        return -np.inf
+    lam = np.zeros(m)
+    error = r.copy()
+    for _ in range(LEAST_NORM_REFINEMENTS + 1):  # lam += K (G + shift)^-1 (r - K^T lam)
+        mu = backward(L, forward(L, error.reshape(1, nv))[0])
+        lam += matvec(K, mu)
+        error = r.copy()
+        for j in range(m):
+            for a in range(nv):
+                error[a] -= K[j, a] * lam[j]
+    least = np.inf
+    for j in range(m):
+        out[columns[j]] = lam[j]
+        if columns[j] >= n_eq:
+            least = min(least, lam[j])
+    return least

@@ -8,7 +8,8 @@ Modules: :mod:`.certificate` (the status of a solve and gaussim's own KKT check 
 :mod:`.proxqp` (the dense ProxQP wrapper that tries those first, then ProxQP, then recovers),
 :mod:`.islands` (the problem split into the independent problems of the bodies that touch, each
 solved by its own ProxQP wrapper),
-:mod:`.diagnosis` (the errors of a failed solve: the rows behind an infeasibility); proxsuite is
+:mod:`.diagnosis` (the errors of a failed solve: the rows behind an infeasibility),
+:mod:`.reactions` (the least-norm multipliers a step reports where its answer's are not unique); proxsuite is
 loaded with its portable build by :mod:`gaussim.portable`, so that runs repeat bit for bit.
 """
 
