@@ -309,6 +309,23 @@ def test_the_reported_reactions_certify_the_step_as_the_solvers_do(box):
     assert report.total_contact_force() == pytest.approx(total, rel=1e-7, abs=1e-9 * box.mass * G)
 
 
+@pytest.mark.parametrize("extra", [0, 1])
+def test_two_equal_rows_share_their_load_up_to_the_size_cap(extra):
+    """min 1/2 |x|^2 s.t. x_0 >= 1, posed twice: x = e_0, and any z >= 0 with z_1 + z_2 = 1 certifies it.
+    The reported split is (1/2, 1/2) (closed form), up to LEAST_NORM_UP_TO coordinates; beyond, the
+    solver's (1, 0)."""
+    from gaussim.assembly import GaussProblem
+    from gaussim.solver.reactions import LEAST_NORM_UP_TO, least_norm_multipliers
+
+    n = LEAST_NORM_UP_TO + extra
+    C = np.zeros((2, n))
+    C[:, 0] = 1.0
+    problem = GaussProblem(np.eye(n), np.zeros(n), np.zeros((0, n)), np.zeros(0), C, np.ones(2), [])
+    x, solvers = np.eye(n)[0], np.array([1.0, 0.0])
+    expected = solvers if extra else np.array([0.5, 0.5])
+    assert least_norm_multipliers(problem, x, solvers, 1e-9) == pytest.approx(expected, abs=1e-12)
+
+
 def test_ball_is_not_redundant(ball):
     sim = gaussim.Simulator(gaussim.Scene(ball, ground=gaussim.Ground()))
     run(sim, sim.reset(at_height(ball, RADIUS)), 10)

@@ -22,6 +22,10 @@ from ..kernels.solver import least_norm
 from ..portable import portable_proxsuite
 from .certificate import KKT_RTOL, Status, checked
 
+# Up to this many coordinates the reactions are the least-norm ones; a larger problem (a pile of 20
+# boxes) reports its solver's: the dense factorization of its size would cost more than its step.
+LEAST_NORM_UP_TO = 64
+
 
 def least_norm_multipliers(
     problem: GaussProblem, x: np.ndarray, multipliers: np.ndarray, eps_abs: float
@@ -29,8 +33,11 @@ def least_norm_multipliers(
     """The multipliers [y; z] of least norm that certify the answer ``x`` of ``problem`` (see the
     module's docstring), or ``multipliers`` (the solver's) when none is found that gaussim's KKT check
     accepts at the solver's tolerance KKT_RTOL ``eps_abs``. The rows that may carry a multiplier are
-    those x holds to within ``eps_abs`` (relative to max(1, |l_i|))."""
+    those x holds to within ``eps_abs`` (relative to max(1, |l_i|)). Beyond LEAST_NORM_UP_TO
+    coordinates, ``multipliers``."""
     p, n_eq = problem, len(problem.b)
+    if len(p.g) > LEAST_NORM_UP_TO:
+        return multipliers
     x = np.array(x)  # writable, as the kernels' compiled signatures take it (a certified last answer is not)
     spread = np.empty_like(multipliers)
     if least_norm(p.H, p.g, p.A, p.C, p.l, x, eps_abs, spread) < 0.0:  # a sign the set forbids: a QP
