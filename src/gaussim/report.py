@@ -99,8 +99,8 @@ class StepReport:
     # from multipliers to reactions (1 / dt at the velocity level: impulses to forces)
     blocks: Sequence[tuple[ConstraintModule, Rows, np.ndarray]] = field(default=(), repr=False)
     scale: float = field(default=1.0, repr=False)
-    # that QP, its answer x, its multipliers and eps_abs: the reactions reported are its least-norm
-    # multipliers (gaussim.solver.reactions), computed when first read
+    # that QP, its answer x, its multipliers and eps_abs: where its contacts rest, the reactions reported
+    # are its least-norm multipliers (gaussim.solver.reactions), computed when first read
     solved: tuple[GaussProblem, np.ndarray, np.ndarray, float] | None = field(
         default=None, repr=False, compare=False
     )
