@@ -25,6 +25,8 @@ def _key_the_kernel_cache() -> None:
 
 
 _key_the_kernel_cache()
+# every kernel a stage calls past numba's dispatcher checks its arguments' types (gaussim.kernels.bound)
+os.environ["GAUSSIM_CHECK_KERNELS"] = "1"
 
 import numpy as np  # noqa: E402
 import pinocchio as pin  # noqa: E402

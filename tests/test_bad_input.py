@@ -298,7 +298,7 @@ def test_non_convergence_is_reported_or_raised(box, monkeypatch):
             strict.step(strict.reset(q, v))
     from gaussim.solver import proxqp
 
-    monkeypatch.setattr(proxqp, "active_set_candidate", lambda *args: (0, (np.nan,) * 5))
+    monkeypatch.setattr(proxqp.active_set_candidate, "call", lambda *args: (0, (np.nan,) * 5))
     lenient = gaussim.Simulator(scene, gaussim.Options(max_iter=3, on_failure="report", solver="proxqp"))
     with pytest.warns(gaussim.GaussimWarning, match="on_failure='report' kept its iterate"):
         state = lenient.step(lenient.reset(q, v))

@@ -149,7 +149,7 @@ def test_each_island_starts_from_its_own_last_solution(refused, monkeypatch):
             warm_islands(*args)
             args[-4][:] = 0
 
-        monkeypatch.setattr(island_module, "warm_islands", refuses)
+        monkeypatch.setattr(island_module.warm_islands, "call", refuses)
     model = _world(4)
     solver = IslandSolver(model, gaussim.Options())
     problem, x_free = _islands_problem(np.random.default_rng(3))
@@ -185,7 +185,7 @@ def test_a_kept_split_serves_only_the_same_islands_all_answered_by_the_pass(monk
             how[1] = 0
             last_x[12:], last_m[4:] = before
 
-    monkeypatch.setattr(island_module, "warm_islands", passes)
+    monkeypatch.setattr(island_module.warm_islands, "call", passes)
     model = _world(4)
     solver = IslandSolver(model, gaussim.Options())
     rng = np.random.default_rng(5)

@@ -7,8 +7,11 @@ import os
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
+import gaussim.kernels.bound as bound_module
+from gaussim.kernels.bound import Bound
 from gaussim.kernels.prebuild import SIGNATURES, code_of, kernel, parse
 
 # What the build's kernels must cover: every shipped scene for 50 ms (the main job in both schemes), and a
@@ -54,6 +57,7 @@ CALLED = (
 import importlib
 import numba
 from numba.core.registry import CPUDispatcher
+from gaussim.kernels.bound import Bound
 from gaussim.kernels.prebuild import code_of
 
 def recording(name, dispatcher):
@@ -73,6 +77,8 @@ for stage in STAGES:
         if isinstance(value, CPUDispatcher) and value.py_func.__module__.startswith("gaussim.kernels."):
             kernel = value.py_func.__module__.rsplit(".", 1)[1] + "." + value.py_func.__name__
             setattr(module, attribute, recording(kernel, value))
+        elif isinstance(value, Bound):  # each call through the dispatcher, recorded
+            value.call = recording(value.name, value.dispatcher)
 """
     + WORKLOAD
 )
@@ -104,3 +110,116 @@ def test_the_build_compiles_every_signature_the_workload_calls():
     }, called
     missing = sorted((name, code) for name, code in called if code not in SIGNATURES.get(name, ()))
     assert not missing, missing
+
+
+def _move_bases_arguments(q_order: str = "C") -> tuple:
+    """move_bases' arguments for one free body turned about z: (q, q_next, v, dt, configuration, velocity)."""
+    q = np.array([0.1, 0.2, 0.3, 0.0, 0.0, np.sin(0.2), np.cos(0.2)], order=q_order)
+    return q, q + 0.0, np.array([1.0, -2.0, 0.5, 0.0, 0.0, 3.0]), 0.01, np.array([0]), np.array([0])
+
+
+def test_a_bound_kernel_calls_the_overload_its_first_call_fits_past_the_dispatcher(monkeypatch):
+    """In a run (checks off) the bound call is numba's compiled entry point itself, with the answer
+    of the dispatcher, for the first call's arguments and for later ones (read-only ones too)."""
+    monkeypatch.setattr(bound_module, "CHECK", False)
+    kernel = Bound("integrator.move_bases")
+    expected = _move_bases_arguments()
+    kernel.dispatcher(*expected)
+    arguments = _move_bases_arguments()
+    kernel.call(*arguments)
+    assert type(kernel.call).__name__ == "builtin_function_or_method"  # no Python frame, no typing
+    np.testing.assert_array_equal(arguments[1], expected[1])
+    np.testing.assert_array_equal(arguments[2], expected[2])
+    again = _move_bases_arguments()
+    again[0].setflags(write=False)
+    kernel.call(*again)
+    np.testing.assert_array_equal(again[1], expected[1])
+
+
+def test_a_bound_kernel_under_the_check_refuses_arguments_of_other_types():
+    """The test suite's setting (conftest): a call whose arguments would need another overload (another
+    dtype, rank or memory order) raises TypeError naming the kernel instead of reading its memory
+    wrongly; one that differs in read-only flags alone runs."""
+    assert bound_module.CHECK
+    kernel = Bound("integrator.move_bases")
+    kernel.call(*_move_bases_arguments())
+    q, q_next, v, dt, configuration, velocity = _move_bases_arguments()
+    with pytest.raises(TypeError, match="kernel integrator.move_bases bound to"):
+        kernel.call(q, q_next, v.astype(np.float32), dt, configuration, velocity)
+    with pytest.raises(TypeError, match="int64"):
+        kernel.call(q, q_next, v, dt, configuration.astype(np.int32), velocity)
+    with pytest.raises(TypeError):
+        kernel.call(q, q_next, v[::2], dt, configuration, velocity)  # not contiguous
+    with pytest.raises(TypeError):
+        kernel.call(q, q_next, v, 1, configuration, velocity)  # an int where a float goes
+    q.setflags(write=False)
+    kernel.call(q, q_next, v, dt, configuration, velocity)
+
+
+def test_a_bound_kernel_takes_the_first_declared_memory_order_a_matrix_of_both_fits():
+    """mirrored is declared for Pinocchio's column-major M first, then for C order: a 1 x 1 matrix is
+    both, and binds the column-major overload, which then answers for any column-major M and refuses
+    a C-ordered one (under the check; which a run's call sites never pass it)."""
+    kernel = Bound("dynamics.mirrored")
+    out = np.zeros((1, 1))
+    kernel.call(np.ones((1, 1)), np.array([1]), out)
+    assert out[0, 0] == 1.0
+    upper = np.asfortranarray(np.triu(np.arange(9.0).reshape(3, 3)))
+    M = np.zeros((3, 3))
+    kernel.call(upper, np.array([3, 2, 1]), M)
+    np.testing.assert_array_equal(M, np.triu(upper) + np.triu(upper, 1).T)
+    with pytest.raises(TypeError, match="dynamics.mirrored"):
+        kernel.call(np.ascontiguousarray(upper), np.array([3, 2, 1]), M)
+
+
+def test_a_call_that_fits_no_declared_signature_leaves_the_kernel_to_the_dispatcher():
+    """Arguments the build declared no signature for (integer matrices where floats go) are typed by
+    numba at each call, as without the binding."""
+    kernel = Bound("dynamics.mirrored")
+    upper, M = np.triu(np.arange(9).reshape(3, 3)), np.zeros((3, 3), dtype=np.int64)
+    kernel.call(upper, np.array([3, 2, 1]), M)
+    np.testing.assert_array_equal(M, np.triu(upper) + np.triu(upper, 1).T)
+    assert kernel.call is kernel.dispatcher
+
+
+def test_arrays_of_a_users_making_reach_the_bound_kernels_as_the_kernels_read_them():
+    """The kernels are bound to C-ordered floats; a user's torque and damping may be strided views, a
+    GaussProblem of a user's making (or a module's rows) column-major, as np.load gives back a
+    Fortran array, or of integers: each step and answer is the one of C-ordered float copies."""
+    import gaussim
+    from gaussim.assembly import GaussProblem
+    from gaussim.solver import GaussSolver
+
+    robot = gaussim.load_robot("double_pendulum")
+    sim, other = gaussim.Simulator(gaussim.Scene(robot)), gaussim.Simulator(gaussim.Scene(robot))
+    wide = np.array([[0.3, 9.0], [-0.2, 9.0]]).ravel()  # the torque in every other entry
+    import pinocchio as pin
+
+    strided = copied = sim.reset(pin.neutral(robot.model), np.array([0.5, -0.2]))
+    damping = np.array([[0.1, 9.0], [0.2, 9.0]]).ravel()
+    for k in range(20):  # the first step's arrays C-ordered (they bind the kernels), then strided
+        given = (wide[::2], damping[::2]) if k else (wide[::2].copy(), damping[::2].copy())
+        strided = sim.step(strided, *given)  # damped: the torque meets a kernel
+        copied = other.step(copied, wide[::2].copy(), damping[::2].copy())
+    np.testing.assert_array_equal(strided.q, copied.q)
+
+    rng = np.random.default_rng(4)
+    root = rng.normal(size=(4, 4))
+    H, g, C, l = (
+        root @ root.T + 4 * np.eye(4),
+        rng.normal(size=4),
+        rng.normal(size=(3, 4)),
+        rng.normal(size=3),
+    )
+    none = (np.zeros((0, 4)), np.zeros(0))
+    expected = GaussSolver(gaussim.Options()).solve(GaussProblem(H, g, *none, C, l, []))
+    answer = GaussSolver(gaussim.Options()).solve(
+        GaussProblem(np.asfortranarray(H), g, *none, np.asfortranarray(C), l, [])
+    )
+    np.testing.assert_allclose(answer.x, expected.x, atol=1e-12)
+    integral = GaussSolver(gaussim.Options()).solve(
+        GaussProblem(
+            np.eye(2, dtype=int), np.array([1, -1]), np.zeros((0, 2)), np.zeros(0), np.eye(2), np.zeros(2), []
+        )
+    )
+    np.testing.assert_allclose(integral.x, [0.0, 1.0], atol=1e-9)

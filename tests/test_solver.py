@@ -43,7 +43,7 @@ def test_warm_start_is_not_stale_when_only_bounds_change(monkeypatch):
     is checked: a stale answer is solved again from a cold start."""
     from gaussim.solver import proxqp
 
-    monkeypatch.setattr(proxqp, "active_set_candidate", lambda *args: (0, (np.nan,) * 5))
+    monkeypatch.setattr(proxqp.active_set_candidate, "call", lambda *args: (0, (np.nan,) * 5))
     solver = GaussSolver(PROXQP)
     resting = solver.solve(_problem(0.0))
     assert resting.lambda_in[0] == pytest.approx(9.81e-3, abs=1e-7)
@@ -528,8 +528,8 @@ def test_a_later_pass_on_the_rows_the_dual_method_holds_goes_to_it_first(monkeyp
 
     problem = _pyramid_problem(np.random.default_rng(3), 3, 8, True, 0)
     tried = []
-    candidate = proxqp.active_set_candidate
-    monkeypatch.setattr(proxqp, "active_set_candidate", lambda *a: tried.append(1) or candidate(*a))
+    candidate = proxqp.active_set_candidate.dispatcher
+    monkeypatch.setattr(proxqp.active_set_candidate, "call", lambda *a: tried.append(1) or candidate(*a))
     gauss = GaussSolver(gaussim.Options(solver=solver))
     first = gauss.solve(problem)  # no last solution: the dual method answers
     assert first.certificate.status is SOLVED_BY[solver] and not tried

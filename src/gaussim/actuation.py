@@ -19,9 +19,12 @@ import numpy as np
 import pinocchio as pin
 
 from .exceptions import InvalidState, shown
-from .kernels.actuation import damped_torque
+from .kernels.bound import Bound
 from .state import real_array
 from .world import World
+
+# the kernels called here, past numba's dispatcher (gaussim.kernels.bound)
+damped_torque = Bound("actuation.damped_torque")
 
 _FLOAT = np.dtype(float)  # a torque of this dtype is read as given
 
@@ -69,7 +72,7 @@ class Actuation:
         D = self._full(damping, "damping", self._padded_damping)
         assert v is not None
         damped = self._damped
-        code, same = damped_torque(
+        code, same = damped_torque.call(
             full, D, v, self._undamped if self.damping is None else self.damping, damped
         )
         if code == 1:
@@ -102,7 +105,9 @@ class Actuation:
         if type(tau) is not np.ndarray and isinstance(tau, Mapping):  # an array first: ABCs are slow
             return self._per_body(tau, name)
         arr = np.asarray(tau)
-        if arr.dtype is not _FLOAT:  # ints, float32, or what is no torque at all (complex, text)
+        # ints, float32, what is no torque at all (complex, text), or a strided view (the kernels
+        # read C-ordered floats: gaussim.kernels.bound)
+        if arr.dtype is not _FLOAT or not arr.flags.c_contiguous:
             arr = real_array(name, arr)
         if arr.shape == (self.nv,):
             return arr

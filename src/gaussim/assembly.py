@@ -15,7 +15,13 @@ import numpy as np
 
 from .constraints.base import ROW_ID_BITS, ConstraintModule, Rows
 from .exceptions import GaussimWarning
-from .kernels.solver import cut, within
+from .kernels.bound import Bound
+
+_FLOAT = np.dtype(float)
+
+# the kernels called here, past numba's dispatcher (gaussim.kernels.bound)
+cut = Bound("solver.cut")
+within = Bound("solver.within")
 
 
 @dataclass
@@ -47,6 +53,12 @@ class GaussProblem:
     source: tuple[GaussProblem, np.ndarray, np.ndarray] | None = None
     rows_key: object = field(default_factory=object, repr=False, compare=False)
 
+    def __post_init__(self) -> None:
+        # the solver's kernels are bound to C-ordered floats (gaussim.kernels.bound): a problem or a
+        # module's rows of a user's making may be neither
+        self.H, self.g, self.A = _c_float(self.H), _c_float(self.g), _c_float(self.A)
+        self.b, self.C, self.l = _c_float(self.b), _c_float(self.C), _c_float(self.l)
+
     def labels(self, equality: bool) -> list[str]:
         """Row names of the equality or inequality rows, in order."""
         if self.source is not None:
@@ -71,7 +83,7 @@ class GaussProblem:
     def island(self, cols: np.ndarray, eq: np.ndarray, ineq: np.ndarray) -> GaussProblem:
         """The problem on the coordinates ``cols`` and the equality and inequality rows ``eq``,
         ``ineq`` (an island: no other row reads those coordinates, and H couples them to no other)."""
-        H, g, A, b, C, l = cut(self.H, self.g, self.A, self.b, self.C, self.l, cols, eq, ineq)
+        H, g, A, b, C, l = cut.call(self.H, self.g, self.A, self.b, self.C, self.l, cols, eq, ineq)
         key = (self.rows_key, cols.tobytes(), eq.tobytes(), ineq.tobytes())  # the same cut of the same rows
         return GaussProblem(H, g, A, b, C, l, [], None, (self, eq, ineq), key)
 
@@ -85,7 +97,7 @@ def _own_ids(module: ConstraintModule, rows: Rows) -> np.ndarray:
         given = np.asarray(rows.ids())
         if given.shape == (count,) and given.dtype.kind in "iu":
             own = given.astype(np.int64, copy=False)  # a uint64 above int64's range turns negative
-            if within(own, 2**ROW_ID_BITS):
+            if within.call(own, 2**ROW_ID_BITS):
                 return own
         warnings.warn(
             f"module '{getattr(module, 'name', type(module).__name__)}': Rows.ids must give one integer in "
@@ -139,6 +151,13 @@ def assemble(
     if previous is not None and _same_rows(previous, blocks, H):
         return GaussProblem(H, g, previous.A, b, previous.C, l, blocks, applied, None, previous.rows_key)
     return GaussProblem(H, g, _stack(equalities, len(g)), b, _stack(inequalities, len(g)), l, blocks, applied)
+
+
+def _c_float(a: np.ndarray) -> np.ndarray:
+    """``a`` itself when a C-contiguous float64 array, else such a copy of it."""
+    if type(a) is np.ndarray and a.dtype is _FLOAT and a.flags.c_contiguous:
+        return a
+    return np.ascontiguousarray(a, dtype=float)
 
 
 def _same_rows(previous: GaussProblem, blocks: list, H: np.ndarray) -> bool:

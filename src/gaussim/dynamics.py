@@ -10,22 +10,23 @@ import numpy as np
 import pinocchio as pin
 
 from .exceptions import InvalidState, SolverError
-from .kernels.dynamics import (
-    armed,
-    constant_terms,
-    factored_terms,
-    floating_terms,
-    frame_accelerations,
-    free_velocity,
-    loaded,
-    mirrored,
-    negated_product,
-    point_jacobians_into,
-    structured_product,
-    structured_solve,
-    structured_terms,
-    unloaded,
-)
+from .kernels.bound import Bound
+from .kernels.dynamics import mirrored
+
+# the kernels called here, past numba's dispatcher (gaussim.kernels.bound)
+armed = Bound("dynamics.armed")
+constant_terms = Bound("dynamics.constant_terms")
+factored_terms = Bound("dynamics.factored_terms")
+floating_terms = Bound("dynamics.floating_terms")
+frame_accelerations = Bound("dynamics.frame_accelerations")
+free_velocity = Bound("dynamics.free_velocity")
+loaded = Bound("dynamics.loaded")
+negated_product = Bound("dynamics.negated_product")
+point_jacobians_into = Bound("dynamics.point_jacobians_into")
+structured_product = Bound("dynamics.structured_product")
+structured_solve = Bound("dynamics.structured_solve")
+structured_terms = Bound("dynamics.structured_terms")
+unloaded = Bound("dynamics.unloaded")
 
 LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 _WORLD = pin.Convention.WORLD
@@ -119,16 +120,16 @@ class FloatingBases:
         for report in reports:
             for _, rows, multipliers in getattr(report, "blocks", ()):
                 if rows.joints is None:
-                    unloaded(rows.J, multipliers, self.velocity, free)
+                    unloaded.call(rows.J, multipliers, self.velocity, free)
                 else:  # a rigid base is its tree's one joint: a row loads it when it reads that joint
-                    loaded(rows.joints, multipliers, self.of_joint, free)
+                    loaded.call(rows.joints, multipliers, self.of_joint, free)
         return free
 
     def frame_acceleration(self, v: np.ndarray) -> np.ndarray:
         """The body-frame acceleration -w x v_l of each base's origin at fixed world velocity, zeros
         elsewhere, shape (nv,): ABA's acceleration less the gauss problem's (its drift terms add it)."""
         c = np.empty(len(v))
-        frame_accelerations(v, self.velocity, c)
+        frame_accelerations.call(v, self.velocity, c)
         return c
 
 
@@ -255,7 +256,7 @@ class DynamicsStage:
         a_free = pin.aba(self.model, self.data, q, v, tau, _WORLD)
         x_free = np.empty(self._nv)  # filled by the kernel: cheaper than a kernel's new array
         # tau is checked only here, where a NaN in it shows
-        reach = free_velocity(v, a_free, dt, x_free, *self._base_args)
+        reach = free_velocity.call(v, a_free, dt, x_free, *self._base_args)
         if not reach < np.inf:  # NaN: x_free is not finite
             if not np.all(np.isfinite(tau)):
                 raise InvalidState.non_finite("tau", tau)
@@ -305,13 +306,13 @@ def compute_dynamics(
         nle = pin.nonLinearEffects(model, data, q, v)
         pin.cholesky.decompose(model, data)
         tree = TreeFactors.of(data) if factors is None else factors
-        g = factored_terms(M, *tree, v, tau, nle, dt, acceleration, *base_args, x_free)
+        g = factored_terms.call(M, *tree, v, tau, nle, dt, acceleration, *base_args, x_free)
     elif structure.constant:  # data.oMi and data.J (WORLD), b, then one kernel
         pin.computeJointJacobians(model, data, q)
         nle = pin.nonLinearEffects(model, data, q, v)
         parts = (structure.M, structure.U, structure.D, structure.parents, structure.subtree)
         M = structure.M
-        g = constant_terms(
+        g = constant_terms.call(
             *parts, structure.armature(model), v, tau, nle, dt, acceleration, *base_args, x_free
         )
     else:  # M's upper triangle, b, data.oMi and data.J (WORLD), O(nv)
@@ -319,11 +320,12 @@ def compute_dynamics(
         pin.nonLinearEffects(model, data, q, v)
         M, f = structure.M, np.empty(len(v))
         h = 0.0 if acceleration else dt
-        if structured_terms(data.M, structure.subtree, v, tau, data.nle, h, M, f):
-            structured_solve(M, structure.parents, structure.subtree, f, structure.U, structure.D, x_free)
+        if structured_terms.call(data.M, structure.subtree, v, tau, data.nle, h, M, f):
+            factor = (structure.U, structure.D)
+            structured_solve.call(M, structure.parents, structure.subtree, f, *factor, x_free)
             g = -f
             if len(bases):
-                floating_terms(v, x_free, dt, acceleration, *base_args)
+                floating_terms.call(v, x_free, dt, acceleration, *base_args)
                 g = _negated(M, x_free, structure)
         else:
             g = None
@@ -350,7 +352,8 @@ def gauss_problem(
     elif structure.constant:  # the Jacobians alone
         pin.computeJointJacobians(model, data, q)
         M = structure.M
-        armed(M, structure.U, structure.D, structure.parents, structure.subtree, structure.armature(model))
+        tree = (structure.U, structure.D, structure.parents, structure.subtree)
+        armed.call(M, *tree, structure.armature(model))
     else:
         pin.crba(model, data, q, _WORLD)  # not computeAllTerms: its RNEA and centroidal terms go unread
         M = structure.M
@@ -361,8 +364,8 @@ def gauss_problem(
 def _negated(M: np.ndarray, x: np.ndarray, structure: MassStructure | None) -> np.ndarray:
     """-M x, on M's structure when there is one."""
     if structure is None:
-        return negated_product(M, x)
-    return -structured_product(M, structure.subtree, x)
+        return negated_product.call(M, x)
+    return -structured_product.call(M, structure.subtree, x)
 
 
 def point_placements(
@@ -420,7 +423,7 @@ def point_jacobians(
     """
     J = joint_jacobians(data)
     result = np.empty((len(joints), 3, J.shape[1]))
-    point_jacobians_into(result, J, *supports, joints, other_joints, points)
+    point_jacobians_into.call(result, J, *supports, joints, other_joints, points)
     return result
 
 

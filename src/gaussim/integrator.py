@@ -19,7 +19,11 @@ import numpy as np
 import pinocchio as pin
 
 from .dynamics import FloatingBases
-from .kernels.integrator import displacement, move_bases
+from .kernels.bound import Bound
+
+# the kernels called here, past numba's dispatcher (gaussim.kernels.bound)
+displacement = Bound("integrator.displacement")
+move_bases = Bound("integrator.move_bases")
 
 _NO_BASES = np.zeros(0, dtype=bool)  # ``free`` when no base turns by the midpoint rule
 
@@ -40,11 +44,11 @@ def integrate(
     ``free`` (k,): which bases turn by the midpoint rule (rigid bases no row touched; None: none).
     The velocity returned is ``v_next`` itself unless a floating base re-expresses it.
     """
-    if not displacement(v, v_next, dt, bases.velocity, _NO_BASES if free is None else free, scratch):
+    if not displacement.call(v, v_next, dt, bases.velocity, _NO_BASES if free is None else free, scratch):
         return None
     q_next = pin.integrate(model, q, scratch)
     if not len(bases):
         return q_next, v_next
     v_out = v_next.copy()
-    move_bases(q, q_next, v_out, dt, bases.configuration, bases.velocity)
+    move_bases.call(q, q_next, v_out, dt, bases.configuration, bases.velocity)
     return q_next, v_out

@@ -5,10 +5,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kernels.boxes import MAX_POINTS, box_pairs
+from ..kernels.bound import Bound
+from ..kernels.boxes import MAX_POINTS
 from .compiled import CompiledPairs
 from .contacts import PATCH_TOLERANCE
 from .pairs import Pair
+
+# the kernels called here, past numba's dispatcher (gaussim.kernels.bound)
+box_pairs = Bound("boxes.box_pairs")
 
 
 class BoxPairs(CompiledPairs):
@@ -33,7 +37,7 @@ class BoxPairs(CompiledPairs):
         self.thin = np.array([2 * h.min() <= PATCH_TOLERANCE for h in self.half], dtype=bool).reshape(-1)
 
     def _kernel(self, placements, near, margin, answer, gaps, normals, points, sizes):  # type: ignore[no-untyped-def]
-        box_pairs(
+        box_pairs.call(
             placements,
             self.spheres.side,
             self.local_rotation,

@@ -7,10 +7,14 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from ..kernels.pairs import gathered, nearby
+from ..kernels.bound import Bound
 from .contacts import Piece, one_pair
 from .narrow import BoundingSpheres, NarrowPhase
 from .pairs import Pair
+
+# the kernels called here, past numba's dispatcher (gaussim.kernels.bound)
+gathered = Bound("pairs.gathered")
+nearby = Bound("pairs.nearby")
 
 
 class CompiledPairs:
@@ -52,13 +56,15 @@ class CompiledPairs:
     def detect(self, data: pin.Data, margin: float, turns: np.ndarray) -> tuple[list[Piece], float]:
         """The contacts of the pairs within ``margin`` [m] at the placements held in ``data``, and a
         lower bound on every pair's gap [m] (``turns`` unused: these patches keep PATCH_TOLERANCE)."""
-        near, clearance = nearby(self.spheres.gaps(data, margin), margin)
+        near, clearance = nearby.call(self.spheres.gaps(data, margin), margin)
         if not len(near):
             return [], clearance
         answer, gaps, normals, points, sizes = self._buffers
         self._kernel(self.spheres.placements(data), near, margin, answer, gaps, normals, points, sizes)
         # one piece for all the points found: a piece per pair costs more than the kernel
-        found, asked, clearance = gathered(self.owner, near, answer, gaps, normals, points, sizes, clearance)
+        found, asked, clearance = gathered.call(
+            self.owner, near, answer, gaps, normals, points, sizes, clearance
+        )
         pieces: list[Piece] = [found] if len(found[0]) else []
         self.coal.use_margin(margin)
         for i in asked.tolist():

@@ -6,9 +6,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kernels.cylinders import CAP_SAMPLES, ground_cylinders
+from ..kernels.bound import Bound
+from ..kernels.cylinders import CAP_SAMPLES
 from .compiled import CompiledPairs
 from .pairs import Pair
+
+# the kernels called here, past numba's dispatcher (gaussim.kernels.bound)
+ground_cylinders = Bound("cylinders.ground_cylinders")
 
 
 class GroundCylinders(CompiledPairs):
@@ -30,7 +34,7 @@ class GroundCylinders(CompiledPairs):
         ).reshape(-1, 4)
 
     def _kernel(self, placements, near, margin, answer, gaps, normals, points, sizes):  # type: ignore[no-untyped-def]
-        ground_cylinders(
+        ground_cylinders.call(
             placements,
             self.spheres.side,
             self.local_rotation,

@@ -11,8 +11,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..dynamics import Supports, joint_jacobians
-from ..kernels.collision import closing, in_pair_order
-from ..kernels.pairs import point_keys
+from ..kernels.bound import Bound
 from ..scene import Scene
 from .boxes import BoxPairs
 from .contacts import MAX_POINTS, NO_CONTACTS, NOTHING_FOUND, Contacts, Piece
@@ -22,6 +21,11 @@ from .margin import WIDENING, MarginSchedule
 from .narrow import NarrowPhase
 from .pairs import Pair
 from .primitives import PrimitivePairs
+
+# the kernels called here, past numba's dispatcher (gaussim.kernels.bound)
+closing = Bound("collision.closing")
+in_pair_order = Bound("collision.in_pair_order")
+point_keys = Bound("pairs.point_keys")
 
 # A fast step leaves out the points it cannot close only when they are at least this fraction of
 # those found: fewer rows do not repay what a new set of rows costs the solver's warm start (bin_pile,
@@ -159,7 +163,7 @@ class ContactDetector:
         owner, points, normals, _ = found
         far = np.empty(len(owner))
         joints, others, mu = self.joint[owner], self.other_joint[owner], self.friction[owner]
-        closing(
+        closing.call(
             joint_jacobians(data), *self.supports, joints, others, points, normals, mu, v, x, dt, x_scale, far
         )
         return far
@@ -185,7 +189,7 @@ class ContactDetector:
         if len(pieces) == 1:
             return pieces[0]
         owner, points, normals, gaps = (np.concatenate([p[i] for p in pieces]) for i in range(4))
-        in_pair_order(owner, points, normals, gaps)
+        in_pair_order.call(owner, points, normals, gaps)
         return owner, points, normals, gaps
 
     def contacts(self, found: Piece) -> Contacts:
@@ -206,7 +210,7 @@ class ContactDetector:
     def _layout(self, owner: np.ndarray) -> tuple:
         """What the contacts of pairs ``owner`` (one entry per point, sorted) have that does not move."""
         keys = np.empty(len(owner), np.int64)
-        starts, counts = point_keys(owner, MAX_POINTS, keys)
+        starts, counts = point_keys.call(owner, MAX_POINTS, keys)
         arrays = [
             self.joint[owner],
             self.other_joint[owner],

@@ -14,9 +14,13 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from ..kernels.collision import NARROW_SLACK, ground_hulls
+from ..kernels.bound import Bound
+from ..kernels.collision import NARROW_SLACK
 from .contacts import PATCH_MIN_EXTENT, PATCH_TOLERANCE, Piece
 from .pairs import JointPlacements, Pair, vertices
+
+# the kernels called here, past numba's dispatcher (gaussim.kernels.bound)
+ground_hulls = Bound("collision.ground_hulls")
 
 # A flat face on the ground is supported by the vertices extreme along these many directions of
 # the tangent plane (every 360/n degrees): the corners of a box, the outline of a sole.
@@ -118,7 +122,7 @@ def touching(
     ``diameters`` (P,) [m]) deep; ``index``: the declared pair of each hull, shape (P,).
     Returns: the contacts of the hulls (a :data:`Piece`, hull by hull) and the least gap of all the
     hulls [m]."""
-    return ground_hulls(  # type: ignore[no-any-return]
+    return ground_hulls.call(  # type: ignore[no-any-return]
         placements,
         joints,
         hulls.plane,

@@ -6,8 +6,11 @@ import numpy as np
 import pinocchio as pin
 
 from ..dynamics import sparse_rows
-from ..kernels.collision import travel
+from ..kernels.bound import Bound
 from .pairs import Pair
+
+# the kernels called here, past numba's dispatcher (gaussim.kernels.bound)
+travel = Bound("collision.travel")
 
 # The margin is this many times what the step needs: it changes by factors of this or more.
 WIDENING = 1.5
@@ -83,7 +86,7 @@ class MarginSchedule:
             if self.clearance - 2 * coarse > self.base_margin:
                 self.clearance -= coarse
                 return False
-        distance = travel(*self.levers, *self.turn_levers, v, x, dt, x_scale, self._closing, self.turns)
+        distance = travel.call(*self.levers, *self.turn_levers, v, x, dt, x_scale, self._closing, self.turns)
         self.clearance -= distance
         self.distance = distance
         needed = self.base_margin + distance

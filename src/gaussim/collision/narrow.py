@@ -7,10 +7,15 @@ import numpy as np
 import pinocchio as pin
 
 from ..exceptions import ContactError
-from ..kernels.pairs import nearby, sphere_gaps, support_gaps
+from ..kernels.bound import Bound
 from ..linalg import finite
 from .contacts import PATCH_MIN_EXTENT, PATCH_TOLERANCE, Piece, one_pair
 from .pairs import JointPlacements, Pair, vertices
+
+# the kernels called here, past numba's dispatcher (gaussim.kernels.bound)
+nearby = Bound("pairs.nearby")
+sphere_gaps = Bound("pairs.sphere_gaps")
+support_gaps = Bound("pairs.support_gaps")
 
 
 class NarrowPhase:
@@ -44,7 +49,7 @@ class NarrowPhase:
         """The contacts of the pairs within ``margin`` [m] at the placements held in ``data``, and a
         lower bound on every pair's gap [m] (``turns`` unused: these patches keep PATCH_TOLERANCE)."""
         self.use_margin(margin)
-        near, clearance = nearby(self.spheres.gaps(data, margin), margin)
+        near, clearance = nearby.call(self.spheres.gaps(data, margin), margin)
         pieces: list[Piece] = []
         for i in near.tolist():
             hit, least = self.collide(self.pairs[i], data)
@@ -157,10 +162,10 @@ class BoundingSpheres:
         gaps = np.empty(len(self.radius))
         if len(gaps):
             placements, spheres = self.placements(data), (self.side, self.centers, self.radius)
-            sphere_gaps(placements, *spheres, self.obstacle_radius, self.boxes, margin, gaps)
+            sphere_gaps.call(placements, *spheres, self.obstacle_radius, self.boxes, margin, gaps)
             if self.vertices is not None:
                 box = (self.centers, self.boxes, self.obstacle_radius)
-                support_gaps(placements, self.side, *self.vertices, *box, margin, gaps)
+                support_gaps.call(placements, self.side, *self.vertices, *box, margin, gaps)
         return gaps
 
 

@@ -7,9 +7,13 @@ from __future__ import annotations
 import coal
 import numpy as np
 
-from ..kernels.primitives import BOX, CAPSULE, MAX_POINTS, SPHERE, primitive_pairs
+from ..kernels.bound import Bound
+from ..kernels.primitives import BOX, CAPSULE, MAX_POINTS, SPHERE
 from .compiled import CompiledPairs
 from .pairs import Pair
+
+# the kernels called here, past numba's dispatcher (gaussim.kernels.bound)
+primitive_pairs = Bound("primitives.primitive_pairs")
 
 
 class PrimitivePairs(CompiledPairs):
@@ -32,7 +36,7 @@ class PrimitivePairs(CompiledPairs):
         self.dims = np.array([[d for _, d in sides] for sides in described]).reshape(-1, 2, 3)
 
     def _kernel(self, placements, near, margin, answer, gaps, normals, points, sizes):  # type: ignore[no-untyped-def]
-        primitive_pairs(
+        primitive_pairs.call(
             placements,
             self.spheres.side,
             self.local_rotation,

@@ -21,8 +21,12 @@ import numpy as np
 import pinocchio as pin
 
 from ..collision import Contacts
-from ..kernels.contact import bound_of, restricting
+from ..kernels.bound import Bound
+from ..kernels.contact import bound_of
 from ..options import Options
+
+# the kernels called here, past numba's dispatcher (gaussim.kernels.bound)
+restricting = Bound("contact.restricting")
 
 if TYPE_CHECKING:
     from ..assembly import GaussProblem
@@ -189,6 +193,6 @@ def is_active(ctx: Context, phi: np.ndarray, rate: np.ndarray, margin: float) ->
     it let Solo-12's feet take turns sinking at dt = 10 ms).
     """
     o = ctx.options
-    return restricting(  # type: ignore[no-any-return]
+    return restricting.call(  # type: ignore[no-any-return]
         LEVELS[ctx.level], phi, rate, o.dt, margin, o.active_tolerance, o.restitution_threshold
     )

@@ -64,17 +64,19 @@ from ..dynamics import (
     point_jacobians,
     point_placements,
 )
-from ..kernels.contact import (
-    contact_row_ids,
-    newton_moves,
-    pyramids,
-    secant_moves,
-    shifted_bounds,
-    slips,
-    unpacked,
-)
-from ..kernels.solver import ACTIVE_SET_FLOOR, matched_values
+from ..kernels.bound import Bound
+from ..kernels.solver import ACTIVE_SET_FLOOR
 from .base import LEVELS, ConstraintModule, Context, Rows, is_active
+
+# the kernels called here, past numba's dispatcher (gaussim.kernels.bound)
+contact_row_ids = Bound("contact.contact_row_ids")
+newton_moves = Bound("contact.newton_moves")
+pyramids = Bound("contact.pyramids")
+secant_moves = Bound("contact.secant_moves")
+shifted_bounds = Bound("contact.shifted_bounds")
+slips = Bound("contact.slips")
+unpacked = Bound("contact.unpacked")
+matched_values = Bound("solver.matched_values")
 
 # More than a contact's rows (its pyramid's facets, at most options.MAXIMA["friction_facets"]): a row's
 # id is its contact's key times this plus its place among them.
@@ -208,7 +210,7 @@ class ContactBatch:
     def _views(self) -> tuple[np.ndarray, ...]:
         m = len(self.contacts)
         nv = (len(self.packed) - 3 * int(self.starts[-1]) - 6 * m) // (3 * m)
-        return unpacked(self.packed, m, nv)
+        return unpacked.call(self.packed, m, nv)
 
     @property
     def J(self) -> np.ndarray:
@@ -243,7 +245,7 @@ class ContactBatch:
         key = self.contacts.key
         if key is None:  # contacts of no detector's making: named by their order
             key = np.arange(len(self.starts) - 1, dtype=np.int64)
-        return contact_row_ids(self.starts, key, ROWS_PER_CONTACT)
+        return contact_row_ids.call(self.starts, key, ROWS_PER_CONTACT)
 
 
 def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -282,7 +284,7 @@ def pyramid_rows(
     rows, bound = np.empty((most, nv)), np.empty(most)
     packed, starts = np.empty(3 * m * nv + 3 * most + 6 * m), np.empty(m + 1, np.int64)
     read = np.empty((most, 2), np.int64)
-    total, sliding, force = pyramids(
+    total, sliding, force = pyramids.call(
         joint_jacobians,
         *supports,
         contacts.joint,
@@ -405,7 +407,7 @@ class ContactModule(ConstraintModule[ContactBatch]):
         if contacts.key is key:  # the detector's layout of the last step: the same contacts, in order
             return start
         stuck = np.empty(len(contacts))
-        if not matched_values(key, np.isfinite(start[:, 0]).astype(float), contacts.key, stuck):
+        if not matched_values.call(key, np.isfinite(start[:, 0]).astype(float), contacts.key, stuck):
             return no_slip
         return _read_only(np.where(stuck[:, None] == 1.0, 0.0, no_slip))
 
@@ -464,7 +466,7 @@ class ContactModule(ConstraintModule[ContactBatch]):
             mu = b.contacts.friction
             joints = (b.contacts.joint, b.contacts.other_joint)
             start = np.empty((m, 3))  # the next step's start, from the last pass's slips
-            slip, residual, stuck = slips(
+            slip, residual, stuck = slips.call(
                 b.packed,
                 b.slip,
                 b.starts,
@@ -509,7 +511,7 @@ def _reshifted(rows: Rows[ContactBatch], slip: np.ndarray, relaxed: bool) -> Row
     motion, not the slip), where posing them again cost a friction pass most of its time."""
     b = rows.data
     bound = np.empty_like(rows.bound)
-    shifted_bounds(rows.bound, b.starts, b.contacts.friction, b.slip, slip, bound)
+    shifted_bounds.call(rows.bound, b.starts, b.contacts.friction, b.slip, slip, bound)
     batch = ContactBatch(b.contacts, b.packed, b.starts, b.sliding, b.shifts, relaxed, slip)
     return Rows(rows.J, bound, False, rows.labels, batch, rows.force, joints=rows.joints, ids=rows.ids)
 
@@ -585,7 +587,7 @@ def _secant(
     while the QP's active set stays."""
     moved, residual = np.empty_like(used), np.empty_like(used)
     move, previous = (_NO_MOVE, _NO_MOVE) if last is None else last
-    secant_moves(used, mapped, move, previous, SECANT_SCALES, moved, residual)
+    secant_moves.call(used, mapped, move, previous, SECANT_SCALES, moved, residual)
     if newton is not None:
         newton(used, mapped, NEWTON_SCALES, moved)
     return used + moved, (moved, residual)

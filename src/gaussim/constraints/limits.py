@@ -11,8 +11,11 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from ..kernels.contact import near_limits
+from ..kernels.bound import Bound
 from .base import LEVELS, ConstraintModule, Context, Rows
+
+# the kernels called here, past numba's dispatcher (gaussim.kernels.bound)
+near_limits = Bound("contact.near_limits")
 
 
 @dataclass
@@ -58,7 +61,7 @@ class LimitModule(ConstraintModule[np.ndarray]):
             return None
         o = ctx.options
         settings = (o.dt, o.limit_margin, o.active_tolerance, o.restitution_threshold, o.stabilisation)
-        count = near_limits(
+        count = near_limits.call(
             ctx.q, ctx.v, self.idx_q, self.idx_v, self.signs, self.limits, LEVELS[ctx.level], settings,
             self._active, self._bound,
         )  # fmt: skip

@@ -25,7 +25,9 @@ _CODES: dict[types.Type, str] = {dtype: code for code, dtype in _DTYPES.items()}
 _SIDES = ("f2 f1 f2 f1", "f2 f1 f2r f1r", "f2r f1r f2 f1")
 
 # The signatures the shipped scenes call the kernels with from Python (both schemes): tests/test_kernels.py
-# checks that the main job needs no other.
+# checks that the main job needs no other. A stage's kernel is bound to the first one its first call fits
+# (gaussim.kernels.bound): a matrix that is both C- and F-contiguous (1 x n) fits either order, so the
+# order a call site passes in general comes first.
 SIGNATURES = {
     "dynamics.factored_terms": [
         f"f2 {U} f1 i1 i1 {v} {tau} f1 f b i1 f3 b1 f1"

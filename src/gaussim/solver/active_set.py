@@ -14,7 +14,11 @@ a few rows, which those steps find at the cost of a linear solve each instead of
 
 from __future__ import annotations
 
-from ..kernels.solver import ACTIVE_SET_FLOOR, active_set_candidate
+from ..kernels.bound import Bound
+from ..kernels.solver import ACTIVE_SET_FLOOR
+
+# the kernels called here, past numba's dispatcher (gaussim.kernels.bound)
+active_set_candidate = Bound("solver.active_set_candidate")
 
 __all__ = ["ACTIVE_SET_FLOOR", "ACTIVE_SET_UP_TO", "active_set_candidate"]
 

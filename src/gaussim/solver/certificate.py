@@ -17,7 +17,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..assembly import GaussProblem
-from ..kernels.solver import kkt_residuals, violates
+from ..kernels.bound import Bound
+
+# the kernels called here, past numba's dispatcher (gaussim.kernels.bound)
+kkt_residuals = Bound("solver.kkt_residuals")
+violates = Bound("solver.violates")
 
 # A solution is accepted when its relative KKT residual (see Certificate) is below KKT_RTOL * eps_abs.
 KKT_RTOL = 100.0
@@ -152,7 +156,7 @@ def kkt_residual(problem: GaussProblem, x: np.ndarray, lambda_eq: np.ndarray, la
     """Largest violation of the KKT conditions of the Gauss problem at (x, lambda_eq, lambda_in >= 0)
     (see the module's docstring); NaN when any of them is not finite."""
     p = problem
-    return kkt_residuals(p.H, p.g, p.A, p.b, p.C, p.l, x, lambda_eq, lambda_in)[0]
+    return kkt_residuals.call(p.H, p.g, p.A, p.b, p.C, p.l, x, lambda_eq, lambda_in)[0]
 
 
 def checked(
@@ -169,9 +173,9 @@ def checked(
     solution, the free motion) is first refused at the first row it violates, without the full check;
     a solver's answer, which meets its rows to its tolerance, skips that pass over the rows."""
     p, n_eq = problem, len(problem.b)
-    if screened and violates(p.C, p.l, x, tolerance):
+    if screened and violates.call(p.C, p.l, x, tolerance):
         return None
-    residual, relative, primal, dual, gap = kkt_residuals(
+    residual, relative, primal, dual, gap = kkt_residuals.call(
         p.H, p.g, p.A, p.b, p.C, p.l, x, multipliers[:n_eq], multipliers[n_eq:]
     )
     if not relative <= tolerance:  # NaN fails too

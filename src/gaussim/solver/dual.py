@@ -24,17 +24,18 @@ import daqp
 import numpy as np
 
 from ..assembly import GaussProblem
-from ..kernels.dual import (
-    OPTIMAL,
-    dual_iterations,
-    envelope_cholesky,
-    free_products,
-    primal_answer,
-    start_set,
-    transformed_rows,
-)
-from ..kernels.solver import matched_values
+from ..kernels.bound import Bound
+from ..kernels.dual import OPTIMAL
 from .certificate import Solution, Status, checked
+
+# the kernels called here, past numba's dispatcher (gaussim.kernels.bound)
+dual_iterations = Bound("dual.dual_iterations")
+envelope_cholesky = Bound("dual.envelope_cholesky")
+free_products = Bound("dual.free_products")
+primal_answer = Bound("dual.primal_answer")
+start_set = Bound("dual.start_set")
+transformed_rows = Bound("dual.transformed_rows")
+matched_values = Bound("solver.matched_values")
 
 _OPTIMAL = 1  # DAQP's exitflag of an optimal solution
 _EQUALITY = 5  # DAQP's sense of an equality row
@@ -85,7 +86,7 @@ class SparseDualActiveSet:
         if self._g is None or self._g.tobytes() != p.g.tobytes():
             self._g = np.array(p.g, dtype=float)
             L, first, _, ptr, idx, val, _, z0, e = self._arrays
-            free_products(L, first, self._g, ptr, idx, val, z0, e)
+            free_products.call(L, first, self._g, ptr, idx, val, z0, e)
         flag, iterations = 0, 0
         if self._size >= 0:  # the working set the last solve on these rows left
             flag, iterations = self._run(lower, n_eq, self._size)
@@ -99,7 +100,7 @@ class SparseDualActiveSet:
         L, first = self._arrays[:2]
         W, _, _, _, lam, _, z = self._set[:7]
         x, multipliers = np.empty(len(p.g)), np.empty(len(lower))
-        primal_answer(L, first, z, self._size, W, lam, x, multipliers)
+        primal_answer.call(L, first, z, self._size, W, lam, x, multipliers)
         solution = checked(p, x, multipliers.copy(), Status.DUAL_SOLVED, self.tolerance, iterations, False)
         if solution is None:  # refused: neither its working set nor its multipliers start the next
             self._size = -1
@@ -115,11 +116,11 @@ class SparseDualActiveSet:
         (m, n), self._size, self._g = rows.shape, -1, None
         L, first, parent = np.empty((n, n)), np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
         self._key = None
-        if not envelope_cholesky(H, L, first, parent):
+        if not envelope_cholesky.call(H, L, first, parent):
             return False
         ptr, idx, val = np.empty(m + 1, dtype=np.int64), np.empty(m * n, dtype=np.int64), np.empty(m * n)
         masks, mark = np.empty(m, dtype=np.int64), np.full(n, -1, dtype=np.int64)
-        transformed_rows(L, first, parent, rows, ptr, idx, val, masks, np.zeros(n), mark)
+        transformed_rows.call(L, first, parent, rows, ptr, idx, val, masks, np.zeros(n), mark)
         self._arrays = (L, first, parent, ptr, idx, val, masks, np.empty(n), np.empty(m))
         # the working set: rows W, factors Lw, Dw and each factor row's first column, multipliers, place
         # of each row, z, scratch
@@ -134,7 +135,7 @@ class SparseDualActiveSet:
         ptr, idx, val, masks = self._arrays[3:7]
         W, Lw, Dw, F, lam, pos, _, work = self._set
         return int(
-            start_set(ptr, idx, val, masks, n_eq, start, DEPENDENCE, W, Lw, Dw, F, lam, pos, *work[2:4])
+            start_set.call(ptr, idx, val, masks, n_eq, start, DEPENDENCE, W, Lw, Dw, F, lam, pos, *work[2:4])
         )
 
     def _run(self, lower: np.ndarray, n_eq: int, size: int) -> tuple[int, int]:
@@ -143,7 +144,7 @@ class SparseDualActiveSet:
         ptr, idx, val, masks, z0, e = self._arrays[3:]
         W, Lw, Dw, F, lam, pos, z, work = self._set
         self._size = -1  # the set is changed in place: none is kept until the method says optimal
-        flag, iterations, size = dual_iterations(
+        flag, iterations, size = dual_iterations.call(
             ptr,
             idx,
             val,
@@ -270,4 +271,4 @@ def matched_start(last: tuple[np.ndarray, np.ndarray] | None, new: np.ndarray) -
     if last is None or not len(last[1]):
         return None
     start = np.empty(len(new))
-    return start if matched_values(*last, new, start) else None
+    return start if matched_values.call(*last, new, start) else None

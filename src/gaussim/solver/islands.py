@@ -16,10 +16,15 @@ import numpy as np
 import pinocchio as pin
 
 from ..assembly import GaussProblem
-from ..kernels.solver import islands, members, warm_islands
+from ..kernels.bound import Bound
 from ..options import Options
 from .certificate import Certificate
 from .proxqp import GaussSolver, warm_certificate
+
+# the kernels called here, past numba's dispatcher (gaussim.kernels.bound)
+islands = Bound("solver.islands")
+members = Bound("solver.members")
+warm_islands = Bound("solver.warm_islands")
 
 # How many islands' solvers (QP objects and last solutions) are kept for warm starts: islands form and
 # split as bodies touch and part.
@@ -98,7 +103,7 @@ class IslandSolver:
         if self.n_trees > 1:
             applied = self._none if p.applied is None else p.applied
             read = _row_joints(p)
-            island_of_tree, island_of_row, n = islands(
+            island_of_tree, island_of_row, n = islands.call(
                 p.A, p.C, read, self.joint_tree, applied, self.tree, self.n_trees
             )
             # several islands, or one that leaves a tree out; and no row that reads no coordinate
@@ -132,7 +137,7 @@ class IslandSolver:
         how, residuals, last_x, last_m = layout.how, layout.residuals, layout.last_x, layout.last_m
         if layout.tried.any():
             problem = (p.H, p.g, p.A, p.b, p.C, p.l)
-            warm_islands(
+            warm_islands.call(
                 *problem,
                 layout.parts,
                 layout.tried,
@@ -170,12 +175,12 @@ class IslandSolver:
         :func:`~gaussim.kernels.solver.islands`), their solvers' last solutions gathered."""
         n_eq = key[0]
         parts = (
-            *members(island_of_tree[self.tree], n),
-            *members(island_of_row[:n_eq], n),
-            *members(island_of_row[n_eq:], n),
+            *members.call(island_of_tree[self.tree], n),
+            *members.call(island_of_row[:n_eq], n),
+            *members.call(island_of_row[n_eq:], n),
         )
         _, col_start, _, eq_start, _, ineq_start = parts
-        trees, tree_start = members(island_of_tree, n)
+        trees, tree_start = members.call(island_of_tree, n)
         solvers, lasts = [], []
         for i in range(n):
             solver = self._solver(tuple(trees[tree_start[i] : tree_start[i + 1]].tolist()))

@@ -15,7 +15,7 @@ import numpy as np
 
 from ..assembly import GaussProblem
 from ..exceptions import GaussimWarning
-from ..kernels.solver import read_results
+from ..kernels.bound import Bound
 from ..options import Options
 from ..portable import portable_proxsuite
 from .active_set import ACTIVE_SET_FLOOR, ACTIVE_SET_UP_TO, active_set_candidate
@@ -30,6 +30,9 @@ from .certificate import (
 )
 from .diagnosis import failure, infeasibility
 from .dual import DaqpActiveSet, SparseDualActiveSet
+
+# the kernels called here, past numba's dispatcher (gaussim.kernels.bound)
+read_results = Bound("solver.read_results")
 
 proxqp = portable_proxsuite().proxqp
 
@@ -207,7 +210,7 @@ class GaussSolver:
         candidate = self._candidate
         if len(candidate[0]) != len(x) or len(candidate[1]) != len(multipliers):
             candidate = self._candidate = np.empty_like(x), np.empty_like(multipliers)
-        how, residuals = active_set_candidate(
+        how, residuals = active_set_candidate.call(
             p.H, p.g, p.A, p.b, p.C, p.l, x, multipliers, self.options.eps_abs, floor, *candidate
         )
         if not how:
@@ -253,7 +256,7 @@ class GaussSolver:
         x, y, z, info = self._results
         p = problem
         # copies (ProxQP's arrays are overwritten by the next solve); the multipliers are -y, -z
-        x, multipliers, residual, relative, _, _, _ = read_results(p.H, p.g, p.A, p.b, p.C, p.l, x, y, z)
+        x, multipliers, residual, relative, _, _, _ = read_results.call(p.H, p.g, p.A, p.b, p.C, p.l, x, y, z)
         status = info.status
         certificate = Certificate(  # ProxQP's info gives Python ints and floats
             Status.SOLVED if status is _SOLVED else _STATUS[status],

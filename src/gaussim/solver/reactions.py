@@ -19,8 +19,11 @@ from __future__ import annotations
 import numpy as np
 
 from ..assembly import GaussProblem
-from ..kernels.solver import least_norm
+from ..kernels.bound import Bound
 from .certificate import KKT_RTOL, Status, checked
+
+# the kernels called here, past numba's dispatcher (gaussim.kernels.bound)
+least_norm = Bound("solver.least_norm")
 
 # Up to this many coordinates the reactions are the least-norm ones; a larger problem (a pile of 20
 # boxes) reports its solver's: the dense factorization of its size would cost more than its step.
@@ -42,7 +45,7 @@ def least_norm_multipliers(
         return multipliers
     x = np.array(x)  # writable, as the kernels' compiled signatures take it (a certified last answer is not)
     spread = np.empty_like(multipliers)
-    least = least_norm(problem.H, problem.g, problem.A, problem.C, problem.l, x, eps_abs, spread)
+    least = least_norm.call(problem.H, problem.g, problem.A, problem.C, problem.l, x, eps_abs, spread)
     z = spread[len(problem.b) :]
     if not least >= -eps_abs * max(1.0, float(np.abs(z).max(initial=0.0))):  # round-off below 0 passes
         return multipliers
