@@ -223,3 +223,20 @@ def test_arrays_of_a_users_making_reach_the_bound_kernels_as_the_kernels_read_th
         )
     )
     np.testing.assert_allclose(integral.x, [0.0, 1.0], atol=1e-9)
+    # a module's rows, column-major integers, as assembly takes them
+    from gaussim.assembly import assemble
+    from gaussim.constraints.base import ConstraintModule, Rows
+
+    class Floor(ConstraintModule):
+        name = "floor"
+
+        def rows(self, ctx):
+            return None
+
+    J = np.asfortranarray(np.array([[1, 0, 0, 0], [0, 1, 1, 0]]))
+    users = Rows(J, np.array([1, -2]), False, lambda: ["a", "b"])
+    mine = Rows(J.astype(float, order="C"), np.array([1.0, -2.0]), False, lambda: ["a", "b"])
+    expected = GaussSolver(gaussim.Options()).solve(assemble(H, g, [(Floor(), mine)]))
+    answer = GaussSolver(gaussim.Options()).solve(assemble(H, g, [(Floor(), users)]))
+    np.testing.assert_allclose(answer.x, expected.x, atol=1e-12)
+    assert expected.x[0] >= 1.0 - 1e-9

@@ -8,7 +8,7 @@ with g = -(M v + dt F) (velocity level), -M v (impulse level) or -F (acceleratio
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import InitVar, dataclass, field
 from functools import cache, cached_property
 
 import numpy as np
@@ -52,12 +52,15 @@ class GaussProblem:
     applied: np.ndarray | None = None
     source: tuple[GaussProblem, np.ndarray, np.ndarray] | None = None
     rows_key: object = field(default_factory=object, repr=False, compare=False)
+    # True: the arrays are C-ordered floats already (assemble's and an island's own)
+    checked: InitVar[bool] = False
 
-    def __post_init__(self) -> None:
-        # the solver's kernels are bound to C-ordered floats (gaussim.kernels.bound): a problem or a
-        # module's rows of a user's making may be neither
-        self.H, self.g, self.A = _c_float(self.H), _c_float(self.g), _c_float(self.A)
-        self.b, self.C, self.l = _c_float(self.b), _c_float(self.C), _c_float(self.l)
+    def __post_init__(self, checked: bool) -> None:
+        # the solver's kernels are bound to C-ordered floats (gaussim.kernels.bound): a problem of a
+        # user's making may hold other arrays
+        if not checked:
+            self.H, self.g, self.A = _c_float(self.H), _c_float(self.g), _c_float(self.A)
+            self.b, self.C, self.l = _c_float(self.b), _c_float(self.C), _c_float(self.l)
 
     def labels(self, equality: bool) -> list[str]:
         """Row names of the equality or inequality rows, in order."""
@@ -85,7 +88,7 @@ class GaussProblem:
         ``ineq`` (an island: no other row reads those coordinates, and H couples them to no other)."""
         H, g, A, b, C, l = cut.call(self.H, self.g, self.A, self.b, self.C, self.l, cols, eq, ineq)
         key = (self.rows_key, cols.tobytes(), eq.tobytes(), ineq.tobytes())  # the same cut of the same rows
-        return GaussProblem(H, g, A, b, C, l, [], None, (self, eq, ineq), key)
+        return GaussProblem(H, g, A, b, C, l, [], None, (self, eq, ineq), key, True)
 
 
 def _own_ids(module: ConstraintModule, rows: Rows) -> np.ndarray:
@@ -149,8 +152,11 @@ def assemble(
             applied = rows.force if applied is None else applied + rows.force
     b, l = _bounds(equalities), _bounds(inequalities)
     if previous is not None and _same_rows(previous, blocks, H):
-        return GaussProblem(H, g, previous.A, b, previous.C, l, blocks, applied, None, previous.rows_key)
-    return GaussProblem(H, g, _stack(equalities, len(g)), b, _stack(inequalities, len(g)), l, blocks, applied)
+        return GaussProblem(
+            H, g, previous.A, b, previous.C, l, blocks, applied, None, previous.rows_key, True
+        )
+    A, C = _stack(equalities, len(g)), _stack(inequalities, len(g))
+    return GaussProblem(H, g, A, b, C, l, blocks, applied, None, object(), True)
 
 
 def _c_float(a: np.ndarray) -> np.ndarray:
@@ -173,19 +179,19 @@ def _same_rows(previous: GaussProblem, blocks: list, H: np.ndarray) -> bool:
 
 
 def _bounds(chosen: list[tuple[ConstraintModule, Rows]]) -> np.ndarray:
-    if len(chosen) == 1:
-        return chosen[0][1].bound
+    if len(chosen) == 1:  # a module's own array (a user's module may return any)
+        return _c_float(chosen[0][1].bound)
     if not chosen:
         return _none(0)[1]
-    return np.concatenate([rows.bound for _, rows in chosen])
+    return np.concatenate([rows.bound for _, rows in chosen], dtype=float)
 
 
 def _stack(chosen: list[tuple[ConstraintModule, Rows]], nv: int) -> np.ndarray:
     if len(chosen) == 1:
-        return chosen[0][1].J
+        return _c_float(chosen[0][1].J)
     if not chosen:
         return _none(nv)[0]
-    return np.vstack([rows.J for _, rows in chosen])
+    return np.vstack([rows.J for _, rows in chosen], dtype=float)
 
 
 @cache
