@@ -40,6 +40,9 @@ class GaussProblem:
         rows_key: stands for the values of H, A and C: a problem with an equal key (==) has the same
             ones (its g, b and l may differ: a friction pass's bounds), so a solver that holds
             factors of them need not compare them. An island's is its source's key and its cut.
+
+    Arrays that are not C-ordered float64 (a problem of a user's making) are copied into such ones,
+    which the solver's kernels read; ``checked=True`` (assemble's and an island's own) skips the check.
     """
 
     H: np.ndarray
@@ -52,13 +55,10 @@ class GaussProblem:
     applied: np.ndarray | None = None
     source: tuple[GaussProblem, np.ndarray, np.ndarray] | None = None
     rows_key: object = field(default_factory=object, repr=False, compare=False)
-    # True: the arrays are C-ordered floats already (assemble's and an island's own)
     checked: InitVar[bool] = False
 
     def __post_init__(self, checked: bool) -> None:
-        # the solver's kernels are bound to C-ordered floats (gaussim.kernels.bound): a problem of a
-        # user's making may hold other arrays
-        if not checked:
+        if not checked:  # the solver's kernels are bound to C-ordered floats (gaussim.kernels.bound)
             self.H, self.g, self.A = _c_float(self.H), _c_float(self.g), _c_float(self.A)
             self.b, self.C, self.l = _c_float(self.b), _c_float(self.C), _c_float(self.l)
 

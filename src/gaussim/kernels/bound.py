@@ -1,8 +1,8 @@
 """Kernels the step calls past numba's dispatcher.
 
 numba's dispatcher types every argument of every call to pick a compiled overload (30 to 60 ns an
-array): on Solo-12 standing, the step's nine kernel calls and their 112 arguments spend 5 us of its
-45 us there. A :class:`Bound` kernel picks its overload once, at its first call: the first of the
+array): on Solo-12 standing, the step's nine kernel calls and their 112 arguments spent 3 to 5 us of
+its 45 us there. A :class:`Bound` kernel picks its overload once, at its first call: the first of the
 kernel's declared signatures (:data:`.prebuild.SIGNATURES`) that the arguments fit, whose overload's
 entry point it calls from then on (a first call that fits none leaves it with the dispatcher). Its
 call site passes arrays gaussim makes, whose dtype, dimensions and memory order do not change
