@@ -146,7 +146,7 @@ def test_a_bound_kernel_under_the_check_refuses_arguments_of_other_types():
     q, q_next, v, dt, configuration, velocity = _move_bases_arguments()
     with pytest.raises(TypeError, match="kernel integrator.move_bases bound to"):
         kernel.call(q, q_next, v.astype(np.float32), dt, configuration, velocity)
-    with pytest.raises(TypeError, match="int64"):
+    with pytest.raises(TypeError, match="int32"):
         kernel.call(q, q_next, v, dt, configuration.astype(np.int32), velocity)
     with pytest.raises(TypeError):
         kernel.call(q, q_next, v[::2], dt, configuration, velocity)  # not contiguous
@@ -172,9 +172,13 @@ def test_a_bound_kernel_takes_the_first_declared_memory_order_a_matrix_of_both_f
         kernel.call(np.ascontiguousarray(upper), np.array([3, 2, 1]), M)
 
 
-def test_a_call_that_fits_no_declared_signature_leaves_the_kernel_to_the_dispatcher():
-    """Arguments the build declared no signature for (integer matrices where floats go) are typed by
-    numba at each call, as without the binding."""
+def test_a_call_that_fits_no_declared_signature_leaves_the_kernel_to_the_dispatcher(monkeypatch):
+    """In a run, arguments the build declared no signature for (integer matrices where floats go) are
+    typed by numba at each call, as without the binding; under the check they raise, so that a test
+    sees a call site whose types the build does not cover."""
+    with pytest.raises(TypeError, match="no declared signature"):
+        Bound("dynamics.mirrored").call(np.eye(3, dtype=int), np.array([3, 2, 1]), np.eye(3, dtype=int))
+    monkeypatch.setattr(bound_module, "CHECK", False)
     kernel = Bound("dynamics.mirrored")
     upper, M = np.triu(np.arange(9).reshape(3, 3)), np.zeros((3, 3), dtype=np.int64)
     kernel.call(upper, np.array([3, 2, 1]), M)
@@ -240,3 +244,22 @@ def test_arrays_of_a_users_making_reach_the_bound_kernels_as_the_kernels_read_th
     answer = GaussSolver(gaussim.Options()).solve(assemble(H, g, [(Floor(), users)]))
     np.testing.assert_allclose(answer.x, expected.x, atol=1e-12)
     assert expected.x[0] >= 1.0 - 1e-9
+
+
+def test_an_integer_friction_is_the_same_friction_to_the_bound_kernels():
+    """Ground(friction=1) is an int; the contact kernels, bound by a scene of float friction first, read
+    C-ordered floats: a box pushed along the ground slides as with friction=1.0."""
+    import gaussim
+    from gaussim import FreeBody
+
+    def slide(friction: object) -> np.ndarray:
+        box = {"box": FreeBody.box("box", (0.1, 0.1, 0.1), mass=1.0)}
+        sim = gaussim.Simulator(gaussim.Scene(bodies=box, ground=gaussim.Ground(friction=friction)))
+        state = sim.reset({"box": gaussim.pose(z=0.05)}, {"box": np.array([1.0, 0, 0, 0, 0, 0])})
+        for _ in range(50):
+            state = sim.step(state)
+        return state.q
+
+    first = slide(0.5)  # binds the kernels to float friction
+    np.testing.assert_array_equal(slide(1), slide(1.0))
+    assert slide(1)[0] < first[0] - 1e-3  # more friction, a shorter slide

@@ -15,9 +15,7 @@ import numpy as np
 
 from .constraints.base import ROW_ID_BITS, ConstraintModule, Rows
 from .exceptions import GaussimWarning
-from .kernels.bound import Bound
-
-_FLOAT = np.dtype(float)
+from .kernels.bound import Bound, c_float, c_int
 
 # the kernels called here, past numba's dispatcher (gaussim.kernels.bound)
 cut = Bound("solver.cut")
@@ -59,8 +57,8 @@ class GaussProblem:
 
     def __post_init__(self, checked: bool) -> None:
         if not checked:  # the solver's kernels are bound to C-ordered floats (gaussim.kernels.bound)
-            self.H, self.g, self.A = _c_float(self.H), _c_float(self.g), _c_float(self.A)
-            self.b, self.C, self.l = _c_float(self.b), _c_float(self.C), _c_float(self.l)
+            self.H, self.g, self.A = c_float(self.H), c_float(self.g), c_float(self.A)
+            self.b, self.C, self.l = c_float(self.b), c_float(self.C), c_float(self.l)
 
     def labels(self, equality: bool) -> list[str]:
         """Row names of the equality or inequality rows, in order."""
@@ -99,7 +97,7 @@ def _own_ids(module: ConstraintModule, rows: Rows) -> np.ndarray:
     if rows.ids is not None:
         given = np.asarray(rows.ids())
         if given.shape == (count,) and given.dtype.kind in "iu":
-            own = given.astype(np.int64, copy=False)  # a uint64 above int64's range turns negative
+            own = c_int(given)  # a uint64 above int64's range turns negative
             if within.call(own, 2**ROW_ID_BITS):
                 return own
         warnings.warn(
@@ -159,13 +157,6 @@ def assemble(
     return GaussProblem(H, g, A, b, C, l, blocks, applied, None, object(), True)
 
 
-def _c_float(a: np.ndarray) -> np.ndarray:
-    """``a`` itself when a C-contiguous float64 array, else such a copy of it."""
-    if type(a) is np.ndarray and a.dtype is _FLOAT and a.flags.c_contiguous:
-        return a
-    return np.ascontiguousarray(a, dtype=float)
-
-
 def _same_rows(previous: GaussProblem, blocks: list, H: np.ndarray) -> bool:
     """Whether ``blocks`` hold, in order, the very J arrays of ``previous``'s blocks, over its H."""
     return (
@@ -179,19 +170,19 @@ def _same_rows(previous: GaussProblem, blocks: list, H: np.ndarray) -> bool:
 
 
 def _bounds(chosen: list[tuple[ConstraintModule, Rows]]) -> np.ndarray:
-    if len(chosen) == 1:  # a module's own array (a user's module may return any)
-        return _c_float(chosen[0][1].bound)
+    if len(chosen) == 1:
+        return chosen[0][1].bound
     if not chosen:
         return _none(0)[1]
-    return np.concatenate([rows.bound for _, rows in chosen], dtype=float)
+    return np.concatenate([rows.bound for _, rows in chosen])
 
 
 def _stack(chosen: list[tuple[ConstraintModule, Rows]], nv: int) -> np.ndarray:
     if len(chosen) == 1:
-        return _c_float(chosen[0][1].J)
+        return chosen[0][1].J
     if not chosen:
         return _none(nv)[0]
-    return np.vstack([rows.J for _, rows in chosen], dtype=float)
+    return np.vstack([rows.J for _, rows in chosen])
 
 
 @cache

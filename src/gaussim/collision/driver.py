@@ -100,8 +100,8 @@ class ContactDetector:
         self.supports = Supports.of(scene.robot.model)
         order = [*dict.fromkeys(ROUTINES.values()), NarrowPhase]
         self.routines = [routine(self.pairs, groups[routine]) for routine in order if routine in groups]
-        self.friction = np.array([pair.friction for pair in self.pairs])
-        self.restitution = np.array([pair.restitution for pair in self.pairs])
+        self.friction = np.array([pair.friction for pair in self.pairs], dtype=float)  # a user's may be ints
+        self.restitution = np.array([pair.restitution for pair in self.pairs], dtype=float)
         self.joint = np.array([pair.joint for pair in self.pairs], dtype=int)
         self.other_joint = np.array([pair.other_joint for pair in self.pairs], dtype=int)
         # each pair's names as object arrays: a layout takes them for all its points in one indexing

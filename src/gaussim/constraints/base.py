@@ -21,7 +21,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..collision import Contacts
-from ..kernels.bound import Bound
+from ..kernels.bound import Bound, c_float, c_int
 from ..kernels.contact import bound_of
 from ..options import Options
 
@@ -73,6 +73,14 @@ class Rows(Generic[T]):
     settled: bool = True
     joints: np.ndarray | None = None
     ids: Callable[[], np.ndarray] | None = None
+
+    def __post_init__(self) -> None:
+        # the arrays the solver's kernels read, C-ordered floats (joints int64) whoever made them
+        self.J, self.bound = c_float(self.J), c_float(self.bound)
+        if self.force is not None:
+            self.force = c_float(self.force)
+        if self.joints is not None:
+            self.joints = c_int(self.joints)
 
     def __len__(self) -> int:
         return len(self.bound)
@@ -194,5 +202,11 @@ def is_active(ctx: Context, phi: np.ndarray, rate: np.ndarray, margin: float) ->
     """
     o = ctx.options
     return restricting.call(  # type: ignore[no-any-return]
-        LEVELS[ctx.level], phi, rate, o.dt, margin, o.active_tolerance, o.restitution_threshold
+        LEVELS[ctx.level],
+        c_float(phi),
+        c_float(rate),
+        o.dt,
+        margin,
+        o.active_tolerance,
+        o.restitution_threshold,
     )

@@ -6,9 +6,12 @@ its 45 us there. A :class:`Bound` kernel picks its overload once, at its first c
 kernel's declared signatures (:data:`.prebuild.SIGNATURES`) that the arguments fit, whose overload's
 entry point it calls from then on (a first call that fits none leaves it with the dispatcher). Its
 call site passes arrays gaussim makes, whose dtype, dimensions and memory order do not change
-between calls; read-only flags may (they change no machine code). With ``GAUSSIM_CHECK_KERNELS=1``
-(the test suite's setting) each later call's arguments are checked against the bound signature, a
-misfit raising TypeError.
+between calls; read-only flags may (they change no machine code). The entry point does not check
+them: the arrays of a user's making that reach a kernel (a torque, a module's :class:`Rows`, a
+:class:`GaussProblem`, a material's coefficients) are made C-ordered float64 (:func:`c_float`) or
+int64 (:func:`c_int`) first. With ``GAUSSIM_CHECK_KERNELS=1`` (the test suite's setting) each later
+call's arguments are checked against the bound signature, a misfit raising TypeError, and so is a
+first call that fits no declared signature.
 """
 
 from __future__ import annotations
@@ -26,6 +29,22 @@ from numba.np.numpy_support import as_dtype
 from .prebuild import SIGNATURES, kernel, parse
 
 CHECK = os.environ.get("GAUSSIM_CHECK_KERNELS", "") not in ("", "0")
+_FLOAT, _INT = np.dtype(np.float64), np.dtype(np.int64)
+
+
+def c_float(a: object) -> np.ndarray:
+    """``a`` itself when a C-contiguous float64 array (what the bound kernels read), else such a copy:
+    for the arrays of a user's making that reach them."""
+    if type(a) is np.ndarray and a.dtype is _FLOAT and a.flags.c_contiguous:
+        return a
+    return np.ascontiguousarray(a, dtype=_FLOAT)
+
+
+def c_int(a: object) -> np.ndarray:
+    """``a`` itself when a C-contiguous int64 array, else such a copy (values cast as numpy casts)."""
+    if type(a) is np.ndarray and a.dtype is _INT and a.flags.c_contiguous:
+        return a
+    return np.ascontiguousarray(np.asarray(a).astype(_INT, copy=False))
 
 
 class Bound:
@@ -51,6 +70,8 @@ class Bound:
         call it; with no signature fitting, the dispatcher stays (it types each call)."""
         signature = next((s for s in self._signatures if _fits(args, s)), None)
         if signature is None:
+            if CHECK:  # a type the build did not declare: a test should see it
+                raise TypeError(f"kernel {self.name} called with ({_shown(args)}), no declared signature")
             self.call = self.dispatcher
         else:
             entry = _entry_point(self.dispatcher, signature)
@@ -66,15 +87,15 @@ def _entry_point(dispatcher: Any, signature: tuple[types.Type, ...]) -> Callable
 
 def _checked(name: str, signature: tuple[types.Type, ...], entry: Callable[..., Any]) -> Callable[..., Any]:
     specs = [_spec(kind) for kind in signature]
-    seen: set[tuple[bytes, ...]] = set()  # numba's fingerprints of the argument types checked already
+    seen: set[tuple[object, ...]] = set()  # numba's fingerprints of the argument types checked already
 
     def call(*args: Any) -> Any:
-        key = tuple(map(compute_fingerprint, args))
+        # numba's fingerprint leaves out the byte order: the dtypes too
+        key = (*map(compute_fingerprint, args), *(a.dtype for a in args if type(a) is np.ndarray))
         if key not in seen:
             if len(args) != len(specs) or not all(map(_fits_spec, args, specs)):
-                shown = ", ".join(_array(a) if isinstance(a, np.ndarray) else type(a).__name__ for a in args)
                 bound = ", ".join(map(str, signature))
-                raise TypeError(f"kernel {name} bound to ({bound}) called with ({shown})")
+                raise TypeError(f"kernel {name} bound to ({bound}) called with ({_shown(args)})")
             if not any(_ambiguous(a) for a in args):  # its fingerprint tells the order
                 seen.add(key)
         return entry(*args)
@@ -90,6 +111,10 @@ def _ambiguous(value: Any) -> bool:
         and value.flags.c_contiguous
         and value.flags.f_contiguous
     )
+
+
+def _shown(args: tuple[Any, ...]) -> str:
+    return ", ".join(_array(a) if isinstance(a, np.ndarray) else type(a).__name__ for a in args)
 
 
 def _array(a: np.ndarray) -> str:

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..assembly import GaussProblem
-from ..kernels.bound import Bound
+from ..kernels.bound import Bound, c_float
 
 # the kernels called here, past numba's dispatcher (gaussim.kernels.bound)
 kkt_residuals = Bound("solver.kkt_residuals")
@@ -156,6 +156,7 @@ def kkt_residual(problem: GaussProblem, x: np.ndarray, lambda_eq: np.ndarray, la
     """Largest violation of the KKT conditions of the Gauss problem at (x, lambda_eq, lambda_in >= 0)
     (see the module's docstring); NaN when any of them is not finite."""
     p = problem
+    x, lambda_eq, lambda_in = c_float(x), c_float(lambda_eq), c_float(lambda_in)  # a user's may be any
     return kkt_residuals.call(p.H, p.g, p.A, p.b, p.C, p.l, x, lambda_eq, lambda_in)[0]
 
 

@@ -350,7 +350,7 @@ def _free_motion(problem: GaussProblem, x_free: np.ndarray, tolerance: float) ->
     the step does not reach: exactly the motion of the body alone), when the KKT check certifies it to
     ``tolerance``; else None."""
     none = np.zeros(len(problem.b) + len(problem.l))
-    return checked(problem, x_free.copy(), none, Status.FREE_MOTION_CERTIFIED, tolerance)
+    return checked(problem, np.array(x_free, dtype=float), none, Status.FREE_MOTION_CERTIFIED, tolerance)
 
 
 def warm_certificate(how: int, residuals: Sequence[float]) -> Certificate:
