@@ -263,3 +263,105 @@ def test_an_integer_friction_is_the_same_friction_to_the_bound_kernels():
     first = slide(0.5)  # binds the kernels to float friction
     np.testing.assert_array_equal(slide(1), slide(1.0))
     assert slide(1)[0] < first[0] - 1e-3  # more friction, a shorter slide
+
+
+def _unusual(a: np.ndarray) -> dict[str, object]:
+    """``a`` in forms a user may hand over: the kernels read C-ordered native float64 alone."""
+    return {
+        "int": a.astype(int),
+        "big-endian": a.astype(">f8"),
+        "strided": np.repeat(a, 2)[::2],
+        "list": a.tolist(),
+    }
+
+
+def test_a_velocity_of_any_make_is_damped_as_a_float_one(solo12):
+    """Simulator.full_torque's v reaches the damping kernel; damping without v, or v of another size,
+    is refused by name."""
+    import gaussim
+
+    sim = gaussim.Simulator(gaussim.Scene(solo12))
+    tau, damping, v = np.ones(12), np.full(12, 0.5), np.arange(18.0)
+    expected = sim.full_torque(tau, damping, v)
+    assert expected[6] == pytest.approx(1.0 - 0.5 * 6.0)
+    for form, given in _unusual(v).items():
+        np.testing.assert_array_equal(sim.full_torque(tau, damping, given), expected, err_msg=form)
+    with pytest.raises(gaussim.InvalidState, match="damping needs the velocity v"):
+        sim.full_torque(tau, damping)
+    with pytest.raises(gaussim.InvalidState, match=r"v must have shape \(18,\)"):
+        sim.full_torque(tau, damping, np.zeros(12))
+
+
+def test_an_adopted_state_of_any_make_steps_as_a_float_one():
+    """A State.adopt of arrays the kernels cannot read as they are is stepped as its float copy."""
+    import gaussim
+    from gaussim import FreeBody
+
+    sim = gaussim.Simulator(gaussim.Scene(bodies={"box": FreeBody.box("box", (0.1,) * 3, mass=1.0)}))
+    start = sim.reset({"box": gaussim.pose(z=0.05)}, {"box": np.array([1.0, 0, 0, 0, 0, 2.0])})
+    expected = sim.step(sim.step(start))
+    for form in ("big-endian", "strided"):
+        q, v = (_unusual(np.array(a))[form] for a in (start.q, start.v))
+        state = gaussim.State.adopt(0.0, q, v, start.world)
+        moved = sim.step(sim.step(state))
+        np.testing.assert_array_equal(moved.v, expected.v, err_msg=form)
+        np.testing.assert_array_equal(moved.q, expected.q, err_msg=form)
+
+
+def test_a_big_endian_reference_holds_as_a_float_one(solo12):
+    """PDHold's q_ref reaches Pinocchio, which reads native float64 bytes."""
+    import gaussim
+    from gaussim.control import PDHold
+
+    q_ref = solo12.configuration("standing")
+    state = gaussim.Simulator(gaussim.Scene(solo12)).reset(solo12.neutral())
+    expected = PDHold(solo12.model, q_ref, 5.0, 0.2, slice(6, None))(state)
+    assert np.abs(expected).max() > 1.0  # the neutral pose is far from standing: a torque to compare
+    np.testing.assert_array_equal(
+        PDHold(solo12.model, q_ref.astype(">f8"), 5.0, 0.2, slice(6, None))(state), expected
+    )
+
+
+def test_rows_and_activity_of_the_wrong_shape_are_refused_by_name(ball):
+    """The kernels read a module's arrays at the shapes they expect and check none: Rows and is_active
+    refuse others, naming the field (and the module, for J's width), before a kernel reads them."""
+    import gaussim
+    from gaussim.constraints import ConstraintModule, Rows, is_active
+
+    def rows(J: object = None, bound: object = None, **kwargs) -> Rows:
+        J, bound = np.zeros((1, 6)) if J is None else J, np.zeros(1) if bound is None else bound
+        return Rows(J, bound, False, lambda: ["r"], **kwargs)
+
+    for field, kwargs in {
+        r"Rows.J: must have shape \(rows, nv\), got \(6,\)": {"J": np.zeros(6)},
+        r"Rows.J: .*got \(1, 1, 6\)": {"J": np.zeros((1, 1, 6))},
+        r"Rows.bound: must have shape \(1,\)": {"bound": np.zeros(2)},
+        r"Rows.force: must have shape \(nv,\)": {"force": np.zeros(1)},
+        r"Rows.joints: must have shape \(1, 2\)": {"joints": np.zeros(2, int)},
+    }.items():
+        with pytest.raises(gaussim.InvalidOptions, match=field):
+            rows(**kwargs)
+
+    class Lid(ConstraintModule):  # v_z <= 1, its rows posed as given
+        name = "lid"
+
+        def __init__(self, J: np.ndarray, phi: np.ndarray) -> None:
+            self.J, self.phi = J, phi
+
+        def rows(self, ctx):
+            if not is_active(ctx, self.phi, np.zeros_like(self.phi), 5)[0]:  # an int margin
+                return None
+            return rows(self.J, np.array([-1.0]))
+
+    def climb(J: np.ndarray, phi: np.ndarray) -> float:
+        sim = gaussim.Simulator(gaussim.Scene(ball), constraints=[Lid(J, phi)])
+        return sim.step(sim.reset(ball.neutral(), [0, 0, 3.0, 0, 0, 0])).v[2]
+
+    lid = -np.eye(6)[2:3]
+    assert climb(lid, np.array([0.0])) == pytest.approx(1.0)
+    with pytest.raises(gaussim.InvalidOptions, match=r"is_active: phi and rate must have one shape"):
+        climb(lid, np.array([[0.0]]))
+    with pytest.raises(
+        gaussim.InvalidOptions, match=r"module 'lid': Rows.J must have 6 columns, got \(1, 5\)"
+    ):
+        climb(lid[:, :5], np.array([0.0]))

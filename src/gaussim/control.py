@@ -62,7 +62,8 @@ class PDHold:
         actuated: slice,
         dt: float | None = None,
     ) -> None:
-        self.model, self.q_ref, self.kp, self.kd, self.actuated = model, np.asarray(q_ref), kp, kd, actuated
+        self.model, self.kp, self.kd, self.actuated = model, kp, kd, actuated
+        self.q_ref = np.asarray(q_ref, dtype=float)  # native float64: Pinocchio reads the bytes as such
         size = len(range(model.nv)[actuated])
         self.damping = None if dt is None else np.full(size, kd + dt * kp)
 

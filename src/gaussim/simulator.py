@@ -30,6 +30,7 @@ from .dynamics import DynamicsStage
 from .exceptions import GaussimWarning, InvalidRobot, InvalidState, SolverError
 from .gauss import GaussStage
 from .integrator import integrate
+from .kernels.bound import is_c_float
 from .options import Options
 from .report import StepReport
 from .scene import Scene
@@ -183,6 +184,14 @@ class Simulator:
     def full_torque(self, tau: object, damping: object = None, v: np.ndarray | None = None) -> np.ndarray:
         """The joint torques a step applies, shape (nv,): ``tau`` validated and padded (see
         :mod:`.actuation`), minus D v for an implicit damping D at the step's new velocity ``v``."""
+        if damping is not None:  # the kernel reads nv floats of v
+            if v is None:
+                raise InvalidState("damping needs the velocity v it acts on")
+            if not is_c_float(v):  # checked and copied, read-only as a state's (one compiled signature)
+                v = real_array("v", v)
+                v.setflags(write=False)
+            if v.shape != (self.model.nv,):
+                raise InvalidState(f"v must have shape ({self.model.nv},), got {v.shape}")
         full = self.actuation.torque(tau, damping, v).copy()
         if not np.all(np.isfinite(full)):
             raise InvalidState.non_finite("tau", full)
@@ -202,7 +211,7 @@ class Simulator:
             InfeasibleConstraints: the constraints admit no motion (the rows involved are named).
             SolverError: ProxQP failed (see ``Options.on_failure``) or the result is not finite.
         """
-        self._admit(state)
+        state = self._admit(state)
         report = StepReport(state.t, self.options.timings)
         torque = self.actuation.torque(tau, damping, state.v)
         x_free = self._free_motion(state, torque, tau, report)
@@ -212,12 +221,16 @@ class Simulator:
             v_next = self._again(state, torque, x_free, report)
         return self._advance(state, v_next, report)
 
-    def _admit(self, state: State) -> None:
-        """Check a state that is not the one the last step returned (and detect afresh from it)."""
+    def _admit(self, state: State) -> State:
+        """Check a state that is not the one the last step returned (and detect afresh from it); the
+        state to step: a copy with C-ordered float arrays when :meth:`State.adopt` took others."""
         if state is not self._last_state:
+            if not (is_c_float(state.q) and is_c_float(state.v)):  # the kernels read these
+                state = State(state.t, state.q, state.v, state.world)
             self._check_state(state)
             if self.detector:
                 self.detector.forget()
+        return state
 
     def _free_motion(self, state: State, torque: np.ndarray, given: object, report: StepReport) -> np.ndarray:
         try:  # the dynamics check the torque's entries, where they are read

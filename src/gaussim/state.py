@@ -57,7 +57,8 @@ class State:
 
     @classmethod
     def adopt(cls, t: float, q: np.ndarray, v: np.ndarray, world: World | None = None) -> State:
-        """A state that takes ownership of fresh float arrays q and v (made read-only, not copied)."""
+        """A state that takes ownership of fresh C-ordered float64 arrays q and v (made read-only, not
+        copied; a Simulator steps a copy of a state whose arrays are not such)."""
         state = _new(cls)
         # write=False, positional: cheaper than the keyword (numpy's stubs want the keyword)
         q.setflags(False)  # type: ignore[call-arg]

@@ -21,6 +21,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..collision import Contacts
+from ..exceptions import InvalidOptions
 from ..kernels.bound import Bound, c_float, c_int
 from ..kernels.contact import bound_of
 from ..options import Options
@@ -75,15 +76,30 @@ class Rows(Generic[T]):
     ids: Callable[[], np.ndarray] | None = None
 
     def __post_init__(self) -> None:
-        # the arrays the solver's kernels read, C-ordered floats (joints int64) whoever made them
-        self.J, self.bound = c_float(self.J), c_float(self.bound)
+        # the arrays the solver's kernels read, C-ordered floats (joints int64) whoever made them, of
+        # the shapes they read (the kernels do not check them)
+        self.J, self.bound = J, bound = c_float(self.J), c_float(self.bound)
+        if J.ndim != 2 or bound.shape != J.shape[:1]:
+            raise _misshapen(J, bound)
         if self.force is not None:
             self.force = c_float(self.force)
+            if self.force.shape != J.shape[1:]:
+                raise InvalidOptions("Rows.force", f"must have shape (nv,), got {self.force.shape}")
         if self.joints is not None:
             self.joints = c_int(self.joints)
+            if self.joints.shape != (len(bound), 2):
+                raise InvalidOptions(
+                    "Rows.joints", f"must have shape ({len(bound)}, 2), got {self.joints.shape}"
+                )
 
     def __len__(self) -> int:
         return len(self.bound)
+
+
+def _misshapen(J: np.ndarray, bound: np.ndarray) -> InvalidOptions:
+    if J.ndim != 2:
+        return InvalidOptions("Rows.J", f"must have shape (rows, nv), got {J.shape}")
+    return InvalidOptions("Rows.bound", f"must have shape ({len(J)},), J's rows, got {bound.shape}")
 
 
 @dataclass
@@ -201,12 +217,10 @@ def is_active(ctx: Context, phi: np.ndarray, rate: np.ndarray, margin: float) ->
     it let Solo-12's feet take turns sinking at dt = 10 ms).
     """
     o = ctx.options
+    phi, rate = c_float(phi), c_float(rate)  # a module's, of any make: the kernel reads (m,) floats
+    if phi.ndim != 1 or rate.shape != phi.shape:
+        shapes = f"{phi.shape}, {rate.shape}"
+        raise InvalidOptions("is_active", f"phi and rate must have one shape (m,), got {shapes}")
     return restricting.call(  # type: ignore[no-any-return]
-        LEVELS[ctx.level],
-        c_float(phi),
-        c_float(rate),
-        o.dt,
-        margin,
-        o.active_tolerance,
-        o.restitution_threshold,
+        LEVELS[ctx.level], phi, rate, o.dt, float(margin), o.active_tolerance, o.restitution_threshold
     )

@@ -32,11 +32,16 @@ CHECK = os.environ.get("GAUSSIM_CHECK_KERNELS", "") not in ("", "0")
 _FLOAT, _INT = np.dtype(np.float64), np.dtype(np.int64)
 
 
+def is_c_float(a: object) -> bool:
+    """Whether ``a`` is a C-contiguous native float64 array, what the bound kernels read."""
+    return type(a) is np.ndarray and a.dtype is _FLOAT and a.flags.c_contiguous
+
+
 def c_float(a: object) -> np.ndarray:
     """``a`` itself when a C-contiguous float64 array (what the bound kernels read), else such a copy:
     for the arrays of a user's making that reach them."""
-    if type(a) is np.ndarray and a.dtype is _FLOAT and a.flags.c_contiguous:
-        return a
+    if is_c_float(a):
+        return a  # type: ignore[return-value]
     return np.ascontiguousarray(a, dtype=_FLOAT)
 
 
