@@ -7,9 +7,9 @@ without joints) and zero torque (``zero``: a robot collapses onto the ground). S
 every collision geometry against the ground, joint limits on; a floating robot starts 1 cm above the
 ground, a fixed-base one has the ground 1 cm below its lowest geometry. A pass runs TIMING_RUNS times
 (the same trajectory: a second that differs is said in its message), and its step times are the least
-of those runs', step by step. The table (robot, nq/nv,
-geometries, outcome, message, steps, median and p90 step, max penetration, max KKT residual, final
-base height) goes to a Markdown file and a CSV; the counts per outcome are printed.
+of those runs', step by step. The table (robot, nq/nv, geometries, outcome, message, steps, median
+and p90 step, median and p90 contact points, max penetration, max KKT residual, final base height)
+goes to a Markdown file and a CSV; the counts per outcome are printed.
 
 Outcomes: ``ok`` (ran to the end), ``refused`` (gaussim refused the robot at load, naming the cause),
 ``failed`` (a gaussim error while simulating), ``exploded`` (a non-finite state, |v| > 1e3 or the base
@@ -80,6 +80,8 @@ class Row:
     max_penetration_mm: float = math.nan
     max_kkt: float = math.nan
     base_height: float = math.nan
+    contacts_median: float = math.nan
+    contacts_p90: float = math.nan
     warnings: str = ""
 
 
@@ -138,13 +140,14 @@ def _run(
     hold = run == "hold" and model.nv > (6 if robot.floating else 0)
     gain = max(robot.mass, 1.0)
     pd = gaussim.control.PDHold(model, q0, HOLD_KP_PER_KG * gain, HOLD_KD_PER_KG * gain, actuated, DT)
-    times, penetration, kkt = [], 0.0, 0.0
+    times, contacts, penetration, kkt = [], [], 0.0, 0.0
     for _ in range(round(duration / DT)):
         command = pd(state) if hold else gaussim.control.Command(None)
         start = time.perf_counter()
         state = sim.step(state, command.tau, command.damping)
         times.append(time.perf_counter() - start)
         report = sim.last_step
+        contacts.append(len(report.contacts))
         kkt = max([kkt, *(c.relative_kkt_residual for c in report.certificates)])
         if report.blocks:
             penetration = max([penetration, *(-c.gap for c in report.contacts)])
@@ -160,6 +163,7 @@ def _run(
     else:
         row.outcome = "ok"
     row.max_penetration_mm, row.max_kkt = 1e3 * max(penetration, 0.0), kkt
+    row.contacts_median, row.contacts_p90 = np.median(contacts), np.percentile(contacts, 90)
     row.base_height = float(state.q[2]) if robot.floating else math.nan
     return 1e3 * np.asarray(times), (state.q, state.v)
 
@@ -285,7 +289,11 @@ def summary(rows: list[Row]) -> list[str]:
         return []
     spread = sorted(ran, key=lambda r: r.p90_ms / r.median_ms, reverse=True)
     within = sum(r.p90_ms <= P90_SPREAD * r.median_ms for r in ran)
-    worst = ", ".join(f"{r.robot} {r.run} {r.p90_ms / r.median_ms:.1f}" for r in spread[:5])
+    worst = ", ".join(
+        f"{r.robot} {r.run} {r.p90_ms / r.median_ms:.1f} (contact points: median {r.contacts_median:g}, "
+        f"p90 {r.contacts_p90:g})"
+        for r in spread[:5]
+    )
     return [
         f"p90 step within {P90_SPREAD:g} x the median on {within} of {len(ran)} runs; the widest: {worst}.",
         f"Largest relative KKT residual accepted: {max(r.max_kkt for r in ran):.2g}; deepest penetration: "
@@ -325,15 +333,16 @@ def write(rows: list[Row], markdown: Path, command: str, duration: float, notes:
     lines += [
         "",
         "| robot | corpus | pass | nq/nv | geoms | outcome | steps | median [ms] | p90 [ms] | "
-        "max pen. [mm] | max KKT | base z [m] | message |",
-        "|---|---|---|---|---:|---|---:|---:|---:|---:|---:|---:|---|",
+        "contact points (median / p90) | max pen. [mm] | max KKT | base z [m] | message |",
+        "|---|---|---|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---|",
     ]
     for r in rows:
         message = r.message.replace("|", "/").replace("\n", " ")
         lines.append(
             f"| {r.robot} | {r.corpus} | {r.run} | {r.nq}/{r.nv} | {r.geometries} | {r.outcome} | "
             f"{r.steps} | "
-            f"{r.median_ms:.3g} | {r.p90_ms:.3g} | {r.max_penetration_mm:.3g} | {r.max_kkt:.2g} | "
+            f"{r.median_ms:.3g} | {r.p90_ms:.3g} | {r.contacts_median:g} / {r.contacts_p90:g} | "
+            f"{r.max_penetration_mm:.3g} | {r.max_kkt:.2g} | "
             f"{r.base_height:.3g} | {message[:300]} |"
         )
     markdown.write_text("\n".join(lines) + "\n")

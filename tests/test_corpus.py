@@ -67,6 +67,7 @@ def test_a_fast_turning_collapse_stays_on_the_ground():
     zero = next(row for row in rows if row.run == "zero")
     assert zero.outcome == "ok", zero.message
     assert zero.max_penetration_mm < 2.0
+    assert 1 <= zero.contacts_median <= zero.contacts_p90  # on the ground, the step's contact points
 
 
 def test_the_corpus_table_says_when_and_on_what_it_was_made(tmp_path):
@@ -81,6 +82,7 @@ def test_the_corpus_table_says_when_and_on_what_it_was_made(tmp_path):
     assert re.search(r"a fixed Python loop \(3,000,000 additions\) took \d\.\d\d s before the run", text)
     assert "1 robots: 0 simulate both passes, 1 are refused with a reason, 0 neither." in text
     assert out.with_suffix(".csv").exists()
+    assert "| contact points (median / p90) |" in text
 
 
 def test_a_pass_times_each_step_by_the_least_of_its_runs(monkeypatch):

@@ -227,9 +227,9 @@ def test_arrays_of_a_users_making_reach_the_bound_kernels_as_the_kernels_read_th
         )
     )
     np.testing.assert_allclose(integral.x, [0.0, 1.0], atol=1e-9)
-    # a module's rows, column-major integers, as assembly takes them
+    # a user's module's rows, column-major integers, as the Gauss stage checks them
     from gaussim.assembly import assemble
-    from gaussim.constraints.base import ConstraintModule, Rows
+    from gaussim.constraints.base import ConstraintModule, Rows, checked_rows
 
     class Floor(ConstraintModule):
         name = "floor"
@@ -238,7 +238,7 @@ def test_arrays_of_a_users_making_reach_the_bound_kernels_as_the_kernels_read_th
             return None
 
     J = np.asfortranarray(np.array([[1, 0, 0, 0], [0, 1, 1, 0]]))
-    users = Rows(J, np.array([1, -2]), False, lambda: ["a", "b"])
+    users = checked_rows("floor", Rows(J, np.array([1, -2]), False, lambda: ["a", "b"]), 4)
     mine = Rows(J.astype(float, order="C"), np.array([1.0, -2.0]), False, lambda: ["a", "b"])
     expected = GaussSolver(gaussim.Options()).solve(assemble(H, g, [(Floor(), mine)]))
     answer = GaussSolver(gaussim.Options()).solve(assemble(H, g, [(Floor(), users)]))
@@ -323,45 +323,38 @@ def test_a_big_endian_reference_holds_as_a_float_one(solo12):
 
 
 def test_rows_and_activity_of_the_wrong_shape_are_refused_by_name(ball):
-    """The kernels read a module's arrays at the shapes they expect and check none: Rows and is_active
-    refuse others, naming the field (and the module, for J's width), before a kernel reads them."""
+    """The kernels read a module's arrays at the shapes they expect and check none: a user's module's
+    Rows, and is_active's arrays, of another shape are refused, naming the module and the field."""
     import gaussim
     from gaussim.constraints import ConstraintModule, Rows, is_active
-
-    def rows(J: object = None, bound: object = None, **kwargs) -> Rows:
-        J, bound = np.zeros((1, 6)) if J is None else J, np.zeros(1) if bound is None else bound
-        return Rows(J, bound, False, lambda: ["r"], **kwargs)
-
-    for field, kwargs in {
-        r"Rows.J: must have shape \(rows, nv\), got \(6,\)": {"J": np.zeros(6)},
-        r"Rows.J: .*got \(1, 1, 6\)": {"J": np.zeros((1, 1, 6))},
-        r"Rows.bound: must have shape \(1,\)": {"bound": np.zeros(2)},
-        r"Rows.force: must have shape \(nv,\)": {"force": np.zeros(1)},
-        r"Rows.joints: must have shape \(1, 2\)": {"joints": np.zeros(2, int)},
-    }.items():
-        with pytest.raises(gaussim.InvalidOptions, match=field):
-            rows(**kwargs)
 
     class Lid(ConstraintModule):  # v_z <= 1, its rows posed as given
         name = "lid"
 
-        def __init__(self, J: np.ndarray, phi: np.ndarray) -> None:
-            self.J, self.phi = J, phi
+        def __init__(self, phi: object = (0.0,), **given: object) -> None:
+            self.phi, self.given = phi, given
 
         def rows(self, ctx):
-            if not is_active(ctx, self.phi, np.zeros_like(self.phi), 5)[0]:  # an int margin
+            if not is_active(ctx, self.phi, np.zeros_like(self.phi), 5)[0]:  # lists, an int margin
                 return None
-            return rows(self.J, np.array([-1.0]))
+            arrays = {"J": -np.eye(6)[2:3], "bound": np.array([-1.0]), **self.given}
+            return Rows(arrays.pop("J"), arrays.pop("bound"), False, lambda: ["lid"], **arrays)
 
-    def climb(J: np.ndarray, phi: np.ndarray) -> float:
-        sim = gaussim.Simulator(gaussim.Scene(ball), constraints=[Lid(J, phi)])
+    def climb(lid: Lid) -> float:
+        sim = gaussim.Simulator(gaussim.Scene(ball), constraints=[lid])
         return sim.step(sim.reset(ball.neutral(), [0, 0, 3.0, 0, 0, 0])).v[2]
 
-    lid = -np.eye(6)[2:3]
-    assert climb(lid, np.array([0.0])) == pytest.approx(1.0)
+    assert climb(Lid()) == pytest.approx(1.0)
+    assert climb(Lid(J=np.array([[0, 0, -1, 0, 0, 0]]), bound=[-1], joints=[[1, 0]])) == pytest.approx(1.0)
+    for message, given in {
+        r"Rows.J must have shape \(rows, 6\), got \(6,\)": {"J": -np.eye(6)[2]},
+        r"Rows.J must have shape \(rows, 6\), got \(1, 1, 6\)": {"J": -np.eye(6)[None, 2:3]},
+        r"Rows.J must have shape \(rows, 6\), got \(1, 5\)": {"J": -np.eye(6)[2:3, :5]},
+        r"Rows.bound must have shape \(1,\), got \(2,\)": {"bound": np.zeros(2)},
+        r"Rows.force must have shape \(6,\), got \(1,\)": {"force": np.zeros(1)},
+        r"Rows.joints must have shape \(1, 2\), got \(2,\)": {"joints": np.zeros(2, int)},
+    }.items():
+        with pytest.raises(gaussim.InvalidOptions, match="module 'lid': " + message):
+            climb(Lid(**given))
     with pytest.raises(gaussim.InvalidOptions, match=r"is_active: phi and rate must have one shape"):
-        climb(lid, np.array([[0.0]]))
-    with pytest.raises(
-        gaussim.InvalidOptions, match=r"module 'lid': Rows.J must have 6 columns, got \(1, 5\)"
-    ):
-        climb(lid[:, :5], np.array([0.0]))
+        climb(Lid([[0.0]]))

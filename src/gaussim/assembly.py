@@ -14,7 +14,7 @@ from functools import cache, cached_property
 import numpy as np
 
 from .constraints.base import ROW_ID_BITS, ConstraintModule, Rows
-from .exceptions import GaussimWarning, InvalidOptions
+from .exceptions import GaussimWarning
 from .kernels.bound import Bound, c_float, c_int
 
 # the kernels called here, past numba's dispatcher (gaussim.kernels.bound)
@@ -101,7 +101,7 @@ def _own_ids(module: ConstraintModule, rows: Rows) -> np.ndarray:
             if within.call(own, 2**ROW_ID_BITS):
                 return own
         warnings.warn(
-            f"module '{_named(module)}': Rows.ids must give one integer in "
+            f"module '{getattr(module, 'name', type(module).__name__)}': Rows.ids must give one integer in "
             f"[0, 2**{ROW_ID_BITS}) per row ({count}), got {given.dtype} of shape {given.shape}; "
             "its rows are named by their places (a warm start of the solver only)",
             GaussimWarning,
@@ -178,19 +178,11 @@ def _bounds(chosen: list[tuple[ConstraintModule, Rows]]) -> np.ndarray:
 
 
 def _stack(chosen: list[tuple[ConstraintModule, Rows]], nv: int) -> np.ndarray:
-    for module, rows in chosen:  # a module's own J: the kernels read nv columns and do not check
-        if rows.J.shape[1] != nv:
-            shape = rows.J.shape
-            raise InvalidOptions(f"module '{_named(module)}'", f"Rows.J must have {nv} columns, got {shape}")
     if len(chosen) == 1:
         return chosen[0][1].J
     if not chosen:
         return _none(nv)[0]
     return np.vstack([rows.J for _, rows in chosen])
-
-
-def _named(module: ConstraintModule) -> str:
-    return getattr(module, "name", type(module).__name__)  # type: ignore[no-any-return]
 
 
 @cache

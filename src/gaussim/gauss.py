@@ -9,13 +9,16 @@ import pinocchio as pin
 
 from .assembly import assemble
 from .collision import Contacts
-from .constraints.base import ConstraintModule, Context, Level, Rows
+from .constraints import BilateralModule, ContactModule, LimitModule
+from .constraints.base import ConstraintModule, Context, Level, Rows, checked_rows
 from .dynamics import Dynamics
 from .options import Options
 from .report import StepReport
 from .solver.islands import IslandSolver
 
 Parts = list[tuple[ConstraintModule, Rows]]
+# gaussim's own families, whose rows are made as the solver's kernels read them (a subclass's may not be)
+OWN = (ContactModule, LimitModule, BilateralModule)
 
 
 class GaussStage:
@@ -43,8 +46,15 @@ class GaussStage:
 
     def rows(self, ctx: Context) -> Parts:
         """The rows of every module that restricts x at ``ctx.level``."""
-        parts = [(module, module.rows(ctx)) for module in self.modules]
+        parts = [(module, self.posed(module, ctx)) for module in self.modules]
         return [(module, rows) for module, rows in parts if rows is not None]
+
+    def posed(self, module: ConstraintModule, ctx: Context) -> Rows | None:
+        """``module``'s rows at ``ctx``; a user's module's checked (:func:`checked_rows`)."""
+        rows = module.rows(ctx)
+        if rows is None or type(module) in OWN:
+            return rows
+        return checked_rows(module.name, rows, self.model.nv)
 
     def minimise(
         self,
@@ -93,7 +103,9 @@ class GaussStage:
             if not again or k == passes - 1:  # the last pass's answer stands: no rows to pose for it
                 break
             asked = {id(module) for module in again}  # by identity: a user's module may define __eq__
-            posed = [(module, module.rows(ctx) if id(module) in asked else rows) for module, rows in parts]
+            posed = [
+                (module, self.posed(module, ctx) if id(module) in asked else rows) for module, rows in parts
+            ]
             parts = [(module, rows) for module, rows in posed if rows is not None]
         assert problem is not None  # the loop posed one: it returns early when no module has rows
         report.blocks, report.scale = blocks, scale

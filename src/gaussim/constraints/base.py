@@ -42,6 +42,8 @@ ROW_ID_BITS = 48
 class Rows(Generic[T]):
     """Rows of one module, and the module's own record of them (``data``, of the module's type T).
 
+    A user's module's arrays may be of any real dtype and memory order: the Gauss stage makes them
+    C-ordered floats and checks their shapes (:func:`checked_rows`); gaussim's own modules make them so.
     Neither the module nor anyone else modifies the arrays once returned: a later pass of the step
     that returns the same J array (new bounds alone) keeps the rows the solver has stacked and factored.
 
@@ -75,31 +77,32 @@ class Rows(Generic[T]):
     joints: np.ndarray | None = None
     ids: Callable[[], np.ndarray] | None = None
 
-    def __post_init__(self) -> None:
-        # the arrays the solver's kernels read, C-ordered floats (joints int64) whoever made them, of
-        # the shapes they read (the kernels do not check them)
-        self.J, self.bound = J, bound = c_float(self.J), c_float(self.bound)
-        if J.ndim != 2 or bound.shape != J.shape[:1]:
-            raise _misshapen(J, bound)
-        if self.force is not None:
-            self.force = c_float(self.force)
-            if self.force.shape != J.shape[1:]:
-                raise InvalidOptions("Rows.force", f"must have shape (nv,), got {self.force.shape}")
-        if self.joints is not None:
-            self.joints = c_int(self.joints)
-            if self.joints.shape != (len(bound), 2):
-                raise InvalidOptions(
-                    "Rows.joints", f"must have shape ({len(bound)}, 2), got {self.joints.shape}"
-                )
-
     def __len__(self) -> int:
         return len(self.bound)
 
 
-def _misshapen(J: np.ndarray, bound: np.ndarray) -> InvalidOptions:
-    if J.ndim != 2:
-        return InvalidOptions("Rows.J", f"must have shape (rows, nv), got {J.shape}")
-    return InvalidOptions("Rows.bound", f"must have shape ({len(J)},), J's rows, got {bound.shape}")
+def checked_rows(name: str, rows: Rows, nv: int) -> Rows:
+    """``rows`` of a user's module ``name``, its arrays made what the solver's kernels read and do not
+    check (C-ordered float64, joints int64, of the shapes the :class:`Rows` fields give), in place;
+    raises :class:`InvalidOptions` naming the module and the field of a wrong shape."""
+
+    def misfit(field: str, shape: str, given: tuple[int, ...]) -> InvalidOptions:
+        return InvalidOptions(f"module '{name}'", f"Rows.{field} must have shape {shape}, got {given}")
+
+    rows.J, rows.bound = J, bound = c_float(rows.J), c_float(rows.bound)
+    if J.ndim != 2 or J.shape[1] != nv:
+        raise misfit("J", f"(rows, {nv})", J.shape)
+    if bound.shape != (len(J),):
+        raise misfit("bound", f"({len(J)},)", bound.shape)
+    if rows.force is not None:
+        rows.force = c_float(rows.force)
+        if rows.force.shape != (nv,):
+            raise misfit("force", f"({nv},)", rows.force.shape)
+    if rows.joints is not None:
+        rows.joints = c_int(rows.joints)
+        if rows.joints.shape != (len(J), 2):
+            raise misfit("joints", f"({len(J)}, 2)", rows.joints.shape)
+    return rows
 
 
 @dataclass
