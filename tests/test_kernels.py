@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -238,7 +239,8 @@ def test_arrays_of_a_users_making_reach_the_bound_kernels_as_the_kernels_read_th
             return None
 
     J = np.asfortranarray(np.array([[1, 0, 0, 0], [0, 1, 1, 0]]))
-    users = checked_rows("floor", Rows(J, np.array([1, -2]), False, lambda: ["a", "b"]), 4)
+    four = SimpleNamespace(nv=4, njoints=5)  # what checked_rows reads of a model
+    users = checked_rows("floor", Rows(J, np.array([1, -2]), False, lambda: ["a", "b"]), four)
     mine = Rows(J.astype(float, order="C"), np.array([1.0, -2.0]), False, lambda: ["a", "b"])
     expected = GaussSolver(gaussim.Options()).solve(assemble(H, g, [(Floor(), mine)]))
     answer = GaussSolver(gaussim.Options()).solve(assemble(H, g, [(Floor(), users)]))
@@ -324,24 +326,25 @@ def test_a_big_endian_reference_holds_as_a_float_one(solo12):
 
 def test_rows_and_activity_of_the_wrong_shape_are_refused_by_name(ball):
     """The kernels read a module's arrays at the shapes they expect and check none: a user's module's
-    Rows, and is_active's arrays, of another shape are refused, naming the module and the field."""
+    Rows, and is_active's arrays, of another shape, values or dtype are refused, naming the module and
+    the field; so is gaussim's own family handed over as a user's (made for another model)."""
     import gaussim
-    from gaussim.constraints import ConstraintModule, Rows, is_active
+    from gaussim.constraints import ConstraintModule, LimitModule, Rows, is_active
 
     class Lid(ConstraintModule):  # v_z <= 1, its rows posed as given
         name = "lid"
 
-        def __init__(self, phi: object = (0.0,), **given: object) -> None:
-            self.phi, self.given = phi, given
+        def __init__(self, phi: object = (0.0,), rate: object = (0.0,), **given: object) -> None:
+            self.phi, self.rate, self.given = phi, rate, given
 
         def rows(self, ctx):
-            if not is_active(ctx, self.phi, np.zeros_like(self.phi), 5)[0]:  # lists, an int margin
+            if not is_active(ctx, self.phi, self.rate, 5)[0]:  # lists, an int margin
                 return None
             arrays = {"J": -np.eye(6)[2:3], "bound": np.array([-1.0]), **self.given}
             return Rows(arrays.pop("J"), arrays.pop("bound"), False, lambda: ["lid"], **arrays)
 
-    def climb(lid: Lid) -> float:
-        sim = gaussim.Simulator(gaussim.Scene(ball), constraints=[lid])
+    def climb(*constraints: ConstraintModule) -> float:
+        sim = gaussim.Simulator(gaussim.Scene(ball), constraints=constraints)
         return sim.step(sim.reset(ball.neutral(), [0, 0, 3.0, 0, 0, 0])).v[2]
 
     assert climb(Lid()) == pytest.approx(1.0)
@@ -350,11 +353,52 @@ def test_rows_and_activity_of_the_wrong_shape_are_refused_by_name(ball):
         r"Rows.J must have shape \(rows, 6\), got \(6,\)": {"J": -np.eye(6)[2]},
         r"Rows.J must have shape \(rows, 6\), got \(1, 1, 6\)": {"J": -np.eye(6)[None, 2:3]},
         r"Rows.J must have shape \(rows, 6\), got \(1, 5\)": {"J": -np.eye(6)[2:3, :5]},
+        r"Rows.J must hold real numbers, got complex128": {"J": -np.eye(6)[2:3] * 1j},
         r"Rows.bound must have shape \(1,\), got \(2,\)": {"bound": np.zeros(2)},
         r"Rows.force must have shape \(6,\), got \(1,\)": {"force": np.zeros(1)},
-        r"Rows.joints must have shape \(1, 2\), got \(2,\)": {"joints": np.zeros(2, int)},
+        r"Rows.joints must be integers of shape \(1, 2\), got int64 \(2,\)": {
+            "joints": np.zeros(2, np.int64)
+        },
+        r"Rows.joints must be integers of shape \(1, 2\), got float64": {"joints": [[1.7, 0.0]]},
+        r"Rows.joints must be joint indices in \[0, 2\), got 0 to 3": {"joints": [[3, 0]]},
+        r"Rows.joints must be joint indices in \[0, 2\), got -1 to 0": {"joints": [[-1, 0]]},
     }.items():
         with pytest.raises(gaussim.InvalidOptions, match="module 'lid': " + message):
             climb(Lid(**given))
     with pytest.raises(gaussim.InvalidOptions, match=r"is_active: phi and rate must have one shape"):
-        climb(Lid([[0.0]]))
+        climb(Lid([[0.0]], [[0.0]]))
+    with pytest.raises(gaussim.InvalidOptions, match=r"is_active: .*got \(1,\), \(2,\)"):
+        climb(Lid([0.0], [0.0, 0.0]))
+    with pytest.raises(
+        gaussim.InvalidOptions, match=r"constraints\[0\]: gaussim's LimitModule comes from the scene"
+    ):
+        climb(LimitModule(gaussim.load_robot("solo12").model))  # under another name too:
+    solo_limits = LimitModule(gaussim.load_robot("solo12").model)
+    solo_limits.name = "solo's"
+    with pytest.raises(gaussim.InvalidOptions, match=r"gaussim's LimitModule comes from the scene"):
+        climb(solo_limits)
+
+
+def test_a_problem_and_a_point_of_the_wrong_shape_are_refused_by_name():
+    """A GaussProblem and a KKT check's point of a user's making reach kernels that read the shapes
+    they expect: others are refused by field (one aborted the process in freeing memory)."""
+    import gaussim
+    from gaussim.assembly import GaussProblem
+    from gaussim.solver import kkt_residual
+
+    H, g, none = np.eye(4), -np.array([1.0, 1.0, 0.0, 0.0]), (np.zeros((0, 4)), np.zeros(0))
+    problem = GaussProblem(H, g, *none, np.eye(4)[:2], np.ones(2), [])  # x_0, x_1 >= 1: met at -g
+    assert kkt_residual(problem, -g, np.zeros(0), np.zeros(2)) == 0.0
+    assert kkt_residual(problem, np.zeros(4), np.zeros(0), np.zeros(2)) >= 1.0  # x_0 >= 1 missed by 1
+    with pytest.raises(
+        gaussim.InvalidOptions, match=r"GaussProblem.C: must have shape \(5, 4\), got \(2, 2\)"
+    ):
+        GaussProblem(H, g, *none, np.eye(2), np.ones(5), [])
+    with pytest.raises(
+        gaussim.InvalidOptions, match=r"GaussProblem.H: must have shape \(4, 4\), got \(3, 3\)"
+    ):
+        GaussProblem(np.eye(3), g, *none, np.eye(4)[:2], np.ones(2), [])
+    with pytest.raises(gaussim.InvalidOptions, match=r"kkt_residual's x: must have shape \(4,\), got \(1,\)"):
+        kkt_residual(problem, np.zeros(1), np.zeros(0), np.zeros(2))
+    with pytest.raises(gaussim.InvalidOptions, match=r"kkt_residual's lambda_in: must have shape \(2,\)"):
+        kkt_residual(problem, np.ones(4), np.zeros(0), np.zeros(0))

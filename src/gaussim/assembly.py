@@ -14,7 +14,7 @@ from functools import cache, cached_property
 import numpy as np
 
 from .constraints.base import ROW_ID_BITS, ConstraintModule, Rows
-from .exceptions import GaussimWarning
+from .exceptions import GaussimWarning, InvalidOptions
 from .kernels.bound import Bound, c_float, c_int
 
 # the kernels called here, past numba's dispatcher (gaussim.kernels.bound)
@@ -40,7 +40,8 @@ class GaussProblem:
             factors of them need not compare them. An island's is its source's key and its cut.
 
     Arrays that are not C-ordered float64 (a problem of a user's making) are copied into such ones,
-    which the solver's kernels read; ``checked=True`` (assemble's and an island's own) skips the check.
+    which the solver's kernels read, and their shapes checked (:class:`InvalidOptions`);
+    ``checked=True`` (assemble's and an island's own) skips both.
     """
 
     H: np.ndarray
@@ -59,6 +60,17 @@ class GaussProblem:
         if not checked:  # the solver's kernels are bound to C-ordered floats (gaussim.kernels.bound)
             self.H, self.g, self.A = c_float(self.H), c_float(self.g), c_float(self.A)
             self.b, self.C, self.l = c_float(self.b), c_float(self.C), c_float(self.l)
+            n = len(self.g)
+            for name, shape, want in (
+                ("H", self.H.shape, (n, n)),
+                ("g", self.g.shape, (n,)),
+                ("A", self.A.shape, (len(self.b), n)),
+                ("b", self.b.shape, (len(self.A),)),
+                ("C", self.C.shape, (len(self.l), n)),
+                ("l", self.l.shape, (len(self.C),)),
+            ):
+                if shape != want:  # the kernels read these shapes and do not check them
+                    raise InvalidOptions(f"GaussProblem.{name}", f"must have shape {want}, got {shape}")
 
     def labels(self, equality: bool) -> list[str]:
         """Row names of the equality or inequality rows, in order."""
@@ -136,7 +148,8 @@ def assemble(
     multipliers go; a force a module applies outside the QP enters the linear term g. ``previous``:
     the last problem of the same solve (same H), whose stacked rows are kept when every block's J is
     the same array as there (a friction pass that moved bounds alone; :class:`Rows` are not modified
-    once returned)."""
+    once returned). The rows' arrays are the kernels' C-ordered floats: a user's module's are made so
+    and checked first (:func:`~gaussim.constraints.base.checked_rows`)."""
     equalities: list[tuple[ConstraintModule, Rows]] = []
     inequalities: list[tuple[ConstraintModule, Rows]] = []
     for part in parts:  # one pass: this runs every QP

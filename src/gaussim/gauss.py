@@ -4,12 +4,13 @@ reactions."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 import pinocchio as pin
 
 from .assembly import assemble
 from .collision import Contacts
-from .constraints import BilateralModule, ContactModule, LimitModule
 from .constraints.base import ConstraintModule, Context, Level, Rows, checked_rows
 from .dynamics import Dynamics
 from .options import Options
@@ -17,17 +18,22 @@ from .report import StepReport
 from .solver.islands import IslandSolver
 
 Parts = list[tuple[ConstraintModule, Rows]]
-# gaussim's own families, whose rows are made as the solver's kernels read them (a subclass's may not be)
-OWN = (ContactModule, LimitModule, BilateralModule)
 
 
 class GaussStage:
-    """The constrained minimum of a step's Gauss functional, for one model and its modules."""
+    """The constrained minimum of a step's Gauss functional, for one model and its modules: gaussim's
+    own, built from the scene, and the user's (``users``), whose rows are checked (:meth:`posed`)."""
 
     def __init__(
-        self, model: pin.Model, data: pin.Data, modules: list[ConstraintModule], options: Options
+        self,
+        model: pin.Model,
+        data: pin.Data,
+        modules: list[ConstraintModule],
+        options: Options,
+        users: Sequence[ConstraintModule] = (),
     ) -> None:
         self.model, self.data, self.modules, self.options = model, data, modules, options
+        self._users = {id(module) for module in users}  # by identity: a user's module may define __eq__
         # The acceleration scheme's sliding friction is a fixed point on each contact's normal force,
         # which redundant contacts (a box's four corners) leave non-unique: DAQP answers with a vertex
         # of that set (a corner or three carry the load, a lopsided friction turns the box), ProxQP's
@@ -52,9 +58,9 @@ class GaussStage:
     def posed(self, module: ConstraintModule, ctx: Context) -> Rows | None:
         """``module``'s rows at ``ctx``; a user's module's checked (:func:`checked_rows`)."""
         rows = module.rows(ctx)
-        if rows is None or type(module) in OWN:
+        if rows is None or id(module) not in self._users:  # gaussim's own make them as the kernels read
             return rows
-        return checked_rows(module.name, rows, self.model.nv)
+        return checked_rows(module.name, rows, self.model)
 
     def minimise(
         self,

@@ -60,8 +60,11 @@ class Simulator:
         self.actuation = Actuation(self.model, self.world, self.options.dt)
         self.dynamics = DynamicsStage(self.model, self.data)
         self.detector = ContactDetector(scene, self.options.contact_margin) if scene.pairs else None
-        self.modules = checked_modules(self._modules(scene, self.options), constraints)
-        self.gauss = GaussStage(self.model, self.data, self.modules, self.options)
+        built_in = self._modules(scene, self.options)
+        self.modules = checked_modules(built_in, constraints)
+        self.gauss = GaussStage(
+            self.model, self.data, self.modules, self.options, self.modules[len(built_in) :]
+        )
         # a module whose rows do not come from detected contacts makes every step pose the QP
         always = any(not m.needs_contacts for m in self.modules)
         self.scheme: Scheme = SCHEMES[self.options.scheme](self.dynamics, self.gauss, self.actuation, always)

@@ -29,6 +29,10 @@ def checked_modules(built_in: list[ConstraintModule], extra: Sequence[object]) -
             raise InvalidOptions(
                 field, f"must be a gaussim.constraints.ConstraintModule, got {type(module).__name__}"
             )
+        if type(module) in (ContactModule, LimitModule, BilateralModule):  # made for a scene, read as its
+            raise InvalidOptions(
+                field, f"gaussim's {type(module).__name__} comes from the scene: declare it there, not here"
+            )
         if not isinstance(module.name, str) or not module.name:
             raise InvalidOptions(field, f"{type(module).__name__}.name must be a non-empty string")
         if module.name in taken:

@@ -22,7 +22,7 @@ import pinocchio as pin
 
 from ..collision import Contacts
 from ..exceptions import InvalidOptions
-from ..kernels.bound import Bound, c_float, c_int
+from ..kernels.bound import Bound, c_float, c_int, is_c_float
 from ..kernels.contact import bound_of
 from ..options import Options
 
@@ -42,8 +42,9 @@ ROW_ID_BITS = 48
 class Rows(Generic[T]):
     """Rows of one module, and the module's own record of them (``data``, of the module's type T).
 
-    A user's module's arrays may be of any real dtype and memory order: the Gauss stage makes them
-    C-ordered floats and checks their shapes (:func:`checked_rows`); gaussim's own modules make them so.
+    A user's module's arrays may be of any real dtype and memory order: the Gauss stage replaces them
+    with C-ordered float64 (int64 joints) copies where they are not, in this object, and checks their
+    shapes (:func:`checked_rows`); gaussim's own modules make them so.
     Neither the module nor anyone else modifies the arrays once returned: a later pass of the step
     that returns the same J array (new bounds alone) keeps the rows the solver has stacked and factored.
 
@@ -81,27 +82,42 @@ class Rows(Generic[T]):
         return len(self.bound)
 
 
-def checked_rows(name: str, rows: Rows, nv: int) -> Rows:
+def checked_rows(name: str, rows: Rows, model: pin.Model) -> Rows:
     """``rows`` of a user's module ``name``, its arrays made what the solver's kernels read and do not
-    check (C-ordered float64, joints int64, of the shapes the :class:`Rows` fields give), in place;
-    raises :class:`InvalidOptions` naming the module and the field of a wrong shape."""
+    check, in place: C-ordered float64 of real values, joints int64 in [0, model.njoints), of the
+    shapes the :class:`Rows` fields give; raises :class:`InvalidOptions` naming the module and the
+    field of a wrong one."""
 
-    def misfit(field: str, shape: str, given: tuple[int, ...]) -> InvalidOptions:
-        return InvalidOptions(f"module '{name}'", f"Rows.{field} must have shape {shape}, got {given}")
+    def misfit(field: str, what: str) -> InvalidOptions:
+        return InvalidOptions(f"module '{name}'", f"Rows.{field} must {what}")
 
-    rows.J, rows.bound = J, bound = c_float(rows.J), c_float(rows.bound)
+    def real(field: str, value: object) -> np.ndarray:
+        if is_c_float(value):
+            return value  # type: ignore[return-value]
+        a = np.asarray(value)
+        if a.dtype.kind not in "biuf":
+            raise misfit(field, f"hold real numbers, got {a.dtype}")
+        return c_float(a)
+
+    nv = model.nv
+    rows.J, rows.bound = J, bound = real("J", rows.J), real("bound", rows.bound)
     if J.ndim != 2 or J.shape[1] != nv:
-        raise misfit("J", f"(rows, {nv})", J.shape)
+        raise misfit("J", f"have shape (rows, {nv}), got {J.shape}")
     if bound.shape != (len(J),):
-        raise misfit("bound", f"({len(J)},)", bound.shape)
+        raise misfit("bound", f"have shape ({len(J)},), got {bound.shape}")
     if rows.force is not None:
-        rows.force = c_float(rows.force)
+        rows.force = real("force", rows.force)
         if rows.force.shape != (nv,):
-            raise misfit("force", f"({nv},)", rows.force.shape)
+            raise misfit("force", f"have shape ({nv},), got {rows.force.shape}")
     if rows.joints is not None:
-        rows.joints = c_int(rows.joints)
-        if rows.joints.shape != (len(J), 2):
-            raise misfit("joints", f"({len(J)}, 2)", rows.joints.shape)
+        joints = np.asarray(rows.joints)
+        if joints.dtype.kind not in "iu" or joints.shape != (len(J), 2):
+            raise misfit("joints", f"be integers of shape ({len(J)}, 2), got {joints.dtype} {joints.shape}")
+        if len(joints) and not (0 <= joints.min() and joints.max() < model.njoints):
+            raise misfit(
+                "joints", f"be joint indices in [0, {model.njoints}), got {joints.min()} to {joints.max()}"
+            )
+        rows.joints = c_int(joints)
     return rows
 
 

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..assembly import GaussProblem
+from ..exceptions import InvalidOptions
 from ..kernels.bound import Bound, c_float
 
 # the kernels called here, past numba's dispatcher (gaussim.kernels.bound)
@@ -157,6 +158,13 @@ def kkt_residual(problem: GaussProblem, x: np.ndarray, lambda_eq: np.ndarray, la
     (see the module's docstring); NaN when any of them is not finite."""
     p = problem
     x, lambda_eq, lambda_in = c_float(x), c_float(lambda_eq), c_float(lambda_in)  # a user's may be any
+    for name, a, size in (
+        ("x", x, len(p.g)),
+        ("lambda_eq", lambda_eq, len(p.b)),
+        ("lambda_in", lambda_in, len(p.l)),
+    ):
+        if a.shape != (size,):  # the kernel reads these sizes and does not check them
+            raise InvalidOptions(f"kkt_residual's {name}", f"must have shape ({size},), got {a.shape}")
     return kkt_residuals.call(p.H, p.g, p.A, p.b, p.C, p.l, x, lambda_eq, lambda_in)[0]
 
 
