@@ -345,6 +345,22 @@ def _cli(capsys, *argv):
     return code, capsys.readouterr().err
 
 
+def test_a_value_after_an_option_that_starts_with_a_minus_is_told_how_to_give_it(tmp_path, capsys):
+    """argparse takes "-1e-3" for an option ("expected one argument"): its error says to write
+    --dt=-1e-3, which reaches gaussim's own check of the value."""
+    from gaussim.cli import EXIT_BAD_INPUT
+
+    with pytest.raises(SystemExit):
+        _cli(capsys, "run", "box_stack", "--dt", "-1e-3")
+    assert (
+        "argument --dt: expected one argument (a value that starts with '-' goes after '=': --dt=-1e-3)"
+        in (capsys.readouterr().err)
+    )
+    code, err = _cli(capsys, "run", "box_stack", "--dt=-1e-3", "--out", tmp_path / "r")
+    assert code == EXIT_BAD_INPUT, err
+    assert "--dt: must be a finite number > 0, got -0.001" in err
+
+
 @pytest.mark.parametrize(
     ("inertia", "message"),
     [

@@ -365,9 +365,9 @@ def test_rows_and_activity_of_the_wrong_shape_are_refused_by_name(ball):
     }.items():
         with pytest.raises(gaussim.InvalidOptions, match="module 'lid': " + message):
             climb(Lid(**given))
-    with pytest.raises(gaussim.InvalidOptions, match=r"is_active: phi and rate must have one shape"):
+    with pytest.raises(gaussim.InvalidOptions, match=r"module 'lid': is_active: phi and rate must have one"):
         climb(Lid([[0.0]], [[0.0]]))
-    with pytest.raises(gaussim.InvalidOptions, match=r"is_active: .*got \(1,\), \(2,\)"):
+    with pytest.raises(gaussim.InvalidOptions, match=r"module 'lid': is_active: .*got \(1,\), \(2,\)"):
         climb(Lid([0.0], [0.0, 0.0]))
     with pytest.raises(
         gaussim.InvalidOptions, match=r"constraints\[0\]: gaussim's LimitModule comes from the scene"

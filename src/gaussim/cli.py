@@ -15,7 +15,7 @@ import sys
 import time
 import warnings
 from pathlib import Path
-from typing import TYPE_CHECKING, TextIO
+from typing import TYPE_CHECKING, NoReturn, TextIO
 
 from .exceptions import (
     ContactError,
@@ -63,8 +63,19 @@ def _version() -> str:
         return "(not installed)"
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse's parser, whose "expected one argument" says how to give a value that starts with
+    '-' (argparse takes "-1e-3" for an option)."""
+
+    def error(self, message: str) -> NoReturn:
+        given = re.fullmatch(r"argument (--[\w-]+)(?:/\S+)?: expected one argument", message)
+        if given:
+            message += f" (a value that starts with '-' goes after '=': {given[1]}=-1e-3)"
+        super().error(message)
+
+
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="gaussim", description="Robot simulation by the Gauss principle.")
+    parser = _Parser(prog="gaussim", description="Robot simulation by the Gauss principle.")
     parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     commands = parser.add_subparsers(dest="command", required=True)
 

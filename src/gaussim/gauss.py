@@ -13,6 +13,7 @@ from .assembly import assemble
 from .collision import Contacts
 from .constraints.base import ConstraintModule, Context, Level, Rows, checked_rows
 from .dynamics import Dynamics
+from .exceptions import InvalidOptions
 from .options import Options
 from .report import StepReport
 from .solver.islands import IslandSolver
@@ -56,8 +57,16 @@ class GaussStage:
         return [(module, rows) for module, rows in parts if rows is not None]
 
     def posed(self, module: ConstraintModule, ctx: Context) -> Rows | None:
-        """``module``'s rows at ``ctx``; a user's module's checked (:func:`checked_rows`)."""
-        rows = module.rows(ctx)
+        """``module``'s rows at ``ctx``; a user's module's checked (:func:`checked_rows`), and the
+        :class:`InvalidOptions` of its call of a gaussim helper (``is_active``) told with its name."""
+        try:
+            rows = module.rows(ctx)
+        except InvalidOptions as err:
+            if id(module) not in self._users or err.field.startswith("module "):
+                raise
+            raise InvalidOptions(
+                f"module '{module.name}': {err.field}", str(err)[len(err.field) + 2 :]
+            ) from err
         if rows is None or id(module) not in self._users:  # gaussim's own make them as the kernels read
             return rows
         return checked_rows(module.name, rows, self.model)
