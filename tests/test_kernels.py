@@ -6,7 +6,6 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -239,8 +238,8 @@ def test_arrays_of_a_users_making_reach_the_bound_kernels_as_the_kernels_read_th
             return None
 
     J = np.asfortranarray(np.array([[1, 0, 0, 0], [0, 1, 1, 0]]))
-    four = SimpleNamespace(nv=4, njoints=5)  # what checked_rows reads of a model
-    users = checked_rows("floor", Rows(J, np.array([1, -2]), False, lambda: ["a", "b"]), four)
+    masks = np.ones((5, 4))  # Supports.masks of a model of 5 joints and 4 coordinates
+    users = checked_rows("floor", Rows(J, np.array([1, -2]), False, lambda: ["a", "b"]), masks)
     mine = Rows(J.astype(float, order="C"), np.array([1.0, -2.0]), False, lambda: ["a", "b"])
     expected = GaussSolver(gaussim.Options()).solve(assemble(H, g, [(Floor(), mine)]))
     answer = GaussSolver(gaussim.Options()).solve(assemble(H, g, [(Floor(), users)]))
@@ -348,6 +347,7 @@ def test_rows_and_activity_of_the_wrong_shape_are_refused_by_name(ball):
         return sim.step(sim.reset(ball.neutral(), [0, 0, 3.0, 0, 0, 0])).v[2]
 
     assert climb(Lid()) == pytest.approx(1.0)
+    assert climb(Lid(joints=np.array([[1, 0]], np.int32))) == pytest.approx(1.0)  # the ball's joint
     assert climb(Lid(J=np.array([[0, 0, -1, 0, 0, 0]]), bound=[-1], joints=[[1, 0]])) == pytest.approx(1.0)
     for message, given in {
         r"Rows.J must have shape \(rows, 6\), got \(6,\)": {"J": -np.eye(6)[2]},
@@ -362,6 +362,9 @@ def test_rows_and_activity_of_the_wrong_shape_are_refused_by_name(ball):
         r"Rows.joints must be integers of shape \(1, 2\), got float64": {"joints": [[1.7, 0.0]]},
         r"Rows.joints must be joint indices in \[0, 2\), got 0 to 3": {"joints": [[3, 0]]},
         r"Rows.joints must be joint indices in \[0, 2\), got -1 to 0": {"joints": [[-1, 0]]},
+        r"Rows.joints must name the joints .*row 0 reads v\[2\], which moves neither joint 0 nor joint 0": {
+            "joints": [[0, 0]]
+        },
     }.items():
         with pytest.raises(gaussim.InvalidOptions, match="module 'lid': " + message):
             climb(Lid(**given))

@@ -12,7 +12,7 @@ import pinocchio as pin
 from .assembly import assemble
 from .collision import Contacts
 from .constraints.base import ConstraintModule, Context, Level, Rows, checked_rows
-from .dynamics import Dynamics
+from .dynamics import Dynamics, Supports
 from .exceptions import InvalidOptions
 from .options import Options
 from .report import StepReport
@@ -35,6 +35,7 @@ class GaussStage:
     ) -> None:
         self.model, self.data, self.modules, self.options = model, data, modules, options
         self._users = {id(module) for module in users}  # by identity: a user's module may define __eq__
+        self._masks = Supports.of(model).masks if users else np.zeros((0, 0))  # what checks their rows
         # The acceleration scheme's sliding friction is a fixed point on each contact's normal force,
         # which redundant contacts (a box's four corners) leave non-unique: DAQP answers with a vertex
         # of that set (a corner or three carry the load, a lopsided friction turns the box), ProxQP's
@@ -69,7 +70,7 @@ class GaussStage:
             ) from err
         if rows is None or id(module) not in self._users:  # gaussim's own make them as the kernels read
             return rows
-        return checked_rows(module.name, rows, self.model)
+        return checked_rows(module.name, rows, self._masks)
 
     def minimise(
         self,

@@ -82,11 +82,12 @@ class Rows(Generic[T]):
         return len(self.bound)
 
 
-def checked_rows(name: str, rows: Rows, model: pin.Model) -> Rows:
+def checked_rows(name: str, rows: Rows, masks: np.ndarray) -> Rows:
     """``rows`` of a user's module ``name``, its arrays made what the solver's kernels read and do not
-    check, in place: C-ordered float64 of real values, joints int64 in [0, model.njoints), of the
-    shapes the :class:`Rows` fields give; raises :class:`InvalidOptions` naming the module and the
-    field of a wrong one."""
+    check, in place: C-ordered float64 of real values, of the shapes the :class:`Rows` fields give,
+    joints int64 among the model's whose supports (``masks``, :attr:`~gaussim.dynamics.Supports.masks`,
+    (njoints, nv)) hold every nonzero of their row (the islands split the rows by them); raises
+    :class:`InvalidOptions` naming the module and the field of a wrong one."""
 
     def misfit(field: str, what: str) -> InvalidOptions:
         return InvalidOptions(f"module '{name}'", f"Rows.{field} must {what}")
@@ -99,7 +100,7 @@ def checked_rows(name: str, rows: Rows, model: pin.Model) -> Rows:
             raise misfit(field, f"hold real numbers, got {a.dtype}")
         return c_float(a)
 
-    nv = model.nv
+    njoints, nv = masks.shape
     rows.J, rows.bound = J, bound = real("J", rows.J), real("bound", rows.bound)
     if J.ndim != 2 or J.shape[1] != nv:
         raise misfit("J", f"have shape (rows, {nv}), got {J.shape}")
@@ -113,9 +114,18 @@ def checked_rows(name: str, rows: Rows, model: pin.Model) -> Rows:
         joints = np.asarray(rows.joints)
         if joints.dtype.kind not in "iu" or joints.shape != (len(J), 2):
             raise misfit("joints", f"be integers of shape ({len(J)}, 2), got {joints.dtype} {joints.shape}")
-        if len(joints) and not (0 <= joints.min() and joints.max() < model.njoints):
+        if len(joints) and not (0 <= joints.min() and joints.max() < njoints):
             raise misfit(
-                "joints", f"be joint indices in [0, {model.njoints}), got {joints.min()} to {joints.max()}"
+                "joints", f"be joint indices in [0, {njoints}), got {joints.min()} to {joints.max()}"
+            )
+        outside = (J != 0) & (masks[joints[:, 0]] + masks[joints[:, 1]] == 0)
+        if outside.any():
+            r, k = np.argwhere(outside)[0]
+            a, b = joints[r]
+            raise misfit(
+                "joints",
+                f"name the joints whose motion each row reads: row {r} reads v[{k}], "
+                f"which moves neither joint {a} nor joint {b}",
             )
         rows.joints = c_int(joints)
     return rows
