@@ -352,10 +352,11 @@ def test_a_value_after_an_option_that_starts_with_a_minus_is_told_how_to_give_it
 
     with pytest.raises(SystemExit):
         _cli(capsys, "run", "box_stack", "--dt", "-1e-3")
-    assert (
-        "argument --dt: expected one argument (a value that starts with '-' goes after '=': --dt=-1e-3)"
-        in (capsys.readouterr().err)
-    )
+    hint = "expected one argument (if its value starts with '-', write {}=VALUE)"
+    assert "argument --dt: " + hint.format("--dt") in capsys.readouterr().err
+    with pytest.raises(SystemExit):  # the short form given: the long one in the hint
+        _cli(capsys, "plot", tmp_path / "r", "-o", "-energy.png")
+    assert "argument -o/--output: " + hint.format("--output") in capsys.readouterr().err
     code, err = _cli(capsys, "run", "box_stack", "--dt=-1e-3", "--out", tmp_path / "r")
     assert code == EXIT_BAD_INPUT, err
     assert "--dt: must be a finite number > 0, got -0.001" in err

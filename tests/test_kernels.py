@@ -349,25 +349,32 @@ def test_rows_and_activity_of_the_wrong_shape_are_refused_by_name(ball):
     assert climb(Lid()) == pytest.approx(1.0)
     assert climb(Lid(joints=np.array([[1, 0]], np.int32))) == pytest.approx(1.0)  # the ball's joint
     assert climb(Lid(J=np.array([[0, 0, -1, 0, 0, 0]]), bound=[-1], joints=[[1, 0]])) == pytest.approx(1.0)
+    assert climb(Lid(joints=[[1.0, 0.0]])) == pytest.approx(1.0)  # whole numbers of any real dtype
     for message, given in {
-        r"Rows.J must have shape \(rows, 6\), got \(6,\)": {"J": -np.eye(6)[2]},
-        r"Rows.J must have shape \(rows, 6\), got \(1, 1, 6\)": {"J": -np.eye(6)[None, 2:3]},
-        r"Rows.J must have shape \(rows, 6\), got \(1, 5\)": {"J": -np.eye(6)[2:3, :5]},
-        r"Rows.J must hold real numbers, got complex128": {"J": -np.eye(6)[2:3] * 1j},
-        r"Rows.bound must have shape \(1,\), got \(2,\)": {"bound": np.zeros(2)},
-        r"Rows.force must have shape \(6,\), got \(1,\)": {"force": np.zeros(1)},
-        r"Rows.joints must be integers of shape \(1, 2\), got int64 \(2,\)": {
+        r"Rows.J: must have shape \(rows, 6\), got \(6,\)": {"J": -np.eye(6)[2]},
+        r"Rows.J: must have shape \(rows, 6\), got \(1, 1, 6\)": {"J": -np.eye(6)[None, 2:3]},
+        r"Rows.J: must have shape \(rows, 6\), got \(1, 5\)": {"J": -np.eye(6)[2:3, :5]},
+        r"Rows.J: must hold real numbers, got complex128": {"J": -np.eye(6)[2:3] * 1j},
+        r"Rows.J: must be a rectangular array of real numbers": {"J": [[0, 0, -1, 0, 0, 0], [0]]},
+        r"Rows.bound: must have shape \(1,\), got \(2,\)": {"bound": np.zeros(2)},
+        r"Rows.bound: must have shape \(1,\), got \(\)": {"bound": -1.0},
+        r"Rows.force: must have shape \(6,\), got \(1,\)": {"force": np.zeros(1)},
+        r"Rows.joints: must be joint indices of shape \(1, 2\), got int64 \(2,\)": {
             "joints": np.zeros(2, np.int64)
         },
-        r"Rows.joints must be integers of shape \(1, 2\), got float64": {"joints": [[1.7, 0.0]]},
-        r"Rows.joints must be joint indices in \[0, 2\), got 0 to 3": {"joints": [[3, 0]]},
-        r"Rows.joints must be joint indices in \[0, 2\), got -1 to 0": {"joints": [[-1, 0]]},
-        r"Rows.joints must name the joints .*row 0 reads v\[2\], which moves neither joint 0 nor joint 0": {
+        r"Rows.joints: must be joint indices of shape \(1, 2\), got <U1": {"joints": [["a", "b"]]},
+        r"Rows.joints: must be whole numbers, got 1.7": {"joints": [[1.7, 0.0]]},
+        r"Rows.joints: must be whole numbers, got nan": {"joints": [[np.nan, 0.0]]},
+        r"Rows.joints: must be joint indices in \[0, 2\), got 0 to 3": {"joints": [[3, 0]]},
+        r"Rows.joints: must be joint indices in \[0, 2\), got -1 to 0": {"joints": [[-1, 0]]},
+        r"Rows.joints: must name the joints .*row 0 reads v\[2\], which moves neither joint 0 nor joint 0": {
             "joints": [[0, 0]]
         },
     }.items():
         with pytest.raises(gaussim.InvalidOptions, match="module 'lid': " + message):
             climb(Lid(**given))
+    with pytest.raises(gaussim.InvalidOptions, match=r"module 'lid': is_active: phi: must hold real numbers"):
+        climb(Lid([0j], [0.0]))
     with pytest.raises(gaussim.InvalidOptions, match=r"module 'lid': is_active: phi and rate must have one"):
         climb(Lid([[0.0]], [[0.0]]))
     with pytest.raises(gaussim.InvalidOptions, match=r"module 'lid': is_active: .*got \(1,\), \(2,\)"):
@@ -393,14 +400,22 @@ def test_a_problem_and_a_point_of_the_wrong_shape_are_refused_by_name():
     problem = GaussProblem(H, g, *none, np.eye(4)[:2], np.ones(2), [])  # x_0, x_1 >= 1: met at -g
     assert kkt_residual(problem, -g, np.zeros(0), np.zeros(2)) == 0.0
     assert kkt_residual(problem, np.zeros(4), np.zeros(0), np.zeros(2)) >= 1.0  # x_0 >= 1 missed by 1
+    for message, arrays in {
+        r"GaussProblem.C: must have shape \(rows, 4\), got \(2, 2\)": (H, g, *none, np.eye(2), np.ones(5)),
+        r"GaussProblem.l: must have shape \(2,\), got \(5,\)": (H, g, *none, np.eye(4)[:2], np.ones(5)),
+        r"GaussProblem.H: must be a square matrix, got shape \(3, 4\)": (H[:3], g, *none, *none),
+        r"GaussProblem.g: must have shape \(3,\), got \(4,\)": (np.eye(3), g, *none, *none),
+        r"GaussProblem.g: must have shape \(4,\), got \(\)": (H, 1.0, *none, *none),
+        r"GaussProblem.A: must hold real numbers, got <U1": (H, g, [["a"]], [0.0], *none),
+    }.items():
+        with pytest.raises(gaussim.InvalidOptions, match=message):
+            GaussProblem(*arrays, [])
     with pytest.raises(
-        gaussim.InvalidOptions, match=r"GaussProblem.C: must have shape \(5, 4\), got \(2, 2\)"
+        gaussim.InvalidOptions, match=r"GaussProblem.applied: must have shape \(4,\), got \(3,\)"
     ):
-        GaussProblem(H, g, *none, np.eye(2), np.ones(5), [])
-    with pytest.raises(
-        gaussim.InvalidOptions, match=r"GaussProblem.H: must have shape \(4, 4\), got \(3, 3\)"
-    ):
-        GaussProblem(np.eye(3), g, *none, np.eye(4)[:2], np.ones(2), [])
+        GaussProblem(H, g, *none, *none, [], np.ones(3))
+    with pytest.raises(gaussim.InvalidOptions, match=r"kkt_residual's x: must have shape \(4,\), got \(\)"):
+        kkt_residual(problem, 0.0, np.zeros(0), np.zeros(2))
     with pytest.raises(gaussim.InvalidOptions, match=r"kkt_residual's x: must have shape \(4,\), got \(1,\)"):
         kkt_residual(problem, np.zeros(1), np.zeros(0), np.zeros(2))
     with pytest.raises(gaussim.InvalidOptions, match=r"kkt_residual's lambda_in: must have shape \(2,\)"):

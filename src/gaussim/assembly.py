@@ -13,9 +13,9 @@ from functools import cache, cached_property
 
 import numpy as np
 
-from .constraints.base import ROW_ID_BITS, ConstraintModule, Rows
+from .constraints.base import ROW_ID_BITS, ConstraintModule, Rows, real_floats
 from .exceptions import GaussimWarning, InvalidOptions
-from .kernels.bound import Bound, c_float, c_int
+from .kernels.bound import Bound, c_int
 
 # the kernels called here, past numba's dispatcher (gaussim.kernels.bound)
 cut = Bound("solver.cut")
@@ -58,19 +58,34 @@ class GaussProblem:
 
     def __post_init__(self, checked: bool) -> None:
         if not checked:  # the solver's kernels are bound to C-ordered floats (gaussim.kernels.bound)
-            self.H, self.g, self.A = c_float(self.H), c_float(self.g), c_float(self.A)
-            self.b, self.C, self.l = c_float(self.b), c_float(self.C), c_float(self.l)
-            n = len(self.g)
-            for name, shape, want in (
-                ("H", self.H.shape, (n, n)),
-                ("g", self.g.shape, (n,)),
-                ("A", self.A.shape, (len(self.b), n)),
-                ("b", self.b.shape, (len(self.A),)),
-                ("C", self.C.shape, (len(self.l), n)),
-                ("l", self.l.shape, (len(self.C),)),
-            ):
-                if shape != want:  # the kernels read these shapes and do not check them
-                    raise InvalidOptions(f"GaussProblem.{name}", f"must have shape {want}, got {shape}")
+            self._check()
+
+    def _check(self) -> None:
+        """Make a user's arrays C-ordered floats, and refuse a wrong shape by field: the kernels read
+        the shapes they expect and do not check them."""
+        H, g, A, b, C, l = (
+            real_floats(f"GaussProblem.{name}", getattr(self, name))
+            for name in ("H", "g", "A", "b", "C", "l")
+        )
+        if H.ndim != 2 or H.shape[0] != H.shape[1]:
+            raise InvalidOptions("GaussProblem.H", f"must be a square matrix, got shape {H.shape}")
+        n = len(H)
+        for name, a, fits, want in (
+            ("g", g, g.shape == (n,), f"({n},)"),
+            ("A", A, A.ndim == 2 and A.shape[1] == n, f"(rows, {n})"),
+            ("b", b, b.shape == (len(A),), f"({len(A)},)"),
+            ("C", C, C.ndim == 2 and C.shape[1] == n, f"(rows, {n})"),
+            ("l", l, l.shape == (len(C),), f"({len(C)},)"),
+        ):
+            if not fits:
+                raise InvalidOptions(f"GaussProblem.{name}", f"must have shape {want}, got {a.shape}")
+        self.H, self.g, self.A, self.b, self.C, self.l = H, g, A, b, C, l
+        if self.applied is not None:
+            self.applied = real_floats("GaussProblem.applied", self.applied)
+            if self.applied.shape != (n,):
+                raise InvalidOptions(
+                    "GaussProblem.applied", f"must have shape ({n},), got {self.applied.shape}"
+                )
 
     def labels(self, equality: bool) -> list[str]:
         """Row names of the equality or inequality rows, in order."""

@@ -68,9 +68,9 @@ class _Parser(argparse.ArgumentParser):
     '-' (argparse takes "-1e-3" for an option)."""
 
     def error(self, message: str) -> NoReturn:
-        given = re.fullmatch(r"argument (--[\w-]+)(?:/\S+)?: expected one argument", message)
+        given = re.fullmatch(r"argument (\S+?)(?:/(\S+))?: expected one argument", message)
         if given:
-            message += f" (a value that starts with '-' goes after '=': {given[1]}=-1e-3)"
+            message += f" (if its value starts with '-', write {given[2] or given[1]}=VALUE)"
         super().error(message)
 
 

@@ -22,7 +22,7 @@ import pinocchio as pin
 
 from ..collision import Contacts
 from ..exceptions import InvalidOptions
-from ..kernels.bound import Bound, c_float, c_int, is_c_float
+from ..kernels.bound import Bound, c_int, is_c_float
 from ..kernels.contact import bound_of
 from ..options import Options
 
@@ -82,42 +82,58 @@ class Rows(Generic[T]):
         return len(self.bound)
 
 
+def real_floats(field: str, value: object) -> np.ndarray:
+    """``value`` itself when it is what the bound kernels read (:func:`~gaussim.kernels.bound.is_c_float`),
+    else a C-ordered float64 copy of the same shape; an :class:`InvalidOptions` naming ``field`` when it
+    is ragged or holds no real numbers (numpy would drop an imaginary part with a warning)."""
+    if is_c_float(value):
+        return value  # type: ignore[return-value]
+    try:
+        a = np.asarray(value)
+    except ValueError:  # nested sequences of unequal lengths
+        raise InvalidOptions(field, "must be a rectangular array of real numbers") from None
+    if a.dtype.kind not in "biuf":
+        raise InvalidOptions(field, f"must hold real numbers, got {a.dtype}")
+    return np.array(a, dtype=np.float64, order="C")
+
+
 def checked_rows(name: str, rows: Rows, masks: np.ndarray) -> Rows:
     """``rows`` of a user's module ``name``, its arrays made what the solver's kernels read and do not
     check, in place: C-ordered float64 of real values, of the shapes the :class:`Rows` fields give,
     joints int64 among the model's whose supports (``masks``, :attr:`~gaussim.dynamics.Supports.masks`,
     (njoints, nv)) hold every nonzero of their row (the islands split the rows by them); raises
     :class:`InvalidOptions` naming the module and the field of a wrong one."""
+    where = f"module '{name}': Rows."
 
     def misfit(field: str, what: str) -> InvalidOptions:
-        return InvalidOptions(f"module '{name}'", f"Rows.{field} must {what}")
-
-    def real(field: str, value: object) -> np.ndarray:
-        if is_c_float(value):
-            return value  # type: ignore[return-value]
-        a = np.asarray(value)
-        if a.dtype.kind not in "biuf":
-            raise misfit(field, f"hold real numbers, got {a.dtype}")
-        return c_float(a)
+        return InvalidOptions(where + field, f"must {what}")
 
     njoints, nv = masks.shape
-    rows.J, rows.bound = J, bound = real("J", rows.J), real("bound", rows.bound)
+    rows.J, rows.bound = J, bound = real_floats(where + "J", rows.J), real_floats(where + "bound", rows.bound)
     if J.ndim != 2 or J.shape[1] != nv:
         raise misfit("J", f"have shape (rows, {nv}), got {J.shape}")
     if bound.shape != (len(J),):
         raise misfit("bound", f"have shape ({len(J)},), got {bound.shape}")
     if rows.force is not None:
-        rows.force = real("force", rows.force)
+        rows.force = real_floats(where + "force", rows.force)
         if rows.force.shape != (nv,):
             raise misfit("force", f"have shape ({nv},), got {rows.force.shape}")
     if rows.joints is not None:
-        joints = np.asarray(rows.joints)
-        if joints.dtype.kind not in "iu" or joints.shape != (len(J), 2):
-            raise misfit("joints", f"be integers of shape ({len(J)}, 2), got {joints.dtype} {joints.shape}")
+        try:
+            joints = np.asarray(rows.joints)
+        except ValueError:  # nested sequences of unequal lengths
+            raise misfit("joints", f"be joint indices of shape ({len(J)}, 2)") from None
+        if joints.dtype.kind not in "iuf" or joints.shape != (len(J), 2):
+            raise misfit(
+                "joints", f"be joint indices of shape ({len(J)}, 2), got {joints.dtype} {joints.shape}"
+            )
+        if joints.dtype.kind == "f" and not np.array_equal(joints, np.round(joints)):  # NaN too
+            raise misfit("joints", f"be whole numbers, got {joints[joints != np.round(joints)][0]}")
         if len(joints) and not (0 <= joints.min() and joints.max() < njoints):
             raise misfit(
-                "joints", f"be joint indices in [0, {njoints}), got {joints.min()} to {joints.max()}"
+                "joints", f"be joint indices in [0, {njoints}), got {joints.min():g} to {joints.max():g}"
             )
+        joints = c_int(joints)
         outside = (J != 0) & (masks[joints[:, 0]] + masks[joints[:, 1]] == 0)
         if outside.any():
             r, k = np.argwhere(outside)[0]
@@ -127,7 +143,7 @@ def checked_rows(name: str, rows: Rows, masks: np.ndarray) -> Rows:
                 f"name the joints whose motion each row reads: row {r} reads v[{k}], "
                 f"which moves neither joint {a} nor joint {b}",
             )
-        rows.joints = c_int(joints)
+        rows.joints = joints
     return rows
 
 
@@ -246,7 +262,8 @@ def is_active(ctx: Context, phi: np.ndarray, rate: np.ndarray, margin: float) ->
     it let Solo-12's feet take turns sinking at dt = 10 ms).
     """
     o = ctx.options
-    phi, rate = c_float(phi), c_float(rate)  # a module's, of any make: the kernel reads (m,) floats
+    # a module's, of any make: the kernel reads (m,) floats
+    phi, rate = real_floats("is_active: phi", phi), real_floats("is_active: rate", rate)
     if phi.ndim != 1 or rate.shape != phi.shape:
         shapes = f"{phi.shape}, {rate.shape}"
         raise InvalidOptions("is_active", f"phi and rate must have one shape (m,), got {shapes}")

@@ -8,10 +8,11 @@ entry point it calls from then on (a first call that fits none leaves it with th
 call site passes arrays gaussim makes, whose dtype, dimensions and memory order do not change
 between calls; read-only flags may (they change no machine code). The entry point does not check
 them: the arrays of a user's making that reach a kernel (a torque, a module's :class:`Rows`, a
-:class:`GaussProblem`, a material's coefficients) are made C-ordered float64 (:func:`c_float`) or
-int64 (:func:`c_int`) first. With ``GAUSSIM_CHECK_KERNELS=1`` (the test suite's setting) each later
-call's arguments are checked against the bound signature, a misfit raising TypeError, and so is a
-first call that fits no declared signature.
+:class:`GaussProblem`, a material's coefficients) are made C-ordered float64 first
+(:func:`~gaussim.constraints.base.real_floats`; int64: :func:`c_int`). With
+``GAUSSIM_CHECK_KERNELS=1`` (the test suite's setting) each later call's arguments are checked against
+the bound signature, a misfit raising TypeError, and so is a first call that fits no declared
+signature.
 """
 
 from __future__ import annotations
@@ -35,14 +36,6 @@ _FLOAT, _INT = np.dtype(np.float64), np.dtype(np.int64)
 def is_c_float(a: object) -> bool:
     """Whether ``a`` is a C-contiguous native float64 array, what the bound kernels read."""
     return type(a) is np.ndarray and a.dtype is _FLOAT and a.flags.c_contiguous
-
-
-def c_float(a: object) -> np.ndarray:
-    """``a`` itself when a C-contiguous float64 array (what the bound kernels read), else such a copy:
-    for the arrays of a user's making that reach them."""
-    if is_c_float(a):
-        return a  # type: ignore[return-value]
-    return np.ascontiguousarray(a, dtype=_FLOAT)
 
 
 def c_int(a: object) -> np.ndarray:

@@ -17,8 +17,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..assembly import GaussProblem
+from ..constraints.base import real_floats
 from ..exceptions import InvalidOptions
-from ..kernels.bound import Bound, c_float
+from ..kernels.bound import Bound
 
 # the kernels called here, past numba's dispatcher (gaussim.kernels.bound)
 kkt_residuals = Bound("solver.kkt_residuals")
@@ -157,7 +158,8 @@ def kkt_residual(problem: GaussProblem, x: np.ndarray, lambda_eq: np.ndarray, la
     """Largest violation of the KKT conditions of the Gauss problem at (x, lambda_eq, lambda_in >= 0)
     (see the module's docstring); NaN when any of them is not finite."""
     p = problem
-    x, lambda_eq, lambda_in = c_float(x), c_float(lambda_eq), c_float(lambda_in)  # a user's may be any
+    point = {"x": x, "lambda_eq": lambda_eq, "lambda_in": lambda_in}  # a user's may be of any make
+    x, lambda_eq, lambda_in = (real_floats(f"kkt_residual's {name}", a) for name, a in point.items())
     for name, a, size in (
         ("x", x, len(p.g)),
         ("lambda_eq", lambda_eq, len(p.b)),
