@@ -69,10 +69,10 @@ class GeometryNotFound(FrameNotFound):
 
 
 class InvalidOptions(GaussimError, ValueError):
-    """An option or scene field holds an invalid value; ``field`` names it."""
+    """An option or scene field holds an invalid value; ``field`` names it, ``message`` says what."""
 
     def __init__(self, field: str, message: str) -> None:
-        self.field = field
+        self.field, self.message = field, message
         super().__init__(f"{field}: {message}")
 
 

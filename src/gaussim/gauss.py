@@ -65,9 +65,7 @@ class GaussStage:
         except InvalidOptions as err:
             if id(module) not in self._users or err.field.startswith("module "):
                 raise
-            raise InvalidOptions(
-                f"module '{module.name}': {err.field}", str(err)[len(err.field) + 2 :]
-            ) from err
+            raise InvalidOptions(f"module '{module.name}': {err.field}", err.message) from err
         if rows is None or id(module) not in self._users:  # gaussim's own make them as the kernels read
             return rows
         return checked_rows(module.name, rows, self._masks)

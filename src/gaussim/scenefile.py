@@ -454,7 +454,7 @@ class _Reader:
         except InvalidOptions as err:
             owner = re.match(r"\w*", err.field)[0]  # type: ignore[index]
             place = SCENE_FIELDS.get(owner, owner) + err.field[len(owner) :]
-            raise SceneFileError(self.path, place, str(err)[len(err.field) + 2 :]) from err
+            raise SceneFileError(self.path, place, err.message) from err
         except InvalidRobot as err:  # a body that cannot join the others
             raise SceneFileError(self.path, "bodies", str(err)) from err
         except GaussimError as err:  # an unknown geometry or obstacle of a pair
@@ -472,7 +472,7 @@ class _Reader:
             if owner is not None and field.startswith(owner + "."):
                 field = field[len(owner) + 1 :]
             field = (aliases or {}).get(field, field)
-            raise SceneFileError(self.path, f"{key}.{field}", str(err)[len(err.field) + 2 :]) from err
+            raise SceneFileError(self.path, f"{key}.{field}", err.message) from err
         except GaussimError as err:
             raise SceneFileError(self.path, key, str(err)) from err
 

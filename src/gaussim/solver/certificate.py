@@ -158,16 +158,17 @@ def kkt_residual(problem: GaussProblem, x: np.ndarray, lambda_eq: np.ndarray, la
     """Largest violation of the KKT conditions of the Gauss problem at (x, lambda_eq, lambda_in >= 0)
     (see the module's docstring); NaN when any of them is not finite."""
     p = problem
-    point = {"x": x, "lambda_eq": lambda_eq, "lambda_in": lambda_in}  # a user's may be of any make
-    x, lambda_eq, lambda_in = (real_floats(f"kkt_residual's {name}", a) for name, a in point.items())
+    point = []  # a user's arrays may be of any make; the kernel reads these sizes and does not check them
     for name, a, size in (
         ("x", x, len(p.g)),
         ("lambda_eq", lambda_eq, len(p.b)),
         ("lambda_in", lambda_in, len(p.l)),
     ):
-        if a.shape != (size,):  # the kernel reads these sizes and does not check them
+        a = real_floats(f"kkt_residual's {name}", a)
+        if a.shape != (size,):
             raise InvalidOptions(f"kkt_residual's {name}", f"must have shape ({size},), got {a.shape}")
-    return kkt_residuals.call(p.H, p.g, p.A, p.b, p.C, p.l, x, lambda_eq, lambda_in)[0]
+        point.append(a)
+    return kkt_residuals.call(p.H, p.g, p.A, p.b, p.C, p.l, *point)[0]
 
 
 def checked(
