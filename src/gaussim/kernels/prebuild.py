@@ -54,8 +54,9 @@ SIGNATURES = {
     "dynamics.constant_terms": [
         f"f2 f2 f1 i1 i1 f1*3 {v} {tau} f1 f b i1 f3 b1 f1" for v in ("f1", "f1r") for tau in ("f1", "f1r")
     ],
-    "integrator.displacement": ["f1r f1 f i1 b1 f1"],
-    "integrator.move_bases": ["f1r f1 f1 f i1 i1"],
+    "integrator.displacement": ["f1r f1 f f b1 i1 b1 f1"],
+    "integrator.impulsive": ["f2 f1 b f1r f b1"],
+    "integrator.move_bases": ["f1r f1 f1 f1 i1 i1"],
     "actuation.damped_torque": ["f1 f1 f1r f1 f1"],
     # the joints' placements: one array whatever the scene (gaussim.kernels.pairs)
     "collision.ground_hulls": ["f3r i1 f2 f3 i2 i2 i1 i1 f2 f1 f1 f3 f f*2 f1 f1 i1"],
@@ -68,6 +69,7 @@ SIGNATURES = {
     "primitives.primitive_pairs": ["f3r i2 f4 f3 i2 f3 i1 f i1 f1 f2 f3 i1"],
     "cylinders.ground_cylinders": ["f3r i2 f4 f3 f2 f2 i1 f i1 f1 f2 f3 i1"],
     "collision.in_pair_order": ["i1 f2 f2 f1"],
+    "collision.joined": ["i1 f2 f2 f1 i1 f2 f2 f1"],
     "collision.travel": ["i1 i1 f1 i1 i1 f1 f1r f1 f f f1 f1"],
     "collision.closing": [f"f2F f2 i1 i1 i1 i1 f2 f2 f1 {v} f1 f f f1" for v in ("f1r", "f1")],
     "contact.near_limits": ["f1r f1r i1 i1 f1 f1 i f*5 i1 f1", "f1r f1 i1 i1 f1 f1 i f*5 i1 f1"],
