@@ -25,6 +25,7 @@ from .primitives import PrimitivePairs
 # the kernels called here, past numba's dispatcher (gaussim.kernels.bound)
 closing = Bound("collision.closing")
 in_pair_order = Bound("collision.in_pair_order")
+joined = Bound("collision.joined")
 point_keys = Bound("pairs.point_keys")
 
 # A fast step leaves out the points it cannot close only when they are at least this fraction of
@@ -188,6 +189,8 @@ class ContactDetector:
             return NOTHING_FOUND
         if len(pieces) == 1:
             return pieces[0]
+        if len(pieces) == 2:  # two routines' pieces, as a pile's ground and box pairs
+            return joined.call(*pieces[0], *pieces[1])  # type: ignore[no-any-return]
         owner, points, normals, gaps = (np.concatenate([p[i] for p in pieces]) for i in range(4))
         in_pair_order.call(owner, points, normals, gaps)
         return owner, points, normals, gaps
