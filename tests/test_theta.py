@@ -128,3 +128,20 @@ def test_a_limit_stops_a_joint_as_at_theta_one(pendulum):
 def test_a_theta_out_of_range_is_named(given, message):
     with pytest.raises(gaussim.InvalidOptions, match=message.replace("[", r"\[")):
         gaussim.Options(**given)
+
+
+def test_the_command_line_sets_theta_and_names_a_bad_one(tmp_path, capsys):
+    """``gaussim run --theta`` overrides the scene's; the run log keeps it; a value out of range is
+    refused with exit code 2 and the field named, without a traceback."""
+    from gaussim.cli import EXIT_BAD_INPUT, EXIT_OK, main
+
+    out = tmp_path / "ball.runlog"
+    argv = ["run", "ball_bounce", "--theta", "0.5", "--duration", "0.05", "--out", str(out), "--quiet"]
+    assert main(argv) == EXIT_OK
+    assert gaussim.RunLog.load(out).options.theta == 0.5
+    assert (
+        main(["run", "ball_bounce", "--theta", "2", "--out", str(tmp_path / "bad"), "--quiet"])
+        == EXIT_BAD_INPUT
+    )
+    err = capsys.readouterr().err
+    assert "theta: must be in [0.5, 1], got 2.0" in err and "Traceback" not in err
