@@ -113,11 +113,9 @@ def test_the_build_compiles_every_signature_the_workload_calls():
 
 
 def _move_bases_arguments(q_order: str = "C") -> tuple:
-    """move_bases' arguments for one free body turned about z: (q, q_next, v, step, configuration,
-    velocity), the step dt v at dt 0.01."""
+    """move_bases' arguments for one free body turned about z: (q, q_next, v, dt, configuration, velocity)."""
     q = np.array([0.1, 0.2, 0.3, 0.0, 0.0, np.sin(0.2), np.cos(0.2)], order=q_order)
-    v = np.array([1.0, -2.0, 0.5, 0.0, 0.0, 3.0])
-    return q, q + 0.0, v, 0.01 * v, np.array([0]), np.array([0])
+    return q, q + 0.0, np.array([1.0, -2.0, 0.5, 0.0, 0.0, 3.0]), 0.01, np.array([0]), np.array([0])
 
 
 def test_a_bound_kernel_calls_the_overload_its_first_call_fits_past_the_dispatcher(monkeypatch):
@@ -145,17 +143,17 @@ def test_a_bound_kernel_under_the_check_refuses_arguments_of_other_types():
     assert bound_module.CHECK
     kernel = Bound("integrator.move_bases")
     kernel.call(*_move_bases_arguments())
-    q, q_next, v, step, configuration, velocity = _move_bases_arguments()
+    q, q_next, v, dt, configuration, velocity = _move_bases_arguments()
     with pytest.raises(TypeError, match="kernel integrator.move_bases bound to"):
-        kernel.call(q, q_next, v.astype(np.float32), step, configuration, velocity)
+        kernel.call(q, q_next, v.astype(np.float32), dt, configuration, velocity)
     with pytest.raises(TypeError, match="int32"):
-        kernel.call(q, q_next, v, step, configuration.astype(np.int32), velocity)
+        kernel.call(q, q_next, v, dt, configuration.astype(np.int32), velocity)
     with pytest.raises(TypeError):
-        kernel.call(q, q_next, v[::2], step, configuration, velocity)  # not contiguous
+        kernel.call(q, q_next, v[::2], dt, configuration, velocity)  # not contiguous
     with pytest.raises(TypeError):
-        kernel.call(q, q_next, v, 0.01, configuration, velocity)  # a float where an array goes
+        kernel.call(q, q_next, v, 1, configuration, velocity)  # an int where a float goes
     q.setflags(write=False)
-    kernel.call(q, q_next, v, step, configuration, velocity)
+    kernel.call(q, q_next, v, dt, configuration, velocity)
 
 
 def test_a_bound_kernel_takes_the_first_declared_memory_order_a_matrix_of_both_fits():

@@ -43,8 +43,6 @@ def _valid(field: str, value: object) -> bool:
         return real and value >= 0  # type: ignore[operator]
     if field == "stabilisation":
         return real and 0 < value <= 1  # type: ignore[operator]
-    if field == "theta":
-        return real and 0.5 <= value <= 1  # type: ignore[operator]
     if field == "timings":
         return isinstance(value, bool)
     return real and value > 0  # type: ignore[operator]

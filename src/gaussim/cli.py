@@ -94,11 +94,6 @@ def main(argv: list[str] | None = None) -> int:
     run.add_argument("--dt", type=float, help="time step [s] (overrides the scene's)")
     run.add_argument("--scheme", choices=SCHEMES, help="Gauss problem's level (overrides the scene's)")
     run.add_argument("--friction-mode", choices=FRICTION_MODES, help="friction model (overrides the scene's)")
-    run.add_argument(
-        "--theta",
-        type=float,
-        help="Moreau-Jean's theta in [0.5, 1]: 0.5 is second order in smooth motion (overrides the scene's)",
-    )
     run.add_argument("--duration", type=float, help="simulated time [s]")
     run.add_argument("--quiet", action="store_true", help="no progress line")
     run.add_argument("--view", action="store_true", help="show the run live in the browser (meshcat)")
@@ -503,9 +498,7 @@ def _run(args: argparse.Namespace) -> int:
         _positive("--dt", args.dt)
     # placing the robot on the ground compiles kernels too
     with compile_notice(None if args.quiet else functools.partial(announce, sys.stderr)):
-        spec = load_scene(
-            args.scene, dt=args.dt, scheme=args.scheme, friction_mode=args.friction_mode, theta=args.theta
-        )
+        spec = load_scene(args.scene, dt=args.dt, scheme=args.scheme, friction_mode=args.friction_mode)
     if args.duration is not None:
         _positive("--duration", args.duration)
         spec.duration = args.duration

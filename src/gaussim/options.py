@@ -39,13 +39,6 @@ class Options:
             contacts of the acceleration scheme.
         restitution_threshold: impacts slower than this normal speed are treated as inelastic [m/s]
             (prevents micro-bouncing of resting contacts when restitution > 0).
-        theta: Moreau-Jean's theta in [0.5, 1] (velocity scheme): the step moves q by
-            dt ((1 - theta) v + theta v+). 1 (default): semi-implicit Euler, whose rows hold the
-            position at v+ exactly (no penetration), first order in position (a body under a constant
-            force lags by a dt / 2 per second); 0.5: the trapezoidal rule, exact under constant forces
-            and second order in smooth motion (flight, rolling, steady sliding), but a contact closing
-            at normal speed u sinks by up to (1 - theta) u dt in the step of its impact, which
-            ``stabilisation`` then removes.
         stabilisation: fraction in (0, 1] of a constraint violation (penetration, limit overshoot,
             bilateral drift) removed per step; the acceleration scheme uses it as a critically
             damped Baumgarte term with time constant dt / stabilisation.
@@ -83,7 +76,6 @@ class Options:
     friction_mode: str = "accurate"
     friction_iterations: int = 10
     restitution_threshold: float = 1e-2
-    theta: float = 1.0
     stabilisation: float = 0.2
     contact_margin: float = 5e-3
     limit_margin: float = 1e-2
@@ -126,14 +118,6 @@ class Options:
         _non_negative("start_penetration", self.start_penetration)
         if not isinstance(self.timings, bool):
             raise InvalidOptions("timings", f"must be True or False, got {shown(self.timings)}")
-        if not (is_real(self.theta) and 0.5 <= self.theta <= 1.0):
-            raise InvalidOptions("theta", f"must be in [0.5, 1], got {shown(self.theta)}")
-        if self.theta != 1.0 and self.scheme == "acceleration":
-            raise InvalidOptions(
-                "theta",
-                "must be 1 with scheme 'acceleration' (it moves q by dt v+ after its impacts), "
-                f"got {self.theta:g}",
-            )
         if not (is_real(self.stabilisation) and 0.0 < self.stabilisation <= 1.0):
             raise InvalidOptions("stabilisation", f"must be in (0, 1], got {shown(self.stabilisation)}")
 

@@ -29,7 +29,7 @@ from .constraints.base import ConstraintModule
 from .dynamics import DynamicsStage
 from .exceptions import GaussimWarning, InvalidRobot, InvalidState, SolverError
 from .gauss import GaussStage
-from .integrator import integrate, jolted
+from .integrator import integrate
 from .kernels.bound import is_c_float
 from .options import Options
 from .report import StepReport
@@ -74,8 +74,7 @@ class Simulator:
         self._narrow = not self.scheme.acceleration  # see _detect
         # the step's points, and those it left out (see _detect)
         self._found = self._left_out = NOTHING_FOUND
-        self._scratch = np.zeros(self.model.nv)  # the step's displacement, read by Pinocchio's integrate
-        self._jolted = np.zeros(self.model.nv, dtype=bool)  # the coordinates an impact moved (theta < 1)
+        self._scratch = np.zeros(self.model.nv)  # the step's dt v+, read by Pinocchio's integrate
         self._unit_parts = _unit_parts(self.model)
 
     @staticmethod
@@ -284,16 +283,10 @@ class Simulator:
         return self.scheme.next_velocity(state, torque, x_free, contacts, report)
 
     def _advance(self, state: State, v_next: np.ndarray, report: StepReport) -> State:
-        """The next state: q moved by dt ((1 - theta) v + theta v+) on each joint's manifold."""
+        """The next state: q moved by dt v+ on each joint's manifold."""
         dt, bases = self.options.dt, self.dynamics.bases
         free = bases.untouched(report, report.impact) if self._rigid_bases else None
-        theta = self.options.theta
-        impacts = None
-        if theta < 1.0:
-            impacts = jolted(report.blocks, state.v, self.options.restitution_threshold, self._jolted)
-        moved = integrate(
-            self.model, state.q, state.v, v_next, dt, theta, self._scratch, bases, free, impacts
-        )
+        moved = integrate(self.model, state.q, state.v, v_next, dt, self._scratch, bases, free)
         report.mark("integrate")
         if moved is None:
             raise SolverError(f"step at t={state.t:.6g} s produced a non-finite velocity", report)

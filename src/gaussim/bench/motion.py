@@ -135,12 +135,6 @@ GAUSSIM_SETTINGS: dict[str, Setting] = {
         f"dt={dt:g} eps_abs=1e-4 pyramid": {"dt": dt, "eps_abs": 1e-4, "friction_mode": "pyramid"}
         for dt in (1e-2, 5e-3, 2e-3, 1e-3)
     },
-    # the trapezoidal rule (Options.theta): second order in smooth motion
-    **{f"dt={dt:g} theta=0.5": {"dt": dt, "theta": 0.5} for dt in (2e-2, 1e-2, 5e-3, 2e-3, 1e-3)},
-    **{
-        f"dt={dt:g} eps_abs=1e-4 theta=0.5": {"dt": dt, "eps_abs": 1e-4, "theta": 0.5}
-        for dt in (2e-2, 1e-2, 5e-3, 2e-3)
-    },
 }
 MUJOCO_SETTINGS: dict[str, Setting] = {
     **{f"dt={dt:g}": {"dt": dt} for dt in (2e-2, 1e-2, 5e-3, 2e-3, 1e-3, 5e-4)},
@@ -280,8 +274,7 @@ form, else the engine's own run at dt 0.1 ms (0.25 ms with `--quick`) and its ti
 (gaussim eps_abs 1e-10; MuJoCo tolerance 1e-12, 1000 iterations). Each engine sweeps its time step
 (20 ms to 0.5 ms; 5 to 1 ms with `--quick`) and its solver tolerance, gaussim also its friction model
 (`friction_mode="pyramid"`, MuJoCo's own pyramidal cone, its error still taken against gaussim's
-reference in the accurate mode) and its position update (`theta=0.5`, the trapezoidal rule; its
-reference stays at theta 1; `gaussim.bench.motion`); the
+reference in the accurate mode; `gaussim.bench.motion`); the
 row is its cheapest setting (wall time of its steps per simulated second, the least of {REPEATS} runs)
 that meets the tolerance, and that time's ratio to gaussim's cheapest."""
 

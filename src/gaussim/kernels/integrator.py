@@ -10,17 +10,12 @@ from ..linalg import finite
 
 
 @njit(cache=True)
-def displacement(v, v_next, dt, theta, jolted, velocity, free, out):  # type: ignore[no-untyped-def]
-    """out = dt ((1 - theta) v + theta v_next), theta 1 on the ``jolted`` coordinates (none when it is
-    empty), with each ``free`` base's turn (bases ``velocity``'s first coordinates) the rotation vector
-    of the Cayley map of dt w_m, 2 atan(dt |w_m| / 2) w_m / |w_m|, w_m the midpoint of v's and
-    v_next's angular velocities; False when v_next is not finite."""
-    blended = len(jolted) > 0
+def displacement(v, v_next, dt, velocity, free, out):  # type: ignore[no-untyped-def]
+    """out = dt v_next, with each ``free`` base's turn (bases ``velocity``'s first coordinates) the
+    rotation vector of the Cayley map of dt w_m, 2 atan(dt |w_m| / 2) w_m / |w_m|, w_m the midpoint
+    of v's and v_next's angular velocities; False when v_next is not finite."""
     for i in range(len(v_next)):
-        if blended and not jolted[i]:
-            out[i] = dt * ((1.0 - theta) * v[i] + theta * v_next[i])
-        else:
-            out[i] = dt * v_next[i]
+        out[i] = dt * v_next[i]
     for k in range(len(free)):
         if free[k]:
             i = velocity[k] + 3
@@ -37,33 +32,15 @@ def displacement(v, v_next, dt, theta, jolted, velocity, free, out):  # type: ig
 
 
 @njit(cache=True)
-def impulsive(J, bound, equality, v, threshold, jolted):  # type: ignore[no-untyped-def]
-    """Mark in ``jolted`` (nv,) the coordinates that the rows (J, bound) read (nonzero columns) where v
-    violates them by more than ``threshold``: J v < bound - threshold, or |J v - bound| > threshold
-    for ``equality`` rows (an impact: the step changes their velocity at once)."""
-    for r in range(len(bound)):
-        value = 0.0
-        for i in range(len(v)):
-            value += J[r, i] * v[i]
-        gap = value - bound[r]
-        if gap < -threshold or (equality and gap > threshold):
-            for i in range(len(v)):
-                if J[r, i] != 0.0:
-                    jolted[i] = True
-
-
-@njit(cache=True)
-def move_bases(q, q_next, v, step, configuration, velocity):  # type: ignore[no-untyped-def]
-    """For each floating base: q_next's origin = q's + R d_l (R the frame of q, d_l the origin's
-    ``step``, the displacement's linear part), and v_l, in place, re-expressed in q_next's frame
-    (R_next^T R v_l). In scalars: this runs every step."""
+def move_bases(q, q_next, v, dt, configuration, velocity):  # type: ignore[no-untyped-def]
+    """For each floating base: q_next's origin = q's + dt R v_l (R the frame of q), and v_l, in place,
+    re-expressed in q_next's frame (R_next^T R v_l). In scalars: this runs every step."""
     for k in range(len(configuration)):
         p, i = configuration[k], velocity[k]
-        x, y, z = _turned(q[p + 3 : p + 7], step[i], step[i + 1], step[i + 2], 1.0)
-        q_next[p] = q[p] + x
-        q_next[p + 1] = q[p + 1] + y
-        q_next[p + 2] = q[p + 2] + z
         x, y, z = _turned(q[p + 3 : p + 7], v[i], v[i + 1], v[i + 2], 1.0)
+        q_next[p] = q[p] + dt * x
+        q_next[p + 1] = q[p + 1] + dt * y
+        q_next[p + 2] = q[p + 2] + dt * z
         v[i], v[i + 1], v[i + 2] = _turned(q_next[p + 3 : p + 7], x, y, z, -1.0)
 
 

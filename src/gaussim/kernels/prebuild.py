@@ -54,9 +54,8 @@ SIGNATURES = {
     "dynamics.constant_terms": [
         f"f2 f2 f1 i1 i1 f1*3 {v} {tau} f1 f b i1 f3 b1 f1" for v in ("f1", "f1r") for tau in ("f1", "f1r")
     ],
-    "integrator.displacement": ["f1r f1 f f b1 i1 b1 f1"],
-    "integrator.impulsive": ["f2 f1 b f1r f b1"],
-    "integrator.move_bases": ["f1r f1 f1 f1 i1 i1"],
+    "integrator.displacement": ["f1r f1 f i1 b1 f1"],
+    "integrator.move_bases": ["f1r f1 f1 f i1 i1"],
     "actuation.damped_torque": ["f1 f1 f1r f1 f1"],
     # the joints' placements: one array whatever the scene (gaussim.kernels.pairs)
     "collision.ground_hulls": ["f3r i1 f2 f3 i2 i2 i1 i1 f2 f1 f1 f3 f f*2 f1 f1 i1"],
