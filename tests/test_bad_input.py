@@ -3,6 +3,8 @@
 import os
 import re
 import stat
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -203,6 +205,41 @@ def test_corrupt_mesh_names_the_file_and_the_reason(tmp_path, content, reason):
         gaussim.InvalidRobot, match=rf"link 'base': mesh file 'meshes/foot.stl' cannot be read: .*{reason}"
     ):
         gaussim.load_robot(path, floating_base=True)
+
+
+FLAT = "v 0 0 0\nv 0.1 0 0\nv 0 0.1 0\nv 0.1 0.1 0\nf 1 2 3\nf 2 4 3\n"  # a square, no thickness
+TRIANGLE = "v 0 0 0\nv 0.1 0 0\nv 0 0.1 0\nf 1 2 3\n"
+
+
+@pytest.mark.parametrize(
+    ("obj", "reason"),
+    [(FLAT, r"its mesh is flat .*give it a thickness"), (TRIANGLE, "its mesh has 3 vertices")],
+    ids=["flat", "three-vertices"],
+)
+def test_a_mesh_without_a_volume_is_named_not_a_crash(tmp_path, obj, reason):
+    """coal's convex hull of a flat mesh crashes the process (and of fewer than 4 vertices raises a
+    bare ValueError): a URDF's collision mesh and a free body's mesh are refused by name first. A
+    subprocess, so that a crash fails the test rather than the suite."""
+    (tmp_path / "plate.obj").write_text(obj)
+    urdf = tmp_path / "robot.urdf"
+    urdf.write_text(_URDF.format(**{**_GOOD, "geometry": '<mesh filename="plate.obj"/>'}))
+    script = (
+        "import sys, gaussim\n"
+        "for load in (lambda: gaussim.load_robot(sys.argv[1], floating_base=True),\n"
+        "             lambda: gaussim.FreeBody.mesh('plate', sys.argv[2], mass=1.0)):\n"
+        "    try:\n"
+        "        load()\n"
+        "    except gaussim.GaussimError as err:\n"
+        "        print(type(err).__name__, err)\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", script, str(urdf), str(tmp_path / "plate.obj")],
+        capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    robot, body = done.stdout.splitlines()
+    assert re.search(rf"InvalidRobot {re.escape(str(urdf))}: collision geometry '.*': {reason}", robot)
+    assert re.search(rf"InvalidOptions plate.mesh: .*plate.obj: {reason}", body)
 
 
 def test_the_well_formed_urdf_of_those_loads(tmp_path):

@@ -60,6 +60,9 @@ SINGULAR_RTOL, MASSLESS_FRACTION = 1e-12, 1e-3
 # A link's centre of mass farther than this from its collision geometry's bounding box, and than half
 # the geometry's size, gets a warning: the file has it wrong (pybullet's teddy_large: 1 m outside) [m]
 COM_OUTSIDE = 0.25
+# A mesh whose vertices lie within this fraction of its size of a plane has no convex hull qhull
+# takes (measured: it crashes the process up to 1e-8, builds from 1e-7).
+FLATNESS = 1e-6
 # coal's hull of a mesh stores at most 255 neighbours per vertex; one with more is rebuilt dropping the
 # points within this distance of the hull (qhull's W option) [m]
 HULL_COARSENING = 1e-3
@@ -773,9 +776,29 @@ def _warn_oddities(robot: Robot) -> None:
         )
 
 
+def hull_problem(points: np.ndarray) -> str:
+    """Why a mesh's vertices ``points`` (n, 3) [m] have no convex hull ("" when they have one): fewer
+    than 4, or all within one plane up to FLATNESS of their size (coal's qhull call crashes the
+    process on such a mesh rather than raising)."""
+    if len(points) < 4:
+        return f"its mesh has {len(points)} vertices: a convex hull needs 4 that are not in one plane"
+    centred = points - points.mean(axis=0)
+    axes = np.linalg.svd(centred, full_matrices=False)[2]
+    spans = np.ptp(centred @ axes.T, axis=0)  # along the principal axes, the widest first
+    if spans[2] <= FLATNESS * max(spans[0], float(np.abs(points).max())):
+        return (
+            f"its mesh is flat (its vertices lie within {spans[2]:.3g} m of a plane over {spans[0]:.3g} m): "
+            "a collision mesh needs a volume; give it a thickness, or use a box"
+        )
+    return ""
+
+
 def _convex_hull(robot: Robot, geometry: pin.GeometryObject) -> None:
     """The convex hull of a mesh; where qhull's hull has a vertex with more neighbours than coal's hull
     can store, the hull without the points within HULL_COARSENING of it, with a warning."""
+    problem = hull_problem(geometry.geometry.vertices())
+    if problem:
+        raise InvalidRobot(f"{robot.source}: collision geometry '{geometry.name}': {problem}")
     try:
         geometry.geometry.buildConvexHull(True, "Qt")
     except RuntimeError as err:

@@ -20,7 +20,7 @@ import pinocchio as pin
 
 from .exceptions import InvalidOptions, InvalidRobot, shown
 from .options import is_real
-from .robot import Robot, as_robot
+from .robot import Robot, as_robot, hull_problem
 
 # Colours given to the bodies in turn (RGBA), for the viewer and the plots.
 PALETTE = (
@@ -304,6 +304,9 @@ def _hull(name: str, path: str, scale: float) -> coal.ConvexBase:
         mesh = coal.MeshLoader().load(str(path), np.full(3, scale))
     except (RuntimeError, ValueError, OSError) as err:
         raise InvalidOptions(f"{name}.mesh", f"cannot read {path}: {err}") from err
+    problem = hull_problem(mesh.vertices())
+    if problem:
+        raise InvalidOptions(f"{name}.mesh", f"{path}: {problem}")
     mesh.buildConvexHull(True, "Qt")
     return mesh.convex
 
