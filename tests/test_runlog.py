@@ -420,3 +420,19 @@ def test_cli_tells_gaussims_warnings_as_its_own_lines(tmp_path):
     assert result.returncode == 0, result.stderr
     assert "gaussim: warning: the initial configuration has joints outside their limits" in result.stderr
     assert "GaussimWarning" not in result.stderr and ".py:" not in result.stderr
+
+
+def test_a_log_replays_and_plots_from_any_folder(tmp_path):
+    """A scene with a robot path relative to its folder, run from that folder: its log replays and
+    plots from another folder (the log keeps the scene file's absolute path)."""
+    project = tmp_path / "project"
+    project.mkdir()
+    (project / "pendulum.urdf").write_text((SCENES.parent / "pendulum.urdf").read_text())
+    scene = '[robot]\nurdf = "pendulum.urdf"\n[initial]\nq = [0.3]\n[simulation]\nduration = 0.05\n'
+    (project / "scene.toml").write_text(scene)
+    result = _cli("run", "scene.toml", "--quiet", cwd=project)
+    assert result.returncode == 0, result.stderr
+    elsewhere = project / "out"
+    for args in (["replay", "scene.runlog", "--html", "a.html"], ["plot", "scene.runlog", "-o", "a.png"]):
+        result = _cli(*args, cwd=elsewhere)
+        assert result.returncode == 0, result.stderr

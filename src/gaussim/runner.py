@@ -96,7 +96,8 @@ def _steps(
     """:func:`run`'s loop, ``progress`` its progress line."""
     sim = Simulator(spec.scene, spec.options)
     state = sim.reset(spec.initial.q, spec.initial.v)
-    log = RunLog(spec.robot.name, spec.text, spec.options, str(spec.path))
+    # absolute: a replay from another folder resolves the scene's relative paths against its folder
+    log = RunLog(spec.robot.name, spec.text, spec.options, str(Path(spec.path).resolve()))
     log.start(state, spec.scene.gravity)
     writer = RunLogWriter(out, log) if out is not None else None
     start = last_saved = time.perf_counter()
