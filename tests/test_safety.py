@@ -377,7 +377,7 @@ def test_a_page_rewritten_on_a_full_disk_keeps_the_previous_one(tmp_path, capsys
         assert main(["replay", str(tmp_path / "r"), "--html", str(page)]) == 0
         good = page.read_bytes()
         assert main(["replay", str(tmp_path / "r"), "--html", str(page)]) == 1
-        assert "No space left on device" in capsys.readouterr().err
+        assert f"gaussim: {page}: No space left on device" in capsys.readouterr().err  # named
         assert page.read_bytes() == good and os.listdir(small) == ["page.html"]
     assert log.steps == 20
 

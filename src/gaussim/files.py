@@ -20,7 +20,8 @@ class OutputError(GaussimError):
 @contextmanager
 def atomic_path(path: str | Path) -> Iterator[Path]:
     """A temporary path beside ``path`` (same suffix, for writers that pick the format from it), renamed
-    to ``path`` when the block succeeds and removed when it fails."""
+    to ``path`` when the block succeeds and removed when it fails; an OSError of the block (a full disk
+    midway, whose write names no file) is raised again naming ``path``."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=f".tmp{path.suffix}", dir=path.parent)
@@ -30,6 +31,9 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         tmp.chmod(0o666 & ~umask())  # mkstemp's 0600 would make every output private
         yield tmp
         os.replace(tmp, path)
+    except OSError as err:
+        tmp.unlink(missing_ok=True)
+        raise OSError(err.errno, err.strerror or str(err), str(path)) from err
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
