@@ -83,6 +83,18 @@ BALL = '[robot]\nname = "ball"\nfloating_base = true\n'
             "no frame 'nose'",
         ),
         (BALL + "[control]\ntype = 'pd'\nkp = -1.0\n", "control", "gains must be >= 0"),
+        # a key the type does not read is refused, not ignored (a gain under the default zero control)
+        (
+            BALL + "[control]\nkp = 5.0\nkd = 0.1\n",
+            "control.kd",
+            "type 'zero' \\(the default\\) does not read it; type = \"pd\" does",
+        ),
+        (BALL + "[control]\ntype = 'pd'\ntau = []\n", "control.tau", 'type = "constant" does'),
+        (
+            BALL + "[[bilaterals]]\ntype = 'loop'\nframes = ['a', 'b']\nposition = [0, 0, 1]\n",
+            r"bilaterals\[0\].position",
+            "type 'loop' does not read it; type = \"anchor\" does",
+        ),
         (BALL + "[simulation]\nduration = 0\n", "simulation.duration", "must be > 0"),
         ('[robot]\nname = "solo13"\n', "robot.name", "no robot 'solo13'.*solo12"),
         ('[robot]\nurdf = "missing.urdf"\n', "robot.urdf", "no such file"),

@@ -93,6 +93,11 @@ SECTIONS = {
     "simulation": {"duration"},
     "options": {f.name for f in fields(Options)},
 }
+# the keys each type of a [control] or [[bilaterals]] table reads (the others are refused, not ignored)
+TYPE_KEYS = {
+    "control": {"zero": (), "constant": ("tau",), "pd": ("target", "kp", "kd", "implicit")},
+    "bilaterals": {"anchor": ("frame", "position", "rpy"), "loop": ("frames", "orientation")},
+}
 # what a body is made from: a robot (by name or file) or a shape
 ROBOT_SOURCES = ("robot", "urdf", "mjcf", "sdf")
 # the dimensions each shape takes (the first ones required)
@@ -672,6 +677,7 @@ class _Reader:
         key = f"bilaterals[{i}]"
         section = self.table("bilaterals", entry, key)
         kind = section.get("type")
+        self.typed("bilaterals", key, section, kind)
         if kind == "anchor":
             frame = self.frame(f"{key}.frame", section.get("frame"), robot)
             position = self.array(f"{key}.position", section.get("position"), 3)
@@ -687,6 +693,17 @@ class _Reader:
             return LoopClosure(frames[0], frames[1], orientation)
         self.fail(f"{key}.type", f"{shown(kind)} is not one of anchor, loop")
         raise AssertionError  # unreachable
+
+    def typed(self, table: str, key: str, section: dict[str, Any], kind: Any) -> None:
+        """Refuse a key of ``section`` (a ``table`` at ``key``) that its type ``kind`` does not read,
+        naming the types that read it: a gain under a zero controller would be ignored."""
+        reads = TYPE_KEYS[table]
+        if kind not in reads:
+            return  # an unknown type: its own error follows
+        for name in sorted(set(section) - {"type", *reads[kind]}):
+            readers = " or ".join(f'type = "{t}"' for t, keys in reads.items() if name in keys)
+            default = "" if "type" in section else " (the default)"
+            self.fail(f"{key}.{name}", f"type {shown(kind)}{default} does not read it; {readers} does")
 
     def frame(self, key: str, name: Any, robot: Robot) -> str:
         """``name``, a frame of ``robot``."""
@@ -751,6 +768,7 @@ class _Reader:
     def controller(self, key: str, section: dict[str, Any], robot: Robot, dt: float) -> Controller:
         """The ``[control]`` table ``section`` (at ``key``), for ``robot``'s joints."""
         kind = section.get("type", "zero")
+        self.typed("control", key, section, kind)
         nv = robot.model.nv
         actuated = slice(6, nv) if robot.floating else slice(0, nv)
         if kind == "zero":
