@@ -310,6 +310,9 @@ def test_forces_between_bodies_are_logged_as_the_simulator_reports_them(crate_ru
     assert not log.forces_between("crate", "ground").any(), "the crate never touches the ground"
     with pytest.raises(gaussim.InvalidOptions, match="no body 'box' in this log; its bodies: solo, crate"):
         log.forces_between("box", "solo")
+    # a misspelt other side is named, not summed to zeros (the ground, declared, never touched the crate)
+    with pytest.raises(gaussim.InvalidOptions, match="no body or obstacle 'grund' .*its obstacles: ground"):
+        log.forces_between("crate", "grund")
 
 
 def test_the_export_and_the_summary_name_the_bodies(crate_run, tmp_path):

@@ -124,6 +124,8 @@ def test_forces_between_bodies_obey_action_and_reaction():
         report.forces_between("bottom", "ground"), [0, 0, 4.0 * G], rtol=1e-6, atol=1e-6
     )
     assert report.forces_between("top", "ground") @ np.ones(3) == 0.0  # they do not touch
+    with pytest.raises(gaussim.InvalidOptions, match="no body or obstacle 'grund'; .*the obstacles: ground"):
+        report.forces_between("top", "grund")  # a misspelt side is named, not summed to zeros
     assert {frozenset(report.body_of(c)) for c in report.contacts} == {
         frozenset(("top", "bottom")),
         frozenset(("bottom", "ground")),

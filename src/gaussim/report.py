@@ -236,6 +236,7 @@ class StepReport:
         [N] (an impulse [N s] in an impact report); ``forces_between(b, a)`` is its opposite."""
         if self.world is not None:
             self.world.body(a)  # an unknown body raises, listing the bodies
+            self.world.other(b)  # so does an unknown body or obstacle: a misspelt one would sum to zeros
         total = np.zeros(3)
         for c in self.contacts:
             pair = self.body_of(c)

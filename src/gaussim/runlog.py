@@ -425,10 +425,20 @@ class RunLog:
         ``t[k + 1]`` (zero when they do not touch); ``forces_between(b, a)`` is its opposite.
 
         Raises:
-            InvalidOptions: ``a`` is no body of the log (the message lists them).
+            InvalidOptions: ``a`` is no body of the log, or ``b`` no body or obstacle of it (the
+                message lists them).
         """
         if a not in self.bodies:
             raise InvalidOptions("body", f"no body '{a}' in this log; its bodies: {', '.join(self.bodies)}")
+        # the obstacles: the scene file's, else those that touched (a misspelt one would sum to zeros)
+        obstacles = _declared_obstacles(self.scene_text, one_robot=False)
+        obstacles = set(self.contact_other) - set(self.bodies) if obstacles is None else obstacles
+        if b not in self.bodies and b not in obstacles:
+            raise InvalidOptions(
+                "body",
+                f"no body or obstacle '{b}' in this log; its bodies: {', '.join(self.bodies)}; "
+                f"its obstacles: {', '.join(sorted(obstacles)) or 'none'}",
+            )
         body, other = np.array(self.contact_body, dtype=str), np.array(self.contact_other, dtype=str)
         # per contact: +1 when its force is on a from b, -1 when on b from a (the reaction)
         sign = np.where((body == a) & (other == b), 1.0, np.where((body == b) & (other == a), -1.0, 0.0))
@@ -766,15 +776,16 @@ def _one_robot_sides(robot: str, scene_text: str, data: dict[str, np.ndarray]) -
     }
 
 
-def _declared_obstacles(scene_text: str) -> set[str] | None:
-    """The obstacles a one-robot scene file declares (its [ground] and [[obstacles]]), or None for a
-    text that is no such file."""
+def _declared_obstacles(scene_text: str, one_robot: bool = True) -> set[str] | None:
+    """The obstacles a scene file (with ``one_robot``, a one-robot scene file) declares (its [ground]
+    and [[obstacles]]), or None for a text that is no such file."""
     try:
         data = tomllib.loads(scene_text)
     except tomllib.TOMLDecodeError:
         return None
     listed = data.get("obstacles", [])
-    if "robot" not in data or not isinstance(listed, list):
+    scene = "robot" in data or (not one_robot and "bodies" in data)
+    if not scene or not isinstance(listed, list):
         return None
     names = {o["name"] for o in listed if isinstance(o, dict) and isinstance(o.get("name"), str)}
     return names | ({"ground"} if "ground" in data else set())

@@ -234,6 +234,7 @@ class Scene:
         clash = set(names) & set(self.world.bodies)
         if clash:
             raise InvalidOptions("obstacles", f"{sorted(clash)} name both an obstacle and a body")
+        self.world.obstacles = tuple(names)
         check_material("self_contact", *self_contact)
         self.self_contact = (float(self_contact[0]), float(self_contact[1]))
         self.joint_limits = bool(joint_limits)

@@ -398,6 +398,7 @@ class World:
         else:
             merged = _merged(robots, specs, "/")
         self.robot: Robot = merged
+        self.obstacles: tuple[str, ...] = ()  # the scene's obstacles' names (its Scene sets them)
         self.bodies: dict[str, BodyLayout] = {}
         model, collision = merged.model, merged.collision_model
         for k, (name, spec) in enumerate(specs.items()):
@@ -428,6 +429,16 @@ class World:
         if name not in self.bodies:
             raise InvalidOptions("body", f"no body '{name}'; the bodies: {', '.join(self.bodies)}")
         return self.bodies[name]
+
+    def other(self, name: str) -> str:
+        """``name``, a body or an obstacle of the scene; raises :class:`InvalidOptions` listing them."""
+        if name not in self.bodies and name not in self.obstacles:
+            raise InvalidOptions(
+                "body",
+                f"no body or obstacle '{name}'; the bodies: {', '.join(self.bodies)}; "
+                f"the obstacles: {', '.join(self.obstacles) or 'none'}",
+            )
+        return name
 
     def owner(self, geometry: int) -> BodyLayout:
         """The body a world collision geometry belongs to."""
