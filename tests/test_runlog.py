@@ -190,6 +190,17 @@ def test_cli_bad_input_exits_2_without_traceback(tmp_path, args, code, message):
     assert message in result.stderr and "Traceback" not in result.stderr
 
 
+def test_a_reader_that_leaves_early_stops_the_command_quietly(tmp_path):
+    """`gaussim inspect ... | head -1`: the reader closes the pipe; the command stops (exit 1, as
+    Python's own recipe for a broken pipe) with no error message and no traceback."""
+    command = [sys.executable, "-m", "gaussim.cli", "inspect", str(SCENES / "solo12_standing.toml")]
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=tmp_path)
+    process.stdout.close()  # before the command writes a line
+    stderr = process.stderr.read().decode()
+    assert process.wait(timeout=300) == 1
+    assert "Broken pipe" not in stderr and "Traceback" not in stderr and "Exception" not in stderr, stderr
+
+
 def test_cli_simulation_failure_exits_1_and_keeps_the_log(tmp_path):
     scene = tmp_path / "scene.toml"
     scene.write_text(

@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import functools
 import math
+import os
 import re
 import signal
 import sys
@@ -240,6 +241,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         _ignore_stops()
         print("gaussim: interrupted", file=sys.stderr)
+        return EXIT_FAILURE
+    except BrokenPipeError:  # stdout's reader left (`| head`): what it read stands, as with Unix tools
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no error at the exit's flush
         return EXIT_FAILURE
     except OSError as err:  # a write that failed midway (a full disk): the message names the file
         where = f"{err.filename}: " if err.filename else ""
