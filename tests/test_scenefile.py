@@ -405,6 +405,18 @@ def test_a_robot_given_for_a_scene_runs_held_on_the_ground(tmp_path, monkeypatch
         assert gaussim.run(spec).complete
 
 
+def test_a_file_of_several_free_bodies_run_by_itself_is_sent_to_a_scene_file(tmp_path, monkeypatch):
+    """robots/box_stack.urdf (three boxes, each on its own free-flyer joint) run as a robot: one start
+    pose would put them inside each other and one posture hold would hold their free coordinates, so
+    it is refused naming its free joints and the scene file that runs it."""
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(
+        gaussim.InvalidRobot, match=r"its 3 free-flyer joints \(bottom_joint, middle_joint, top_joint\)"
+    ):
+        load_scene(ROBOTS_DIR / "box_stack.urdf")
+    assert load_scene(ROBOTS_DIR / "scenes" / "box_stack.toml").robot.model.nv == 18  # its scene runs
+
+
 def test_a_robot_without_collision_geometry_runs_without_a_ground(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     with pytest.warns(gaussim.GaussimWarning, match="no collision geometry"):

@@ -252,6 +252,13 @@ def _robot_scene(source: str) -> tuple[str, Robot, tuple[str, bool | None]]:
     from .simulator import within_limits
 
     robot, floated = _robot_of(source)
+    free = [robot.model.names[j] for j in range(1, robot.model.njoints) if robot.model.joints[j].nv == 6]
+    if len(free) > 1:  # one start pose and one posture hold cannot place and hold several free bodies
+        raise InvalidRobot(
+            f"{source}: its {len(free)} free-flyer joints ({', '.join(free)}) move {len(free)} bodies, which "
+            "a robot run by itself cannot place apart: give each its pose in a scene file ([initial] q, "
+            "or one [[bodies]] table per body; robots/scenes/box_stack.toml runs robots/box_stack.urdf)"
+        )
     path = Path(source)
     if path.suffix in SUFFIXES:
         key, value = {".urdf": "urdf", ".sdf": "sdf"}.get(path.suffix, "mjcf"), str(path.resolve())
