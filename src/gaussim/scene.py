@@ -225,16 +225,15 @@ class Scene:
             raise InvalidOptions("bodies", "give one robot, or bodies={name: robot or free body, ...}")
         if robot is not None and not isinstance(robot, Robot):
             raise InvalidOptions("robot", f"must be a gaussim.Robot (gaussim.load_robot), got {shown(robot)}")
-        self.world = World({robot.name: robot} if robot is not None else bodies)  # type: ignore[dict-item, arg-type]
-        self.robot = robot = self.world.robot
         self.obstacles: tuple[Obstacle, ...] = ((ground,) if ground else ()) + tuple(obstacles)
         names = [o.name for o in self.obstacles]
+        self.world = World({robot.name: robot} if robot is not None else bodies, names)  # type: ignore[dict-item, arg-type]
+        self.robot = robot = self.world.robot
         if len(set(names)) != len(names):
             raise InvalidOptions("obstacles", f"names must be unique, got {names}")
         clash = set(names) & set(self.world.bodies)
         if clash:
             raise InvalidOptions("obstacles", f"{sorted(clash)} name both an obstacle and a body")
-        self.world.obstacles = tuple(names)
         check_material("self_contact", *self_contact)
         self.self_contact = (float(self_contact[0]), float(self_contact[1]))
         self.joint_limits = bool(joint_limits)

@@ -45,6 +45,7 @@ import numpy as np
 import pinocchio as pin
 
 from .control import Command, Controller, PDHold, command, constant_torque, zero_torque
+from .dynamics import FloatingBases
 from .exceptions import GaussimError, InvalidOptions, InvalidRobot, shown
 from .options import Options, is_real
 from .robot import ROBOTS_DIR, SUFFIXES, Robot, example_robot_names, load_robot
@@ -52,6 +53,11 @@ from .scene import Anchor, Box, Ground, LoopClosure, Scene, Sphere
 from .state import BodyState, State
 from .world import SHAPES, Body, FreeBody, Material, World, pose
 
+# the keys each type of a [control] or [[bilaterals]] table reads (the others are refused, not ignored)
+TYPE_KEYS = {
+    "control": {"zero": (), "constant": ("tau",), "pd": ("target", "kp", "kd", "implicit")},
+    "bilaterals": {"anchor": ("frame", "position", "rpy"), "loop": ("frames", "orientation")},
+}
 SECTIONS = {
     "robot": {"name", "urdf", "mjcf", "sdf", "package_dirs", "floating_base"},
     "bodies": {
@@ -88,15 +94,12 @@ SECTIONS = {
     "obstacles": {"type", "name", "size", "radius", "position", "rpy", "friction", "restitution"},
     "contacts": {"pairs", "friction", "restitution"},
     "limits": {"enabled"},
-    "bilaterals": {"type", "frame", "position", "rpy", "frames", "orientation"},
-    "control": {"type", "tau", "target", "kp", "kd", "implicit"},
+    **{
+        table: {"type", *(key for keys in types.values() for key in keys)}
+        for table, types in TYPE_KEYS.items()
+    },
     "simulation": {"duration"},
     "options": {f.name for f in fields(Options)},
-}
-# the keys each type of a [control] or [[bilaterals]] table reads (the others are refused, not ignored)
-TYPE_KEYS = {
-    "control": {"zero": (), "constant": ("tau",), "pd": ("target", "kp", "kd", "implicit")},
-    "bilaterals": {"anchor": ("frame", "position", "rpy"), "loop": ("frames", "orientation")},
 }
 # what a body is made from: a robot (by name or file) or a shape
 ROBOT_SOURCES = ("robot", "urdf", "mjcf", "sdf")
@@ -252,7 +255,9 @@ def _robot_scene(source: str) -> tuple[str, Robot, tuple[str, bool | None]]:
     from .simulator import within_limits
 
     robot, floated = _robot_of(source)
-    free = [robot.model.names[j] for j in range(1, robot.model.njoints) if robot.model.joints[j].nv == 6]
+    free = [
+        robot.model.names[j] for j in np.flatnonzero(FloatingBases.of(robot.model).of_joint >= 0).tolist()
+    ]
     if len(free) > 1:  # one start pose and one posture hold cannot place and hold several free bodies
         raise InvalidRobot(
             f"{source}: its {len(free)} free-flyer joints ({', '.join(free)}) move {len(free)} bodies, which "

@@ -382,9 +382,10 @@ class World:
     Attributes:
         robot: the merged robot (in a one-body world, the body itself: names and results unchanged).
         bodies: each body's :class:`BodyLayout`, in order.
+        obstacles: the names of the scene's obstacles (``forces_between`` takes them).
     """
 
-    def __init__(self, bodies: Mapping[str, object]) -> None:
+    def __init__(self, bodies: Mapping[str, object], obstacles: Sequence[str] = ()) -> None:
         if not isinstance(bodies, Mapping) or not bodies:
             raise InvalidOptions(
                 "bodies", f"must map body names to robots or free bodies, got {shown(bodies)}"
@@ -398,7 +399,7 @@ class World:
         else:
             merged = _merged(robots, specs, "/")
         self.robot: Robot = merged
-        self.obstacles: tuple[str, ...] = ()  # the scene's obstacles' names (its Scene sets them)
+        self.obstacles = tuple(obstacles)  # the scene's obstacles' names, which reports name
         self.bodies: dict[str, BodyLayout] = {}
         model, collision = merged.model, merged.collision_model
         for k, (name, spec) in enumerate(specs.items()):
