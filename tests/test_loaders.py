@@ -129,6 +129,29 @@ def test_mjcf_floating_base(tmp_path):
     fixed, floating = gaussim.load_robot(arm), gaussim.load_robot(arm, floating_base=True)
     assert (fixed.model.nq, fixed.floating, fixed.mass) == (1, False, 3.0)  # the base's 2 kg on the universe
     assert (floating.model.nq, floating.floating, floating.mass) == (8, True, 3.0)
+    hinged = tmp_path / "hinged.xml"  # a base on its own hinge: Pinocchio adds no free root above it
+    hinged.write_text(arm.read_text().replace('<body name="base">', '<body name="base"><joint name="spin"/>'))
+    with pytest.raises(
+        gaussim.InvalidRobot,
+        match=r"hinged.xml: floating_base=True: body 'base' hangs from the world by its own joint 'spin'.*"
+        r"<freejoint/>",
+    ):
+        gaussim.load_robot(hinged, floating_base=True)
+    assert gaussim.load_robot(hinged).model.nq == 2
+
+
+def test_mjcf_equality_to_the_world_is_left_out_with_a_warning(tmp_path):
+    """A <connect> to body2="world", valid in MuJoCo, is warned as left out like any <equality> (the
+    reader of Pinocchio's constraints refused the file: no body named world)."""
+    path = tmp_path / "pinned.xml"
+    path.write_text(
+        '<mujoco><worldbody><body name="link" pos="0 0 0.5"><joint name="j" axis="0 1 0"/>'
+        '<geom type="capsule" fromto="0 0 0 0.2 0 0" size="0.02" mass="0.5"/></body></worldbody>'
+        '<equality><connect name="pin" body1="link" body2="world" anchor="0.2 0 0"/></equality></mujoco>'
+    )
+    with pytest.warns(gaussim.GaussimWarning, match=r"<equality> constraints <connect pin> are not honoured"):
+        robot = gaussim.load_robot(path)
+    assert (robot.model.nq, robot.mass) == (1, 0.5)
 
 
 MJCF_FAULTS = {
@@ -150,6 +173,11 @@ MJCF_FAULTS = {
     "mesh inertia": (
         '<mujoco><asset><mesh name="m" file="tetra.obj"/></asset><worldbody><body name="a"><freejoint/>'
         '<geom type="mesh" mesh="m" mass="0.3"/></body></worldbody></mujoco>',
+        r"bodies 'a' take their inertia from mesh geoms.*give them an <inertial>",
+    ),
+    "inline mesh inertia": (
+        '<mujoco><asset><mesh name="m" vertex="0 0 0  0.1 0 0  0 0.1 0  0 0 0.1"/></asset><worldbody>'
+        '<body name="a"><freejoint/><geom type="mesh" mesh="m"/></body></worldbody></mujoco>',
         r"bodies 'a' take their inertia from mesh geoms.*give them an <inertial>",
     ),
     "missing mesh": (
@@ -290,6 +318,19 @@ def test_sdf_faults_name_the_file_and_element(tmp_path, fault):
     path.write_text(text)
     with pytest.raises(gaussim.InvalidRobot, match=str(path) + ": .*" + message):
         gaussim.load_robot(path)
+
+
+def test_an_sdf_link_without_inertial_is_warned_the_free_root_too(tmp_path):
+    """SDFormat's default inertia (1 kg, 1 kg m^2) is warned for every link that takes it, the free
+    root's included (a one-link model's crate was let through without a word)."""
+    path = tmp_path / "crate.sdf"
+    path.write_text(
+        '<sdf version="1.9"><model name="crate"><link name="crate"><collision name="c"><geometry>'
+        "<box><size>0.1 0.1 0.1</size></box></geometry></collision></link></model></sdf>"
+    )
+    with pytest.warns(gaussim.GaussimWarning, match=r"crate.sdf: the links 'crate' have no <inertial>"):
+        robot = gaussim.load_robot(path)
+    assert (robot.floating, robot.mass) == (True, 1.0)
 
 
 def test_sdf_world_joint_fixes_the_base(tmp_path):

@@ -18,6 +18,8 @@ import pinocchio as pin
 from .exceptions import InvalidRobot
 
 JOINT_TYPES = ("hinge", "slide", "ball", "free")
+# what Pinocchio makes of a mesh geom: a BVH from a file, a convex from inline vertices
+MESHES = (coal.BVHModelBase, coal.ConvexBase)
 # the numeric attributes of the elements that place and weigh bodies
 NUMERIC = (
     "pos", "quat", "euler", "axisangle", "xyaxes", "zaxis", "axis", "fromto", "size", "range", "ref",
@@ -93,7 +95,7 @@ def check(path: Path, root: ET.Element, collision: pin.GeometryModel, model: pin
         {
             model.frames[g.parentFrame].name
             for g in collision.geometryObjects
-            if isinstance(g.geometry, coal.BVHModelBase)
+            if isinstance(g.geometry, MESHES)
             and (from_geoms == "true" or model.frames[g.parentFrame].name not in explicit)
         }
     )

@@ -415,18 +415,25 @@ def _from_mjcf(path: Path, floating: bool | None, policies: Mapping[str, str]) -
     root = mjcf.read(path)
     mjcf.check_file(path, root)
     try:
-        model, _ = pin.buildModelAndLegacyConstraintsFromMJCF(str(path))
-        floats = model.njoints > 1 and model.joints[1].shortname() == "JointModelFreeFlyer"
+        # the model alone: the reader of its <equality> constraints, which gaussim leaves out (see
+        # mjcf.check), fails on valid ones (body2="world")
+        model = pin.buildModelFromMJCF(str(path))
+        floats = _floats(model)
         if floating is False and floats:
-            body = next(f.name for f in model.frames if f.type == pin.FrameType.BODY and f.parentJoint == 1)
             raise InvalidRobot(
-                f"{path}: body '{body}' has a <freejoint>, so the robot floats: floating_base=False cannot "
-                "fix it (remove the <freejoint> to fix the base)"
+                f"{path}: body '{_root_body(model)}' has a <freejoint>, so the robot floats: "
+                "floating_base=False cannot fix it (remove the <freejoint> to fix the base)"
             )
         if floating and not floats:
             model, _ = pin.buildModelAndLegacyConstraintsFromMJCF(
                 str(path), pin.JointModelFreeFlyer(), "root_joint"
             )
+            if not _floats(model):
+                raise InvalidRobot(
+                    f"{path}: floating_base=True: body '{_root_body(model)}' hangs from the world by its "
+                    f"own joint '{model.names[1]}', above which Pinocchio's MJCF reader adds no free root: "
+                    "put it in a body of its own with a <freejoint/> to make the robot float"
+                )
         collision = pin.buildGeomFromMJCF(model, str(path), pin.GeometryType.COLLISION)
         visual = pin.buildGeomFromMJCF(model, str(path), pin.GeometryType.VISUAL)
     except (RuntimeError, ValueError, OSError) as err:
@@ -449,6 +456,16 @@ def _from_mjcf(path: Path, floating: bool | None, policies: Mapping[str, str]) -
         warnings.warn(f"{path}: {note}", GaussimWarning, stacklevel=4)
     dirs = (str(path.parent),)
     return Robot(path.stem, model, collision, visual, str(path), dirs, _configurations(model), **policies)
+
+
+def _floats(model: pin.Model) -> bool:
+    """Whether the model's first joint is a free flyer."""
+    return model.njoints > 1 and model.joints[1].shortname() == "JointModelFreeFlyer"
+
+
+def _root_body(model: pin.Model) -> str:
+    """The name of the body the model's first joint moves."""
+    return next(f.name for f in model.frames if f.type == pin.FrameType.BODY and f.parentJoint == 1)
 
 
 def _from_sdf(

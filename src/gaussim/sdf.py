@@ -130,7 +130,7 @@ class _Reader:
             robot.append(self.link(name, link, frame_of[name]))
         for joint in joints:
             robot.append(self.joint(joint, frame_of))
-        bare = [name for name, link in links.items() if link.find("inertial") is None and name != base]
+        bare = [name for name, link in links.items() if link.find("inertial") is None]
         if bare:
             self.notes.append(
                 f"the links {', '.join(repr(b) for b in bare)} have no <inertial>: SDFormat's default, "
