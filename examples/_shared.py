@@ -1,8 +1,13 @@
-"""What the examples of several bodies share (not an example itself): a run recorded step by step
-into a run log and its replay page, and an open-loop trot for Solo-12."""
+"""What the examples share (not an example itself): their command lines' checks (a duration or a
+time step > 0; a gaussim error told in one line), a run recorded step by step into a run log and its
+replay page, and an open-loop trot for Solo-12."""
 
 from __future__ import annotations
 
+import argparse
+import math
+import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -11,6 +16,25 @@ import gaussim
 from gaussim.control import Command, PDHold
 from gaussim.state import BodyState
 from gaussim.viewer import Viewer
+
+
+def positive(text: str) -> float:
+    """An argparse type: a finite number > 0 (a duration, a time step)."""
+    value = float(text)  # argparse tells a ValueError as "invalid positive value"
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text}")
+    return value
+
+
+def run(main: Callable[[], int | None]) -> None:
+    """Exit with ``main()``'s status; a gaussim error (an option a scene refuses, ...) is told in one
+    line on stderr, exit status 2, as the gaussim command tells it."""
+    try:
+        status = main()
+    except gaussim.GaussimError as err:
+        print(f"{Path(sys.argv[0]).name}: {err}", file=sys.stderr)
+        status = 2
+    sys.exit(status)
 
 
 class Recording:

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
-from _shared import Recording
+from _shared import Recording, positive, run
 
 import gaussim
 from gaussim import FreeBody
@@ -91,8 +91,8 @@ def drop_poses(frame: pin.SE3, bodies: dict[str, tuple[FreeBody, float]], seed: 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--duration", type=float, default=1.2, help="simulated time [s]")
-    parser.add_argument("--dt", type=float, default=1e-3, help="time step [s]")
+    parser.add_argument("--duration", type=positive, default=1.2, help="simulated time [s]")
+    parser.add_argument("--dt", type=positive, default=1e-3, help="time step [s]")
     parser.add_argument("--mode", default="accurate", choices=gaussim.options.FRICTION_MODES)
     parser.add_argument("--seed", type=int, default=0, help="of the random orientations")
     parser.add_argument("--out", type=Path, default=Path("out/bin_pile"), help="prefix of the files written")
@@ -110,7 +110,7 @@ def main(argv: list[str] | None = None) -> int:
     recording = Recording(sim, state)
     print(f"{len(bodies)} objects, {len(scene.pairs)} contact pairs, {args.mode} friction", file=sys.stderr)
 
-    steps, every = int(round(args.duration / args.dt)), max(1, int(round(0.1 / args.dt)))
+    steps, every = max(1, round(args.duration / args.dt)), max(1, round(0.1 / args.dt))
     deepest, uncertified, wall = 0.0, 0, time.perf_counter()
     for k in range(steps):
         state = recording.step(state)
@@ -143,4 +143,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run(main)

@@ -18,11 +18,11 @@ Run:  python examples/custom_constraint.py [--dt 1e-3] [--scheme acceleration]
 from __future__ import annotations
 
 import argparse
-import sys
 from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
+from _shared import positive, run
 
 import gaussim
 from gaussim.constraints import ConstraintModule, Context, Rows, is_active, stabilised_bound
@@ -102,7 +102,7 @@ def _push(report: gaussim.StepReport, ground: bool) -> float:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--dt", type=float, default=1e-3)
+    parser.add_argument("--dt", type=positive, default=1e-3)
     parser.add_argument("--scheme", default="velocity", choices=gaussim.options.SCHEMES)
     args = parser.parse_args(argv)
     z0 = 0.5
@@ -119,4 +119,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run(main)

@@ -7,19 +7,20 @@ Run:  python examples/free_bodies.py [--dt 1e-3]
 from __future__ import annotations
 
 import argparse
-import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
+from _shared import positive, run
 
 import gaussim
 
 G = 9.81
 TOP = """<?xml version="1.0"?>
 <robot name="top"><link name="body"><inertial><origin xyz="0 0 0"/><mass value="1"/>
-<inertia ixx="1" ixy="0" ixz="0" iyy="2" iyz="0" izz="2.5"/></inertial></link></robot>
+<inertia ixx="1" ixy="0" ixz="0" iyy="2" iyz="0" izz="2.5"/></inertial>
+<collision><geometry><box size="0.4 0.3 0.2"/></geometry></collision></link></robot>
 """
 
 
@@ -70,7 +71,7 @@ def flipping(dt: float, w0: tuple[float, float, float] = (0.01, 5.0, 0.01)) -> N
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--dt", type=float, default=1e-3, help="time step [s]")
+    parser.add_argument("--dt", type=positive, default=1e-3, help="time step [s]")
     args = parser.parse_args(argv)
     rolling(args.dt)
     flipping(args.dt)
@@ -78,4 +79,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run(main)

@@ -14,8 +14,9 @@ from __future__ import annotations
 
 import argparse
 import math
-import sys
 from pathlib import Path
+
+from _shared import positive, run
 
 from gaussim import study
 
@@ -26,7 +27,7 @@ SLOPE, G = math.radians(30.0), 9.81
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frictions", default="0.1,0.3,0.5,0.7", help="the values of ground.friction")
-    parser.add_argument("--duration", type=float, default=0.5, help="simulated time of each run [s]")
+    parser.add_argument("--duration", type=positive, default=0.5, help="simulated time of each run [s]")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--out", type=Path, default=Path("out/incline_friction"))
     args = parser.parse_args(argv)
@@ -46,4 +47,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run(main)

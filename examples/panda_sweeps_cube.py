@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
-from _shared import Recording
+from _shared import Recording, positive, run
 
 import gaussim
 
@@ -50,8 +50,8 @@ def reach_pose(panda: gaussim.Robot) -> np.ndarray:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--duration", type=float, default=2.0, help="simulated time of the sweep [s]")
-    parser.add_argument("--dt", type=float, default=1e-3, help="time step [s]")
+    parser.add_argument("--duration", type=positive, default=2.0, help="simulated time of the sweep [s]")
+    parser.add_argument("--dt", type=positive, default=1e-3, help="time step [s]")
     parser.add_argument(
         "--out", type=Path, default=Path("out/panda_sweeps_cube"), help="prefix of the files written"
     )
@@ -84,7 +84,7 @@ def main(argv: list[str] | None = None) -> int:
     damping = np.full(panda.model.nv, KD + args.dt * KP)  # the PD's velocity feedback, implicit
 
     cube_start = state.body("cube").q[:3].copy()
-    steps, lag, peak = int(round(args.duration / args.dt)), 0.0, 0.0
+    steps, lag, peak = max(1, round(args.duration / args.dt)), 0.0, 0.0
     wall = time.perf_counter()
     for _ in range(steps):
         s = min(1.0, state.t / args.duration)  # a smooth step from SWEEP[0] to SWEEP[1]
@@ -118,4 +118,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run(main)

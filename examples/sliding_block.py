@@ -6,9 +6,9 @@ Run:  python examples/sliding_block.py [--mode accurate] [--heading 30]
 from __future__ import annotations
 
 import argparse
-import sys
 
 import numpy as np
+from _shared import positive, run
 
 import gaussim
 
@@ -18,7 +18,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--mode", default="accurate", choices=gaussim.options.FRICTION_MODES)
     parser.add_argument("--heading", type=float, default=30.0, help="sliding direction [deg]")
     parser.add_argument("--mu", type=float, default=0.5)
-    parser.add_argument("--dt", type=float, default=1e-3)
+    parser.add_argument("--dt", type=positive, default=1e-3)
     args = parser.parse_args(argv)
 
     robot = gaussim.load_robot("box", floating_base=True)
@@ -44,4 +44,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run(main)

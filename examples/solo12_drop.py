@@ -13,6 +13,8 @@ import sys
 import time
 from pathlib import Path
 
+from _shared import positive, run
+
 import gaussim
 from gaussim.runlog import write_forces
 
@@ -21,8 +23,8 @@ KP, KD = 5.0, 0.2  # posture PD gains [N m / rad], [N m s / rad]
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--duration", type=float, default=2.0, help="simulated time [s]")
-    parser.add_argument("--dt", type=float, default=1e-3, help="time step [s]")
+    parser.add_argument("--duration", type=positive, default=2.0, help="simulated time [s]")
+    parser.add_argument("--dt", type=positive, default=1e-3, help="time step [s]")
     parser.add_argument("--scheme", default="velocity", choices=gaussim.options.SCHEMES)
     parser.add_argument(
         "--csv", type=Path, default=Path("out/solo12_drop_forces.csv"), help="contact-force time series"
@@ -41,7 +43,7 @@ def main(argv: list[str] | None = None) -> int:
     log.start(state, scene.gravity)
 
     args.csv.parent.mkdir(parents=True, exist_ok=True)
-    steps = int(round(args.duration / args.dt))
+    steps = max(1, round(args.duration / args.dt))  # as gaussim run: at least one
     start = time.perf_counter()
     for k in range(steps):
         tau = KP * (q_ref[7:] - state.q[7:]) - KD * state.v[6:]
@@ -62,4 +64,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run(main)

@@ -7,12 +7,11 @@ Run:  python examples/solo_bump.py [--duration 3] [--apart 0.7] [--out out/solo_
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
-from _shared import Recording, Trot
+from _shared import Recording, Trot, positive, run
 
 import gaussim
 
@@ -25,8 +24,8 @@ FACING = {
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--duration", type=float, default=3.0, help="simulated time [s]")
-    parser.add_argument("--dt", type=float, default=1e-3, help="time step [s]")
+    parser.add_argument("--duration", type=positive, default=3.0, help="simulated time [s]")
+    parser.add_argument("--dt", type=positive, default=1e-3, help="time step [s]")
     parser.add_argument(
         "--apart", type=float, default=0.7, help="distance between the bases at the start [m]"
     )
@@ -50,7 +49,7 @@ def main(argv: list[str] | None = None) -> int:
     gaits = {name: Trot(solo, args.dt) for name in FACING}
     recording = Recording(sim, state)
 
-    steps, met, peak = int(round(args.duration / args.dt)), None, 0.0
+    steps, met, peak = max(1, round(args.duration / args.dt)), None, 0.0
     wall = time.perf_counter()
     for _ in range(steps):
         commands = {name: gait(state.t, state.body(name)) for name, gait in gaits.items()}
@@ -80,4 +79,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run(main)

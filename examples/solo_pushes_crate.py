@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _shared import Recording, Trot
+from _shared import Recording, Trot, positive, run
 
 import gaussim
 
@@ -28,8 +28,8 @@ PUSHED = 0.01
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--duration", type=float, default=4.0, help="simulated time [s]")
-    parser.add_argument("--dt", type=float, default=1e-3, help="time step [s]")
+    parser.add_argument("--duration", type=positive, default=4.0, help="simulated time [s]")
+    parser.add_argument("--dt", type=positive, default=1e-3, help="time step [s]")
     parser.add_argument(
         "--distance", type=float, default=0.2, help="from Solo's front feet to the crate at the start [m]"
     )
@@ -55,7 +55,7 @@ def main(argv: list[str] | None = None) -> int:
     recording = Recording(sim, state)
 
     crate_start, solo_start = state.body("crate").q[:3].copy(), state.body("solo").q[:3].copy()
-    steps, peak, pushing = int(round(args.duration / args.dt)), 0.0, 0
+    steps, peak, pushing = max(1, round(args.duration / args.dt)), 0.0, 0
     wall = time.perf_counter()
     for _ in range(steps):
         tau, damping = gait(state.t, state.body("solo"))
@@ -81,4 +81,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run(main)

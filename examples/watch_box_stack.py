@@ -14,6 +14,8 @@ import sys
 import time
 from pathlib import Path
 
+from _shared import positive, run
+
 import gaussim
 from gaussim.plots import save_plot
 from gaussim.viewer import Viewer, follow
@@ -23,7 +25,7 @@ SCENE = Path(__file__).resolve().parents[1] / "robots" / "scenes" / "box_stack.t
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--duration", type=float, default=1.0, help="simulated time [s]")
+    parser.add_argument("--duration", type=positive, default=1.0, help="simulated time [s]")
     parser.add_argument(
         "--out", type=Path, default=Path("out/watch_box_stack"), help="prefix of the files written"
     )
@@ -54,4 +56,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run(main)
