@@ -251,10 +251,18 @@ def test_the_well_formed_urdf_of_those_loads(tmp_path):
 def test_unknown_frame_and_geometry_list_choices(ball, solo12):
     with pytest.raises(gaussim.FrameNotFound, match=r"no frame 'FL_TOE'.*FL_FOOT"):
         gaussim.Scene(solo12, bilaterals=[gaussim.Anchor("FL_TOE", (0, 0, 0))])
-    with pytest.raises(gaussim.GeometryNotFound, match=r"no collision geometry 'FL_TOE_0'.*FL_FOOT_0"):
+    with pytest.raises(
+        gaussim.GeometryNotFound,
+        match=r"no collision geometry 'FL_TOE_0' in the robot \(did you mean FL_FOOT_0",
+    ):
         gaussim.Scene(solo12, ground=gaussim.Ground(), contacts=[("FL_TOE_0", "ground")])
-    with pytest.raises(gaussim.GeometryNotFound, match=r"no obstacle 'table'.*ground"):
+    with pytest.raises(gaussim.GeometryNotFound, match=r"no obstacle or collision geometry 'table' in the"):
         gaussim.Scene(ball, ground=gaussim.Ground(), contacts=[("ball_0", "table")])
+    with pytest.raises(
+        gaussim.GeometryNotFound,
+        match=r"no obstacle or collision geometry 'grund' in the scene \(did you mean ground\?\); known: ",
+    ):
+        gaussim.Scene(solo12, ground=gaussim.Ground(), contacts=[("FL_FOOT_0", "grund")])
     with pytest.raises(gaussim.FrameNotFound, match=r"no configuration 'sitting'.*standing"):
         solo12.configuration("sitting")
 

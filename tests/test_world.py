@@ -250,7 +250,7 @@ def test_per_body_torques_and_states(solo12):
         (
             lambda s: gaussim.Scene(bodies={"solo": s, "c": crate()}, contacts=[("solo/FL_FOOT_0", "table")]),
             gaussim.GeometryNotFound,
-            r"no obstacle 'table'",
+            r"no obstacle or collision geometry 'table' in the scene",
         ),
         (
             lambda s: gaussim.Scene(

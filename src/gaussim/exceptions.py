@@ -34,6 +34,12 @@ def _choices(known: Iterable[str], limit: int = 80) -> str:
     return shown + (f", ... ({len(names) - limit} more)" if len(names) > limit else "")
 
 
+def _meant(name: str, known: Iterable[str]) -> str:
+    """ " (did you mean a or b?)" for the known names closest to a misspelt ``name``, else ""."""
+    close = get_close_matches(name, sorted(set(known)), n=3)
+    return f" (did you mean {' or '.join(close)}?)" if close else ""
+
+
 class RobotNotFound(GaussimError):
     """A robot name is neither an example-robot-data robot nor an existing URDF file."""
 
@@ -41,12 +47,9 @@ class RobotNotFound(GaussimError):
         if file:  # a path: the names are no help
             super().__init__(f"no robot '{name}': no such file")
             return
-        known = sorted(set(known))
-        close = get_close_matches(name, known, n=3)
-        meant = f" (did you mean {' or '.join(close)}?)" if close else ""
         super().__init__(
             f"no robot '{name}': not an existing URDF path and not an example-robot-data "
-            f"robot{meant}; known names: {_choices(known)}"
+            f"robot{_meant(name, known)}; known names: {_choices(known)}"
         )
 
 
@@ -57,15 +60,20 @@ class InvalidRobot(GaussimError):
 class FrameNotFound(GaussimError):
     """A frame name does not exist in the robot model."""
 
-    def __init__(self, name: str, known: Iterable[str], what: str = "frame") -> None:
-        super().__init__(f"no {what} '{name}' in the robot; known: {_choices(known)}")
+    def __init__(
+        self, name: str, known: Iterable[str], what: str = "frame", where: str = "the robot"
+    ) -> None:
+        known = list(known)
+        super().__init__(f"no {what} '{name}' in {where}{_meant(name, known)}; known: {_choices(known)}")
 
 
 class GeometryNotFound(FrameNotFound):
     """A collision geometry or environment object name does not exist."""
 
-    def __init__(self, name: str, known: Iterable[str], what: str = "collision geometry") -> None:
-        super().__init__(name, known, what)
+    def __init__(
+        self, name: str, known: Iterable[str], what: str = "collision geometry", where: str = "the robot"
+    ) -> None:
+        super().__init__(name, known, what, where)
 
 
 class InvalidOptions(GaussimError, ValueError):

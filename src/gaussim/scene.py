@@ -440,5 +440,6 @@ class _Names:
             except GeometryNotFound:
                 if obstacles:
                     return obstacles
-                raise GeometryNotFound(name, self.obstacles + self.geometry_names, "obstacle") from None
+                known = self.obstacles + self.geometry_names
+                raise GeometryNotFound(name, known, "obstacle or collision geometry", "the scene") from None
         return [("geometry", g) for g in self.geometries(name, where)]
