@@ -70,7 +70,7 @@ BALL = '[robot]\nname = "ball"\nfloating_base = true\n'
         (
             BALL + "[ground]\n[contacts]\npairs = [['ball_0', 'table']]\n",
             r"contacts.pairs",
-            "no obstacle 'table'.*ground",
+            "no obstacle or collision geometry 'table'.*ground",
         ),
         (
             BALL + "[[obstacles]]\ntype = 'cone'\nname = 'c'\n",

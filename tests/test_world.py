@@ -6,6 +6,7 @@ import pytest
 
 import gaussim
 from gaussim import Body, FreeBody, Material, pose
+from gaussim.robot import ROBOTS_DIR
 
 from .conftest import G
 
@@ -223,6 +224,23 @@ def test_per_body_torques_and_states(solo12):
     solo = states[0].body("solo")
     assert solo.q.shape == (19,) and np.array_equal(solo.v, states[0].v[6:])
     np.testing.assert_allclose(states[0].body("crate").q[:3], [0, 0, 3.0])
+
+
+def test_no_torque_drives_a_free_root(solo12):
+    """The actuated coordinates leave out the six of every free-flyer joint hung from the world: none
+    in robots/box_stack.urdf (three free boxes, whose upper two were counted as 12 actuated ones, so a
+    torque of 12 entries pushed the boxes apart), 6 to 18 in Solo-12."""
+    stack = gaussim.load_robot(ROBOTS_DIR / "box_stack.urdf")
+    assert stack.actuated.shape == (0,)
+    np.testing.assert_array_equal(solo12.actuated, np.arange(6, 18))
+    sim = gaussim.Simulator(gaussim.Scene(bodies={"solo": solo12, "stack": stack}, gravity=(0, 0, 0)))
+    state = sim.reset({"solo": solo12.configuration("standing"), "stack": stack.neutral()})
+    with pytest.raises(gaussim.InvalidState, match=r"tau\['stack'\] must have shape \(18,\) or \(0,\)"):
+        sim.step(state, {"stack": np.ones(12)})
+    with pytest.raises(gaussim.InvalidState, match=r"tau must have shape \(36,\) or \(12,\) for the"):
+        sim.step(state, np.ones(24))  # 12 of Solo-12's, 12 the stack's upper boxes'
+    moved = sim.step(state, np.ones(12))  # Solo-12's joints alone
+    assert np.array_equal(moved.body("stack").v, np.zeros(18))
 
 
 @pytest.mark.parametrize(

@@ -1,8 +1,8 @@
 """Stage 0, actuation: the joint torques of a step, (nv,), from what a user passes.
 
 A torque is given for the whole world, (nv,), or for its actuated coordinates only (every body's
-but a floating base's six, stacked: a floating robot's (nv - 6,)), or per body as
-``{"solo": tau_solo}`` (each (nv_b,) or its actuated (nv_b - 6,)); what is not given is zero.
+but the six of each free root, :attr:`Robot.actuated`, stacked: a floating robot's (nv - 6,)), or per
+body as ``{"solo": tau_solo}`` (each (nv_b,) or its actuated ones); what is not given is zero.
 
 Implicit damping D (a PD drive's kd + dt kp), shaped as a torque and >= 0, makes the joints feel
 tau - D v+ with v+ the step's new velocity: that is M + dt D in place of M and tau - D v in place of
@@ -41,9 +41,7 @@ class Actuation:
     def __init__(self, model: pin.Model, world: World, dt: float) -> None:
         self.model, self.world, self.dt = model, world, dt
         self.nv = model.nv
-        actuated = np.concatenate(
-            [np.arange(b.actuated.start, b.actuated.stop) for b in world.bodies.values()]
-        ).astype(int)
+        actuated = np.concatenate([b.actuated for b in world.bodies.values()]).astype(int)
         contiguous = len(actuated) and np.array_equal(actuated, np.arange(actuated[0], actuated[-1] + 1))
         # a slice where the actuated coordinates are one block (a floating robot's): a cheaper copy
         self._actuated: slice | np.ndarray = (
@@ -128,7 +126,7 @@ class Actuation:
             layout = self.world.body(str(body))
             arr = real_array(f"{name}['{body}']", tau)
             nv = layout.v.stop - layout.v.start
-            shapes = {(nv,), (nv - 6,)} if layout.floating else {(nv,)}
+            shapes = {(nv,), (len(layout.actuated),)}
             if arr.shape not in shapes:
                 listed = " or ".join(str(s) for s in sorted(shapes, reverse=True))
                 raise InvalidState(f"{name}['{body}'] must have shape {listed}, got {arr.shape}")

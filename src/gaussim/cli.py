@@ -743,7 +743,7 @@ def _body_line(layout: BodyLayout) -> str:
         what, base = f"robot {layout.robot.name}", "floating base" if layout.floating else "fixed base"
         if placement is not None:
             base += f" at ({', '.join(f'{x:.4g}' for x in placement.translation)}) m"
-    actuated = layout.actuated.stop - layout.actuated.start
+    actuated = len(layout.actuated)
     return (
         f"{layout.name}: {what}; q[{layout.q.start}:{layout.q.stop}], v[{layout.v.start}:{layout.v.stop}]; "
         f"{base}, {actuated} actuated; mass {layout.robot.mass:.4g} kg"

@@ -59,12 +59,12 @@ class PDHold:
         q_ref: np.ndarray,
         kp: float,
         kd: float,
-        actuated: slice,
+        actuated: slice | np.ndarray,
         dt: float | None = None,
     ) -> None:
         self.model, self.kp, self.kd, self.actuated = model, kp, kd, actuated
         self.q_ref = np.asarray(q_ref, dtype=float)  # native float64: Pinocchio reads the bytes as such
-        size = len(range(model.nv)[actuated])
+        size = len(np.arange(model.nv)[actuated])
         self.damping = None if dt is None else np.full(size, kd + dt * kp)
 
     def __call__(self, state: State | BodyState) -> np.ndarray | Command:

@@ -162,6 +162,17 @@ class Robot:
         return self.model.njoints > 1 and self.model.joints[1].shortname() == "JointModelFreeFlyer"
 
     @property
+    def actuated(self) -> np.ndarray:
+        """The velocity coordinates torques drive, shape (k,): all but the six of each free-flyer joint
+        hung from the world (a floating base; each box of a file of free boxes)."""
+        from .dynamics import FloatingBases  # the project's definition of a free root
+
+        driven = np.ones(self.model.nv, dtype=bool)
+        for first in FloatingBases.of(self.model).velocity:
+            driven[first : first + 6] = False
+        return np.flatnonzero(driven)
+
+    @property
     def mass(self) -> float:
         """Total mass [kg]."""
         return float(sum(inertia.mass for inertia in self.model.inertias))

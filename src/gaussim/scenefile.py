@@ -274,7 +274,7 @@ def _robot_scene(source: str) -> tuple[str, Robot, tuple[str, bool | None]]:
     # the named configuration, or the one clamped into the limits as numbers
     posture = json.dumps(start) if not outside else json.dumps(q.tolist())
     touches = bool(robot.collision_model.ngeoms)
-    actuated = robot.model.nv > (6 if robot.floating else 0)
+    actuated = len(robot.actuated) > 0
     base = "floating" if robot.floating else "fixed (floating_base = true drops it)"
     lines = [
         f"# {robot.name} run by itself (gaussim run {source}), its base {base}: "
@@ -781,13 +781,11 @@ class _Reader:
         """The ``[control]`` table ``section`` (at ``key``), for ``robot``'s joints."""
         kind = section.get("type", "zero")
         self.typed("control", key, section, kind)
-        nv = robot.model.nv
-        actuated = slice(6, nv) if robot.floating else slice(0, nv)
+        actuated = robot.actuated
         if kind == "zero":
             return zero_torque
         if kind == "constant":
-            n = nv - 6 if robot.floating else nv
-            tau = self.array(f"{key}.tau", section.get("tau"), n)
+            tau = self.array(f"{key}.tau", section.get("tau"), len(actuated))
             if np.abs(tau).max(initial=0.0) > MAX_TORQUE:
                 self.fail(
                     f"{key}.tau", f"beyond any actuator (|tau| <= {MAX_TORQUE:g} N m), got {shown(tau)}"

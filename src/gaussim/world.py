@@ -356,6 +356,9 @@ class BodyLayout:
         free: it is a :class:`FreeBody`.
         color: its RGBA colour.
         prefix: what its names carry in the world (``"name/"``, or "" in a one-body world).
+        body: its declaration.
+        actuated: the world's velocity coordinates torques drive in it, shape (k,) (its robot's
+            :attr:`Robot.actuated`).
     """
 
     name: str
@@ -369,11 +372,7 @@ class BodyLayout:
     color: tuple[float, float, float, float]
     prefix: str
     body: Body
-
-    @property
-    def actuated(self) -> slice:
-        """Its actuated joints' velocity slice: all of them but a floating base's six."""
-        return slice(self.v.start + 6, self.v.stop) if self.floating else self.v
+    actuated: np.ndarray = field(repr=False, compare=False)
 
 
 class World:
@@ -419,6 +418,7 @@ class World:
                 spec.color or body_color(k),
                 prefix,
                 spec,
+                robots[name].actuated + first.idx_v,
             )
         self._owner = {g: layout for layout in self.bodies.values() for g in layout.geometries}
 
