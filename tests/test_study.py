@@ -15,6 +15,7 @@ from gaussim import study
 from gaussim.cli import main
 from gaussim.exceptions import InvalidOptions
 from gaussim.pool import load
+from gaussim.runlog import RunLog
 from gaussim.scenefile import load_scene_text
 
 SCENES = Path(__file__).resolve().parents[1] / "robots" / "scenes"
@@ -247,6 +248,22 @@ def test_the_sweep_command_runs_on_a_dask_cluster(tmp_path):
     frame = pd.read_parquet(tmp_path / study.TABLE)
     assert list(frame["options.dt"]) == [1e-3, 2e-3] and set(frame["status"]) == {"ok"}
     assert list(frame["steps"]) == [100, 50]
+
+
+def test_a_worker_in_another_folder_writes_each_log_into_the_sweeps_folder(tmp_path, monkeypatch):
+    """A Dask worker runs in a working directory of its own: a run planned with a relative scene path
+    and output folder (the default out/SCENE.sweep) writes its log there all the same, and the log
+    names the scene file."""
+    (tmp_path / "box.toml").write_text(INCLINE.read_text())
+    monkeypatch.chdir(tmp_path)
+    (run,) = study.plan("box.toml", {"simulation.duration": [0.01]}, "out/box.sweep")
+    (tmp_path / "worker").mkdir()
+    monkeypatch.chdir(tmp_path / "worker")
+    record = study.run_one(run)
+    assert record["status"] == "ok"
+    log = RunLog.load(tmp_path / "out" / "box.sweep" / record["log"])
+    assert log.scene_path == str(tmp_path / "box.toml")
+    assert not (tmp_path / "worker" / "out").exists()
 
 
 def test_the_example_study_prints_each_slide_beside_its_closed_form(tmp_path):

@@ -47,7 +47,7 @@ from .files import atomic_path
 from .options import Options
 from .pool import Progress, run_all
 from .runlog import ACCEPTED, RunLog
-from .scenefile import SECTIONS, SceneSpec, load_scene, load_scene_text
+from .scenefile import SECTIONS, SceneSpec, load_scene, load_scene_text, shipped_scene
 from .state import State
 
 # the arrays of tables of a scene file, and the key that names an entry (bilaterals have none)
@@ -95,9 +95,9 @@ class Run:
         seed: the perturbation's seed, or None for the scene's own initial state.
         noise: the perturbation's size (with a seed).
         text: the scene text the run loads (TOML).
-        scene_path: the scene file (its folder resolves relative robot paths).
+        scene_path: the scene file, absolute (its folder resolves relative robot paths).
         digest: a digest of the original scene text: a study of an edited scene reruns.
-        out: the study's output folder.
+        out: the study's output folder, absolute.
     """
 
     values: tuple[tuple[str, Any], ...]
@@ -195,6 +195,8 @@ def plan(
     slowest), each with seeds 0 to ``seeds`` - 1 when ``seeds`` > 0.
 
     Every key and every value is checked before any run: the scene loads with each value set alone.
+    The runs name the scene file and ``out`` by absolute paths: a Dask worker, which runs in a folder
+    of its own, writes each log into ``out`` and resolves the scene's relative paths as here.
 
     Raises:
         SceneFileError: the scene file itself is malformed.
@@ -202,7 +204,8 @@ def plan(
             value the scene refuses (the field named ``--vary KEY``), seeds < 0, a noise < 0 or
             without seeds.
     """
-    scene = Path(scene)
+    scene, out = Path(scene), Path(out).absolute()
+    path = shipped_scene(scene).absolute()  # a shipped scene's bare name: its file
     spec = load_scene(scene)
     data = tomllib.loads(spec.text)
     if isinstance(seeds, bool) or not isinstance(seeds, int) or seeds < 0:
@@ -237,7 +240,7 @@ def plan(
         )
         text = _scene_text(data, [(places[k], v) for k, v in values], header) if values else spec.text
         for seed in range(seeds) if seeds else [None]:
-            runs.append(Run(values, seed, noise or Noise(), text, str(scene), digest, str(out)))
+            runs.append(Run(values, seed, noise or Noise(), text, str(path), digest, str(out)))
     return runs
 
 
