@@ -13,7 +13,7 @@ import pytest
 
 from gaussim import study
 from gaussim.cli import main
-from gaussim.exceptions import InvalidOptions
+from gaussim.exceptions import GaussimError, InvalidOptions
 from gaussim.pool import load
 from gaussim.runlog import RunLog
 from gaussim.scenefile import load_scene_text
@@ -137,12 +137,19 @@ def test_unknown_keys_and_refused_values_name_the_key(tmp_path, key, value, mess
         (["--seeds", "2", "--velocity-noise", "-1"], "--velocity-noise: must be a finite number >= 0"),
         (["--vary", "ground.friction=1", "--plot", "box.speed", "--against", "options.dt"], "not varied"),
         (["--vary", "ground.friction=1", "--plot", "speed", "--against", "ground.friction"], "box.speed"),
+        (
+            ["--vary", "ground.friction=1", "--scheduler", "127.0.0.1"],
+            "--scheduler: '127.0.0.1': missing port",
+        ),
+        (["--vary", "ground.friction=1", "--scheduler", "localhost:x"], "its port 'x' is not a number"),
+        (["--vary", "ground.friction=1", "--scheduler", "http://host"], "unknown address scheme 'http'"),
     ],
 )
 def test_the_command_refuses_bad_input_with_exit_2_and_no_traceback(tmp_path, capsys, args, message):
     assert _sweep(INCLINE, "--out", tmp_path, *args) == 2
     err = capsys.readouterr().err
     assert message in err and "Traceback" not in err
+    assert " to run on " not in err, "the input is checked before the sweep says what it runs"
     assert not (tmp_path / study.RESULTS).exists(), "nothing runs before the input is checked"
 
 
@@ -264,6 +271,16 @@ def test_a_worker_in_another_folder_writes_each_log_into_the_sweeps_folder(tmp_p
     log = RunLog.load(tmp_path / "out" / "box.sweep" / record["log"])
     assert log.scene_path == str(tmp_path / "box.toml")
     assert not (tmp_path / "worker" / "out").exists()
+
+
+def test_a_malformed_scheduler_address_is_refused_before_any_run(tmp_path, monkeypatch):
+    runs = study.plan(INCLINE, {"ground.friction": [0.1]}, tmp_path)
+    with pytest.raises(InvalidOptions, match="--scheduler: 'tcp://127.0.0.1': missing port"):
+        study.study(runs, tmp_path, scheduler="tcp://127.0.0.1")
+    assert not (tmp_path / study.RESULTS).exists()
+    monkeypatch.setitem(sys.modules, "distributed.comm", None)  # as if dask were not installed
+    with pytest.raises(GaussimError, match=re.escape("pip install 'dask[distributed]'")):
+        study.study(runs, tmp_path, scheduler="tcp://127.0.0.1:8786")
 
 
 def test_the_example_study_prints_each_slide_beside_its_closed_form(tmp_path):

@@ -360,11 +360,14 @@ def _bench_suite(args: argparse.Namespace) -> int:
 def _sweep(args: argparse.Namespace) -> int:
     import os
 
+    from .pool import check_scheduler
     from .study import Noise, plan, require_table, study, summary_columns, write_table
 
     require_table()  # before the runs, not after them
     if args.workers is not None and args.workers < 1:
         raise InvalidOptions("--workers", f"must be >= 1, got {args.workers}")
+    if args.scheduler is not None:
+        check_scheduler(args.scheduler)
     vary = _vary(args.vary)
     noise = None
     if args.position_noise is not None or args.velocity_noise is not None:

@@ -16,6 +16,8 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 from typing import Any, TypeVar
 
+from .exceptions import GaussimError, InvalidOptions
+
 Job = TypeVar("Job")
 # called with (done, total, record) after each job: done counts this batch's jobs, total those it runs
 Progress = Callable[[int, int, dict], None]
@@ -56,7 +58,12 @@ def run_all(
         scheduler: a Dask scheduler address ("tcp://host:8786"), or a ``dask.distributed.Client``-like
             object with ``map``; the jobs then run on that cluster.
         progress: called with (done, total, record) after each job.
+
+    Raises:
+        InvalidOptions: ``scheduler`` is no Dask address (:func:`check_scheduler`), before any job.
     """
+    if isinstance(scheduler, str):
+        check_scheduler(scheduler)
     path.parent.mkdir(parents=True, exist_ok=True)
     done = {r["key"]: r for r in load(path) if "key" in r}
     remaining = [item for item in todo if key(item) not in done]
@@ -71,6 +78,30 @@ def run_all(
             if progress is not None:
                 progress(count, len(remaining), record)
     return [done[key(item)] for item in todo if key(item) in done]
+
+
+def check_scheduler(address: str) -> None:
+    """Raise InvalidOptions naming ``--scheduler`` unless ``address`` is one a Dask client can connect
+    to: a known scheme, a host that resolves and a port (``tcp://host:8786``, or ``host:8786``). A typo
+    stops the batch before any job, not in a traceback of dask's; a valid address that nobody answers
+    fails when the client connects.
+
+    Raises:
+        GaussimError: dask.distributed is not installed (the message gives the install command).
+    """
+    try:
+        from distributed.comm import resolve_address
+    except ImportError:
+        raise GaussimError("--scheduler needs dask.distributed: pip install 'dask[distributed]'") from None
+    try:
+        resolve_address(address)
+    except (ValueError, OSError) as err:
+        cause = err.strerror if isinstance(err, OSError) and err.strerror else str(err)
+        if cause.startswith("invalid literal for int()"):  # dask's reading of the port
+            cause = f"its port {cause.partition(': ')[2]} is not a number"
+        raise InvalidOptions(
+            "--scheduler", f"{address!r}: {cause}; a Dask scheduler's address is tcp://HOST:PORT"
+        ) from None
 
 
 def _results(
