@@ -128,12 +128,52 @@ def test_unknown_keys_and_refused_values_name_the_key(tmp_path, key, value, mess
 
 
 @pytest.mark.parametrize(
+    "first, second, message",
+    [
+        (
+            "bodies[1].mass=1.0",
+            "bodies.ball.mass=2.0",
+            "bodies.ball.mass: sets the field --vary bodies[1].mass sets",
+        ),
+        (
+            "bodies.crate.position[2]=0.2",
+            "bodies[0].position[2]=0.3",
+            "sets the field --vary bodies.crate.position[2]",
+        ),
+        (
+            "bodies.ball.position=[0.5, 0, 0.1]",
+            "bodies[1].position[2]=0.2",
+            "overlaps --vary bodies.ball.position (a",
+        ),
+        (
+            "bodies.ball.position[2]=0.2",
+            "bodies[1].position=[0.5, 0, 0.1]",
+            "overlaps --vary bodies.ball.position[2]",
+        ),
+    ],
+)
+def test_two_keys_that_set_one_field_are_refused_naming_both(tmp_path, first, second, message):
+    """The later key's value would be the one the runs use, the earlier's the one the table shows."""
+    scene = tmp_path / "two.toml"
+    scene.write_text(TWO_BODIES)
+    with pytest.raises(InvalidOptions, match=re.escape(message)):
+        study.plan(scene, dict(map(study.parse_vary, (first, second))), tmp_path / "out")
+    apart = {"bodies.ball.position[0]": [0.6], "bodies[1].position[2]": [0.1], "bodies.crate.mass": [2.0]}
+    (run,) = study.plan(scene, apart, tmp_path / "out")  # two elements of one list are two fields
+    assert load_scene_text(run.text, scene).initial.body("ball").q[[0, 2]].tolist() == [0.6, 0.1]
+
+
+@pytest.mark.parametrize(
     "args, message",
     [
         (["--vary", "options.dtt=1e-3"], "--vary options.dtt: unknown field 'dtt' of [options]"),
         (["--vary", "ground.friction="], "--vary ground.friction: no values given"),
         (["--vary", "ground.friction=-0.5"], "--vary ground.friction: the value -0.5"),
         (["--vary", "ground.friction=1", "--vary", "ground.friction=2"], "given twice"),
+        (
+            ["--vary", "ground.normal=[0,0,1]", "--vary", "ground.normal[2]=2"],
+            "overlaps --vary ground.normal",
+        ),
         (["--seeds", "2", "--velocity-noise", "-1"], "--velocity-noise: must be a finite number >= 0"),
         (["--vary", "ground.friction=1", "--plot", "box.speed", "--against", "options.dt"], "not varied"),
         (["--vary", "ground.friction=1", "--plot", "speed", "--against", "ground.friction"], "box.speed"),

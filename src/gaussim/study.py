@@ -200,9 +200,9 @@ def plan(
 
     Raises:
         SceneFileError: the scene file itself is malformed.
-        InvalidOptions: an unknown key, a key the scene has no place for, no values, a value twice, a
-            value the scene refuses (the field named ``--vary KEY``), seeds < 0, a noise < 0 or
-            without seeds.
+        InvalidOptions: an unknown key, a key the scene has no place for, two keys that set one field
+            (two spellings of it, or a list and its element), no values, a value twice, a value the
+            scene refuses (the field named ``--vary KEY``), seeds < 0, a noise < 0 or without seeds.
     """
     scene, out = Path(scene), Path(out).absolute()
     path = shipped_scene(scene).absolute()  # a shipped scene's bare name: its file
@@ -219,7 +219,9 @@ def plan(
             raise InvalidOptions("--position-noise/--velocity-noise", "perturb seeded runs: give --seeds N")
     places: dict[str, tuple[Any, ...]] = {}
     for key, values in vary.items():
-        places[key] = _place(data, key)
+        place = _place(data, key)
+        _disjoint(places, key, place)
+        places[key] = place
         if not values:
             raise InvalidOptions(f"--vary {key}", "no values given")
         for i, value in enumerate(values):
@@ -294,6 +296,21 @@ def _place(data: dict[str, Any], key: str) -> tuple[Any, ...]:
             )
             raise InvalidOptions(where, f"{what}: it has no element [{element}] to vary")
     return place
+
+
+def _disjoint(places: Mapping[str, tuple[Any, ...]], key: str, place: tuple[Any, ...]) -> None:
+    """Raise InvalidOptions when ``key`` sets a field (or an element of it) that a key of ``places``
+    sets: two spellings of one field (``bodies[1].mass``, ``bodies.crate.mass``) or a list and its
+    element. The later key's value would replace the earlier's in every run, and the table would
+    record for the earlier key a value that no run used."""
+    for other, earlier in places.items():
+        if earlier == place:
+            raise InvalidOptions(f"--vary {key}", f"sets the field --vary {other} sets: give it one --vary")
+        if earlier[:-1] == place[:-1] and None in (earlier[-1], place[-1]):
+            raise InvalidOptions(
+                f"--vary {key}",
+                f"overlaps --vary {other} (a list and one of its elements): vary the one or the other",
+            )
 
 
 def _entry(data: dict[str, Any], section: str, index: int | None, names: list, where: str) -> int:
