@@ -70,7 +70,7 @@ def test_values_are_toml_separated_by_commas_outside_brackets():
         ["pyramid", "exact"],
     )
     assert study.parse_vary("options.dt=1e-3,2e-3") == ("options.dt", [1e-3, 2e-3])
-    assert study.parse_vary("bodies.ball.mass=1,1.0")[1] == [1, 1.0]  # an integer and a float differ
+    assert study.parse_vary("bodies.ball.mass=1,1.0")[1] == [1, 1.0]  # as TOML reads them (plan: one value)
 
 
 @pytest.mark.parametrize(
@@ -116,6 +116,8 @@ def test_keys_address_fields_bodies_by_name_and_list_elements(tmp_path):
         ("control.kp", 1.0, "this scene is of \\[\\[bodies\\]\\]"),
         ("bodies.crate.mass", -1.0, "the value -1.0: .*bodies\\[0\\].mass"),
         ("bodies.crate.mass", [2.0, 2.0], "the value 2.0 is given twice"),
+        ("bodies.crate.mass", [1, 2, 1.0], "the value 1.0 is given twice"),  # one number, two types
+        ("bodies.crate.position", [[0, 0, 1], [0, 0, 1.0]], r"the value \[0, 0, 1.0\] is given twice"),
         ("options.scheme", "fast", 'the value "fast": .*options.scheme.*velocity'),
     ],
 )
@@ -170,6 +172,7 @@ def test_two_keys_that_set_one_field_are_refused_naming_both(tmp_path, first, se
         (["--vary", "ground.friction="], "--vary ground.friction: no values given"),
         (["--vary", "ground.friction=-0.5"], "--vary ground.friction: the value -0.5"),
         (["--vary", "ground.friction=1", "--vary", "ground.friction=2"], "given twice"),
+        (["--vary", "ground.friction=1,1.0"], "--vary ground.friction: the value 1.0 is given twice"),
         (
             ["--vary", "ground.normal=[0,0,1]", "--vary", "ground.normal[2]=2"],
             "overlaps --vary ground.normal",

@@ -44,7 +44,7 @@ import numpy as np
 
 from .exceptions import GaussimError, InvalidOptions, shown
 from .files import atomic_path
-from .options import Options
+from .options import Options, is_real
 from .pool import Progress, run_all
 from .runlog import ACCEPTED, RunLog
 from .scenefile import SECTIONS, SceneSpec, load_scene, load_scene_text, shipped_scene
@@ -181,6 +181,10 @@ def _value(token: str, where: str) -> Any:
 
 
 def _same(a: Any, b: Any) -> bool:
+    """Whether two values set a field alike: numbers by value (1 and 1.0 make the same run, as do
+    [0, 1] and [0, 1.0]), the others by type and value (true is not 1)."""
+    if is_real(a) and is_real(b):
+        return bool(a == b)
     return type(a) is type(b) and a == b
 
 
