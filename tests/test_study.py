@@ -129,6 +129,18 @@ def test_unknown_keys_and_refused_values_name_the_key(tmp_path, key, value, mess
         study.plan(scene, {key: values}, tmp_path / "out")
 
 
+@pytest.mark.parametrize("values", [0.1, "0.1,0.2", {0.1, 0.2}, np.float64(0.1)])
+def test_the_values_of_a_key_are_a_list(tmp_path, values):
+    with pytest.raises(InvalidOptions, match=re.escape("--vary ground.friction: needs a list of values")):
+        study.plan(INCLINE, {"ground.friction": values}, tmp_path)
+
+
+def test_a_numpy_array_gives_a_key_its_values_as_python_numbers(tmp_path):
+    runs = study.plan(INCLINE, {"ground.friction": np.array([0.25, 0.5])}, tmp_path)
+    assert [r.values for r in runs] == [(("ground.friction", 0.25),), (("ground.friction", 0.5),)]
+    assert {type(r.values[0][1]) for r in runs} == {float}
+
+
 @pytest.mark.parametrize(
     "first, second, message",
     [

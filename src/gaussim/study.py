@@ -190,13 +190,13 @@ def _same(a: Any, b: Any) -> bool:
 
 def plan(
     scene: str | Path,
-    vary: Mapping[str, Sequence[Any]],
+    vary: Mapping[str, Sequence[Any] | np.ndarray],
     out: str | Path,
     seeds: int = 0,
     noise: Noise | None = None,
 ) -> list[Run]:
-    """The runs of a study: every combination of ``vary``'s values (the first key's values vary
-    slowest), each with seeds 0 to ``seeds`` - 1 when ``seeds`` > 0.
+    """The runs of a study: every combination of ``vary``'s values (a list, tuple or numpy array per
+    key; the first key's values vary slowest), each with seeds 0 to ``seeds`` - 1 when ``seeds`` > 0.
 
     Every key and every value is checked before any run: the scene loads with each value set alone.
     The runs name the scene file and ``out`` by absolute paths: a Dask worker, which runs in a folder
@@ -205,8 +205,9 @@ def plan(
     Raises:
         SceneFileError: the scene file itself is malformed.
         InvalidOptions: an unknown key, a key the scene has no place for, two keys that set one field
-            (two spellings of it, or a list and its element), no values, a value twice, a value the
-            scene refuses (the field named ``--vary KEY``), seeds < 0, a noise < 0 or without seeds.
+            (two spellings of it, or a list and its element), a value not in a list, no values, a
+            value twice, a value the scene refuses (the field named ``--vary KEY``), seeds < 0, a
+            noise < 0 or without seeds.
     """
     scene, out = Path(scene), Path(out).absolute()
     path = shipped_scene(scene).absolute()  # a shipped scene's bare name: its file
@@ -221,13 +222,12 @@ def plan(
                 raise InvalidOptions(f"--{name}-noise", f"must be a finite number >= 0, got {value}")
         if not seeds:
             raise InvalidOptions("--position-noise/--velocity-noise", "perturb seeded runs: give --seeds N")
+    vary = {key: _listed(key, values) for key, values in vary.items()}
     places: dict[str, tuple[Any, ...]] = {}
     for key, values in vary.items():
         place = _place(data, key)
         _disjoint(places, key, place)
         places[key] = place
-        if not values:
-            raise InvalidOptions(f"--vary {key}", "no values given")
         for i, value in enumerate(values):
             if any(_same(value, other) for other in values[:i]):
                 raise InvalidOptions(f"--vary {key}", f"the value {_toml_value(value)} is given twice")
@@ -248,6 +248,21 @@ def plan(
         for seed in range(seeds) if seeds else [None]:
             runs.append(Run(values, seed, noise or Noise(), text, str(path), digest, str(out)))
     return runs
+
+
+def _listed(key: str, values: Any) -> list[Any]:
+    """``key``'s values as a list, a numpy array's numbers as Python's (their TOML is written from
+    Python's types); raises InvalidOptions naming the key for one value given bare (``0.1``, a
+    string), a set (its order is not the runs') or no value."""
+    if isinstance(values, np.ndarray):
+        values = values.tolist()
+    if isinstance(values, str | bytes) or not isinstance(values, Sequence):
+        raise InvalidOptions(
+            f"--vary {key}", f"needs a list of values (one value: [VALUE]), got {shown(values)}"
+        )
+    if not values:
+        raise InvalidOptions(f"--vary {key}", "no values given")
+    return [v.item() if isinstance(v, np.generic) else v for v in values]
 
 
 def _place(data: dict[str, Any], key: str) -> tuple[Any, ...]:
