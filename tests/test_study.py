@@ -141,6 +141,14 @@ def test_a_numpy_array_gives_a_key_its_values_as_python_numbers(tmp_path):
     assert {type(r.values[0][1]) for r in runs} == {float}
 
 
+def test_a_study_varies_a_key_or_the_seeds(tmp_path):
+    """A study of no key and no seed would be one run of the scene as it is (gaussim run's), and its
+    table would replace the folder's."""
+    with pytest.raises(InvalidOptions, match=re.escape("--vary: nothing varies")):
+        study.plan(INCLINE, {}, tmp_path)
+    assert [r.label for r in study.plan(INCLINE, {}, tmp_path, seeds=2)] == ["seed=0", "seed=1"]
+
+
 @pytest.mark.parametrize(
     "first, second, message",
     [
@@ -180,6 +188,7 @@ def test_two_keys_that_set_one_field_are_refused_naming_both(tmp_path, first, se
 @pytest.mark.parametrize(
     "args, message",
     [
+        ([], "--vary: nothing varies: give --vary KEY=VALUES or --seeds N"),
         (["--vary", "options.dtt=1e-3"], "--vary options.dtt: unknown field 'dtt' of [options]"),
         (["--vary", "ground.friction="], "--vary ground.friction: no values given"),
         (["--vary", "ground.friction=-0.5"], "--vary ground.friction: the value -0.5"),

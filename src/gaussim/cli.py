@@ -188,7 +188,7 @@ def main(argv: list[str] | None = None) -> int:
         metavar="KEY=VALUES",
         help="a scene-file field and its values, TOML separated by commas: ground.friction=0.2,0.5, "
         "options.dt=1e-3,2e-3, bodies.crate.mass=1,2,4, control.kp=5,10, initial.q[2]=0.5,1, "
-        "bodies.crate.position=[0,0,0.3],[0,0,0.5] (repeat --vary for more keys)",
+        "bodies.crate.position=[0,0,0.3],[0,0,0.5] (repeat --vary for more keys; at least one, or --seeds)",
     )
     sweep.add_argument(
         "--seeds",

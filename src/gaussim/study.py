@@ -123,7 +123,7 @@ class Run:
     def label(self) -> str:
         """The run's values and seed, as a progress line shows them."""
         parts = [f"{k}={_toml_value(v)}" for k, v in self.values]
-        return " ".join(parts + ([] if self.seed is None else [f"seed={self.seed}"])) or "the scene as given"
+        return " ".join(parts + ([] if self.seed is None else [f"seed={self.seed}"]))
 
 
 def parse_vary(text: str) -> tuple[str, list[Any]]:
@@ -206,8 +206,8 @@ def plan(
         SceneFileError: the scene file itself is malformed.
         InvalidOptions: an unknown key, a key the scene has no place for, two keys that set one field
             (two spellings of it, or a list and its element), a value not in a list, no values, a
-            value twice, a value the scene refuses (the field named ``--vary KEY``), seeds < 0, a
-            noise < 0 or without seeds.
+            value twice, a value the scene refuses (the field named ``--vary KEY``), no key and no
+            seeds, seeds < 0, a noise < 0 or without seeds.
     """
     scene, out = Path(scene), Path(out).absolute()
     path = shipped_scene(scene).absolute()  # a shipped scene's bare name: its file
@@ -222,6 +222,10 @@ def plan(
                 raise InvalidOptions(f"--{name}-noise", f"must be a finite number >= 0, got {value}")
         if not seeds:
             raise InvalidOptions("--position-noise/--velocity-noise", "perturb seeded runs: give --seeds N")
+    if not vary and not seeds:  # a single run of the scene: gaussim run's, with a run log of its own
+        raise InvalidOptions(
+            "--vary", "nothing varies: give --vary KEY=VALUES or --seeds N (gaussim run runs a scene once)"
+        )
     vary = {key: _listed(key, values) for key, values in vary.items()}
     places: dict[str, tuple[Any, ...]] = {}
     for key, values in vary.items():
