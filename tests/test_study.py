@@ -115,6 +115,11 @@ def test_keys_address_fields_bodies_by_name_and_list_elements(tmp_path):
         ("options.dt[0]", 1.0, "the scene gives no dt: it has no element \\[0\\]"),
         ("control.kp", 1.0, "this scene is of \\[\\[bodies\\]\\]"),
         ("bodies.crate.mass", -1.0, "the value -1.0: .*bodies\\[0\\].mass"),
+        (
+            "bodies.crate.size[1]",
+            -0.1,
+            "the value -0.1: .*bodies\\[0\\].size: .*> 0, got -0.1$",
+        ),  # not np's repr
         ("bodies.crate.mass", [2.0, 2.0], "the value 2.0 is given twice"),
         ("bodies.crate.mass", [1, 2, 1.0], "the value 1.0 is given twice"),  # one number, two types
         ("bodies.crate.position", [[0, 0, 1], [0, 0, 1.0]], r"the value \[0, 0, 1.0\] is given twice"),
