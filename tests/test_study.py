@@ -222,6 +222,16 @@ def test_the_command_refuses_bad_input_with_exit_2_and_no_traceback(tmp_path, ca
     assert not (tmp_path / study.RESULTS).exists(), "nothing runs before the input is checked"
 
 
+def test_an_out_that_cannot_be_a_folder_is_refused_before_any_run(tmp_path, capsys):
+    afile = tmp_path / "afile"
+    afile.write_text("mine")
+    for out, message in ((afile, "is a file, not a folder"), (afile / "sub", "cannot be written")):
+        assert _sweep(INCLINE, "--vary", "ground.friction=0.1", "--out", out) == 2
+        err = capsys.readouterr().err
+        assert f"gaussim: --out {out}: {message}" in err and " to run on " not in err
+    assert afile.read_text() == "mine"
+
+
 def test_a_friction_sweep_slides_the_box_as_the_closed_form(tmp_path, capsys):
     """Each value reaches its run: the box's slide over 0.2 s is 1/2 g (sin - mu cos) t^2, or none
     once mu > tan 30 deg; the seeds move the start along the slope by about 1 mm (the box stays on it)."""

@@ -27,7 +27,7 @@ from .exceptions import (
     InvalidState,
     SolverError,
 )
-from .files import atomic_path, check_writable
+from .files import atomic_path, check_folder, check_writable
 from .options import FRICTION_MODES, SCHEMES
 from .stops import STOP_SIGNALS, interrupt, taken_stop
 
@@ -378,6 +378,7 @@ def _sweep(args: argparse.Namespace) -> int:
         )
     out = args.out or Path("out") / f"{args.scene.stem}.sweep"
     runs = plan(args.scene, vary, out, args.seeds, noise)
+    check_folder(out, "--out")  # before the plot's default path in it is checked
     plot: tuple[str, str, Path] | None = None  # the summary, the key and the image
     if args.plot is not None or args.against is not None or args.plot_file is not None:
         from .plots import plot_path
