@@ -14,7 +14,7 @@ import pytest
 from gaussim import study
 from gaussim.cli import main
 from gaussim.exceptions import GaussimError, InvalidOptions
-from gaussim.pool import load
+from gaussim.pool import FolderInUse, load
 from gaussim.runlog import RunLog
 from gaussim.scenefile import load_scene_text
 
@@ -311,6 +311,38 @@ def test_an_interrupted_sweep_resumes_without_redoing_its_finished_runs(tmp_path
     assert _sweep(BALL, "--vary", "ground.restitution=0.9", *args) == 0
     assert "1 runs, 1 already in" in capsys.readouterr().err
     assert len(pd.read_parquet(tmp_path / study.TABLE)) == 1, "the table holds the runs asked for"
+
+
+# holds a folder's lock as a sweep does, until killed
+HOLD = """
+import sys, time
+from pathlib import Path
+from gaussim.pool import exclusive
+with exclusive(Path(sys.argv[1])):
+    print("held", flush=True)
+    time.sleep(600)
+"""
+
+
+def test_a_second_sweep_into_a_folder_being_written_stops_at_once(tmp_path, capsys):
+    """Two sweeps into one folder would both make every run (runs.jsonl twice as long, each log kept as
+    .prev): the second stops, naming the folder. The lock dies with its process (an flock): a sweep
+    killed midway stops no later one."""
+    args = (INCLINE, "--vary", "ground.friction=0.1", "--vary", "simulation.duration=0.01", "--out", tmp_path)
+    holder = subprocess.Popen([sys.executable, "-c", HOLD, str(tmp_path)], stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline() == "held\n"
+        assert _sweep(*args) == 2
+        err = capsys.readouterr().err
+        assert f"gaussim: {tmp_path}: another sweep (process {holder.pid}) is writing this folder" in err
+        assert " to run on " not in err
+        with pytest.raises(FolderInUse, match="another sweep"):
+            study.study(study.plan(INCLINE, {"ground.friction": [0.1]}, tmp_path), tmp_path, workers=1)
+        assert not (tmp_path / study.RESULTS).exists()
+    finally:
+        holder.kill()
+        holder.wait()
+    assert _sweep(*args) == 0, "the lock of a killed process is free"
 
 
 def test_the_sweep_command_runs_on_a_dask_cluster(tmp_path):

@@ -33,6 +33,7 @@ from .stops import STOP_SIGNALS, interrupt, taken_stop
 
 if TYPE_CHECKING:
     from .scene import Scene
+    from .study import Run
     from .world import BodyLayout
 
 EXIT_OK, EXIT_FAILURE, EXIT_BAD_INPUT = 0, 1, 2
@@ -358,10 +359,8 @@ def _bench_suite(args: argparse.Namespace) -> int:
 
 
 def _sweep(args: argparse.Namespace) -> int:
-    import os
-
-    from .pool import check_scheduler
-    from .study import Noise, plan, require_table, study, summary_columns, write_table
+    from .pool import check_scheduler, exclusive
+    from .study import Noise, plan, require_table, summary_columns
 
     require_table()  # before the runs, not after them
     if args.workers is not None and args.workers < 1:
@@ -402,6 +401,17 @@ def _sweep(args: argparse.Namespace) -> int:
             plot_path(args.plot_file or out / f"{args.plot}-vs-{args.against}.png"),
         )
         check_writable(plot[2], "--plot-file")
+    with exclusive(out):  # from the count of the finished runs to the table: a second sweep stops at once
+        return _sweep_runs(args, runs, out, [*vary], plot)
+
+
+def _sweep_runs(
+    args: argparse.Namespace, runs: list[Run], out: Path, keys: list[str], plot: tuple[str, str, Path] | None
+) -> int:
+    """The runs of a sweep whose input is checked: those not in ``out`` made, the table written, the
+    plot drawn."""
+    from .study import study, write_table
+
     done_before = len(runs) - len({r.key for r in runs} - _finished(out))
     processes = args.workers or os.cpu_count() or 1
     workers = (
@@ -445,7 +455,7 @@ def _sweep(args: argparse.Namespace) -> int:
         from .plots import save_sweep_plot
         from .study import rows
 
-        print(f"plot: {save_sweep_plot(rows(records), plot[0], plot[1], [*vary], plot[2])}")
+        print(f"plot: {save_sweep_plot(rows(records), plot[0], plot[1], keys, plot[2])}")
     return EXIT_FAILURE if failed else EXIT_OK
 
 
