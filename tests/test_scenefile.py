@@ -90,6 +90,8 @@ BALL = '[robot]\nname = "ball"\nfloating_base = true\n'
             "type 'zero' \\(the default\\) does not read it; type = \"pd\" does",
         ),
         (BALL + "[control]\ntype = 'pd'\ntau = []\n", "control.tau", 'type = "constant" does'),
+        (BALL + "[control]\ntype = []\n", "control.type", "not one of"),  # a type that is no word
+        (BALL + "[[bilaterals]]\ntype = []\n", r"bilaterals\[0\].type", r"\[\] is not one of anchor, loop"),
         (
             BALL + "[[bilaterals]]\ntype = 'loop'\nframes = ['a', 'b']\nposition = [0, 0, 1]\n",
             r"bilaterals\[0\].position",

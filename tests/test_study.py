@@ -13,8 +13,9 @@ import pytest
 
 from gaussim import study
 from gaussim.cli import main
-from gaussim.exceptions import InvalidOptions
-from gaussim.pool import load
+from gaussim.exceptions import GaussimError, InvalidOptions
+from gaussim.pool import FolderInUse, load
+from gaussim.runlog import RunLog
 from gaussim.scenefile import load_scene_text
 
 SCENES = Path(__file__).resolve().parents[1] / "robots" / "scenes"
@@ -69,7 +70,7 @@ def test_values_are_toml_separated_by_commas_outside_brackets():
         ["pyramid", "exact"],
     )
     assert study.parse_vary("options.dt=1e-3,2e-3") == ("options.dt", [1e-3, 2e-3])
-    assert study.parse_vary("bodies.ball.mass=1,1.0")[1] == [1, 1.0]  # an integer and a float differ
+    assert study.parse_vary("bodies.ball.mass=1,1.0")[1] == [1, 1.0]  # as TOML reads them (plan: one value)
 
 
 @pytest.mark.parametrize(
@@ -114,7 +115,14 @@ def test_keys_address_fields_bodies_by_name_and_list_elements(tmp_path):
         ("options.dt[0]", 1.0, "the scene gives no dt: it has no element \\[0\\]"),
         ("control.kp", 1.0, "this scene is of \\[\\[bodies\\]\\]"),
         ("bodies.crate.mass", -1.0, "the value -1.0: .*bodies\\[0\\].mass"),
+        (
+            "bodies.crate.size[1]",
+            -0.1,
+            "the value -0.1: .*bodies\\[0\\].size: .*> 0, got -0.1$",
+        ),  # not np's repr
         ("bodies.crate.mass", [2.0, 2.0], "the value 2.0 is given twice"),
+        ("bodies.crate.mass", [1, 2, 1.0], "the value 1.0 is given twice"),  # one number, two types
+        ("bodies.crate.position", [[0, 0, 1], [0, 0, 1.0]], r"the value \[0, 0, 1.0\] is given twice"),
         ("options.scheme", "fast", 'the value "fast": .*options.scheme.*velocity'),
     ],
 )
@@ -126,23 +134,102 @@ def test_unknown_keys_and_refused_values_name_the_key(tmp_path, key, value, mess
         study.plan(scene, {key: values}, tmp_path / "out")
 
 
+@pytest.mark.parametrize("values", [0.1, "0.1,0.2", {0.1, 0.2}, np.float64(0.1)])
+def test_the_values_of_a_key_are_a_list(tmp_path, values):
+    with pytest.raises(InvalidOptions, match=re.escape("--vary ground.friction: needs a list of values")):
+        study.plan(INCLINE, {"ground.friction": values}, tmp_path)
+
+
+def test_a_numpy_array_gives_a_key_its_values_as_python_numbers(tmp_path):
+    runs = study.plan(INCLINE, {"ground.friction": np.array([0.25, 0.5])}, tmp_path)
+    assert [r.values for r in runs] == [(("ground.friction", 0.25),), (("ground.friction", 0.5),)]
+    assert {type(r.values[0][1]) for r in runs} == {float}
+
+
+def test_a_study_varies_a_key_or_the_seeds(tmp_path):
+    """A study of no key and no seed would be one run of the scene as it is (gaussim run's), and its
+    table would replace the folder's."""
+    with pytest.raises(InvalidOptions, match=re.escape("--vary: nothing varies")):
+        study.plan(INCLINE, {}, tmp_path)
+    assert [r.label for r in study.plan(INCLINE, {}, tmp_path, seeds=2)] == ["seed=0", "seed=1"]
+
+
+@pytest.mark.parametrize(
+    "first, second, message",
+    [
+        (
+            "bodies[1].mass=1.0",
+            "bodies.ball.mass=2.0",
+            "bodies.ball.mass: sets the field --vary bodies[1].mass sets",
+        ),
+        (
+            "bodies.crate.position[2]=0.2",
+            "bodies[0].position[2]=0.3",
+            "sets the field --vary bodies.crate.position[2]",
+        ),
+        (
+            "bodies.ball.position=[0.5, 0, 0.1]",
+            "bodies[1].position[2]=0.2",
+            "overlaps --vary bodies.ball.position (a",
+        ),
+        (
+            "bodies.ball.position[2]=0.2",
+            "bodies[1].position=[0.5, 0, 0.1]",
+            "overlaps --vary bodies.ball.position[2]",
+        ),
+    ],
+)
+def test_two_keys_that_set_one_field_are_refused_naming_both(tmp_path, first, second, message):
+    """The later key's value would be the one the runs use, the earlier's the one the table shows."""
+    scene = tmp_path / "two.toml"
+    scene.write_text(TWO_BODIES)
+    with pytest.raises(InvalidOptions, match=re.escape(message)):
+        study.plan(scene, dict(map(study.parse_vary, (first, second))), tmp_path / "out")
+    apart = {"bodies.ball.position[0]": [0.6], "bodies[1].position[2]": [0.1], "bodies.crate.mass": [2.0]}
+    (run,) = study.plan(scene, apart, tmp_path / "out")  # two elements of one list are two fields
+    assert load_scene_text(run.text, scene).initial.body("ball").q[[0, 2]].tolist() == [0.6, 0.1]
+
+
 @pytest.mark.parametrize(
     "args, message",
     [
+        ([], "--vary: nothing varies: give --vary KEY=VALUES or --seeds N"),
         (["--vary", "options.dtt=1e-3"], "--vary options.dtt: unknown field 'dtt' of [options]"),
         (["--vary", "ground.friction="], "--vary ground.friction: no values given"),
         (["--vary", "ground.friction=-0.5"], "--vary ground.friction: the value -0.5"),
         (["--vary", "ground.friction=1", "--vary", "ground.friction=2"], "given twice"),
+        (["--vary", "ground.friction=1,1.0"], "--vary ground.friction: the value 1.0 is given twice"),
+        (
+            ["--vary", "ground.normal=[0,0,1]", "--vary", "ground.normal[2]=2"],
+            "overlaps --vary ground.normal",
+        ),
         (["--seeds", "2", "--velocity-noise", "-1"], "--velocity-noise: must be a finite number >= 0"),
         (["--vary", "ground.friction=1", "--plot", "box.speed", "--against", "options.dt"], "not varied"),
         (["--vary", "ground.friction=1", "--plot", "speed", "--against", "ground.friction"], "box.speed"),
+        (
+            ["--vary", "ground.friction=1", "--scheduler", "127.0.0.1"],
+            "--scheduler: '127.0.0.1': missing port",
+        ),
+        (["--vary", "ground.friction=1", "--scheduler", "localhost:x"], "its port 'x' is not a number"),
+        (["--vary", "ground.friction=1", "--scheduler", "http://host"], "unknown address scheme 'http'"),
     ],
 )
 def test_the_command_refuses_bad_input_with_exit_2_and_no_traceback(tmp_path, capsys, args, message):
     assert _sweep(INCLINE, "--out", tmp_path, *args) == 2
     err = capsys.readouterr().err
     assert message in err and "Traceback" not in err
+    assert " to run on " not in err, "the input is checked before the sweep says what it runs"
     assert not (tmp_path / study.RESULTS).exists(), "nothing runs before the input is checked"
+
+
+def test_an_out_that_cannot_be_a_folder_is_refused_before_any_run(tmp_path, capsys):
+    afile = tmp_path / "afile"
+    afile.write_text("mine")
+    for out, message in ((afile, "is a file, not a folder"), (afile / "sub", "cannot be written")):
+        assert _sweep(INCLINE, "--vary", "ground.friction=0.1", "--out", out) == 2
+        err = capsys.readouterr().err
+        assert f"gaussim: --out {out}: {message}" in err and " to run on " not in err
+    assert afile.read_text() == "mine"
 
 
 def test_a_friction_sweep_slides_the_box_as_the_closed_form(tmp_path, capsys):
@@ -226,6 +313,38 @@ def test_an_interrupted_sweep_resumes_without_redoing_its_finished_runs(tmp_path
     assert len(pd.read_parquet(tmp_path / study.TABLE)) == 1, "the table holds the runs asked for"
 
 
+# holds a folder's lock as a sweep does, until killed
+HOLD = """
+import sys, time
+from pathlib import Path
+from gaussim.pool import exclusive
+with exclusive(Path(sys.argv[1])):
+    print("held", flush=True)
+    time.sleep(600)
+"""
+
+
+def test_a_second_sweep_into_a_folder_being_written_stops_at_once(tmp_path, capsys):
+    """Two sweeps into one folder would both make every run (runs.jsonl twice as long, each log kept as
+    .prev): the second stops, naming the folder. The lock dies with its process (an flock): a sweep
+    killed midway stops no later one."""
+    args = (INCLINE, "--vary", "ground.friction=0.1", "--vary", "simulation.duration=0.01", "--out", tmp_path)
+    holder = subprocess.Popen([sys.executable, "-c", HOLD, str(tmp_path)], stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline() == "held\n"
+        assert _sweep(*args) == 2
+        err = capsys.readouterr().err
+        assert f"gaussim: {tmp_path}: another sweep (process {holder.pid}) is writing this folder" in err
+        assert " to run on " not in err
+        with pytest.raises(FolderInUse, match="another sweep"):
+            study.study(study.plan(INCLINE, {"ground.friction": [0.1]}, tmp_path), tmp_path, workers=1)
+        assert not (tmp_path / study.RESULTS).exists()
+    finally:
+        holder.kill()
+        holder.wait()
+    assert _sweep(*args) == 0, "the lock of a killed process is free"
+
+
 def test_the_sweep_command_runs_on_a_dask_cluster(tmp_path):
     distributed = pytest.importorskip("dask.distributed")
     with distributed.LocalCluster(n_workers=1, processes=False, threads_per_worker=1) as cluster:
@@ -247,6 +366,32 @@ def test_the_sweep_command_runs_on_a_dask_cluster(tmp_path):
     frame = pd.read_parquet(tmp_path / study.TABLE)
     assert list(frame["options.dt"]) == [1e-3, 2e-3] and set(frame["status"]) == {"ok"}
     assert list(frame["steps"]) == [100, 50]
+
+
+def test_a_worker_in_another_folder_writes_each_log_into_the_sweeps_folder(tmp_path, monkeypatch):
+    """A Dask worker runs in a working directory of its own: a run planned with a relative scene path
+    and output folder (the default out/SCENE.sweep) writes its log there all the same, and the log
+    names the scene file."""
+    (tmp_path / "box.toml").write_text(INCLINE.read_text())
+    monkeypatch.chdir(tmp_path)
+    (run,) = study.plan("box.toml", {"simulation.duration": [0.01]}, "out/box.sweep")
+    (tmp_path / "worker").mkdir()
+    monkeypatch.chdir(tmp_path / "worker")
+    record = study.run_one(run)
+    assert record["status"] == "ok"
+    log = RunLog.load(tmp_path / "out" / "box.sweep" / record["log"])
+    assert log.scene_path == str(tmp_path / "box.toml")
+    assert not (tmp_path / "worker" / "out").exists()
+
+
+def test_a_malformed_scheduler_address_is_refused_before_any_run(tmp_path, monkeypatch):
+    runs = study.plan(INCLINE, {"ground.friction": [0.1]}, tmp_path)
+    with pytest.raises(InvalidOptions, match="--scheduler: 'tcp://127.0.0.1': missing port"):
+        study.study(runs, tmp_path, scheduler="tcp://127.0.0.1")
+    assert not (tmp_path / study.RESULTS).exists()
+    monkeypatch.setitem(sys.modules, "distributed.comm", None)  # as if dask were not installed
+    with pytest.raises(GaussimError, match=re.escape("pip install 'dask[distributed]'")):
+        study.study(runs, tmp_path, scheduler="tcp://127.0.0.1:8786")
 
 
 def test_the_example_study_prints_each_slide_beside_its_closed_form(tmp_path):

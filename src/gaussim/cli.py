@@ -27,12 +27,13 @@ from .exceptions import (
     InvalidState,
     SolverError,
 )
-from .files import atomic_path, check_writable
+from .files import atomic_path, check_folder, check_writable
 from .options import FRICTION_MODES, SCHEMES
 from .stops import STOP_SIGNALS, interrupt, taken_stop
 
 if TYPE_CHECKING:
     from .scene import Scene
+    from .study import Run
     from .world import BodyLayout
 
 EXIT_OK, EXIT_FAILURE, EXIT_BAD_INPUT = 0, 1, 2
@@ -188,7 +189,7 @@ def main(argv: list[str] | None = None) -> int:
         metavar="KEY=VALUES",
         help="a scene-file field and its values, TOML separated by commas: ground.friction=0.2,0.5, "
         "options.dt=1e-3,2e-3, bodies.crate.mass=1,2,4, control.kp=5,10, initial.q[2]=0.5,1, "
-        "bodies.crate.position=[0,0,0.3],[0,0,0.5] (repeat --vary for more keys)",
+        "bodies.crate.position=[0,0,0.3],[0,0,0.5] (repeat --vary for more keys; at least one, or --seeds)",
     )
     sweep.add_argument(
         "--seeds",
@@ -358,13 +359,14 @@ def _bench_suite(args: argparse.Namespace) -> int:
 
 
 def _sweep(args: argparse.Namespace) -> int:
-    import os
-
-    from .study import Noise, plan, require_table, study, summary_columns, write_table
+    from .pool import check_scheduler, exclusive
+    from .study import Noise, plan, require_table, summary_columns
 
     require_table()  # before the runs, not after them
     if args.workers is not None and args.workers < 1:
         raise InvalidOptions("--workers", f"must be >= 1, got {args.workers}")
+    if args.scheduler is not None:
+        check_scheduler(args.scheduler)
     vary = _vary(args.vary)
     noise = None
     if args.position_noise is not None or args.velocity_noise is not None:
@@ -375,6 +377,7 @@ def _sweep(args: argparse.Namespace) -> int:
         )
     out = args.out or Path("out") / f"{args.scene.stem}.sweep"
     runs = plan(args.scene, vary, out, args.seeds, noise)
+    check_folder(out, "--out")  # before the plot's default path in it is checked
     plot: tuple[str, str, Path] | None = None  # the summary, the key and the image
     if args.plot is not None or args.against is not None or args.plot_file is not None:
         from .plots import plot_path
@@ -398,6 +401,17 @@ def _sweep(args: argparse.Namespace) -> int:
             plot_path(args.plot_file or out / f"{args.plot}-vs-{args.against}.png"),
         )
         check_writable(plot[2], "--plot-file")
+    with exclusive(out):  # from the count of the finished runs to the table: a second sweep stops at once
+        return _sweep_runs(args, runs, out, [*vary], plot)
+
+
+def _sweep_runs(
+    args: argparse.Namespace, runs: list[Run], out: Path, keys: list[str], plot: tuple[str, str, Path] | None
+) -> int:
+    """The runs of a sweep whose input is checked: those not in ``out`` made, the table written, the
+    plot drawn."""
+    from .study import study, write_table
+
     done_before = len(runs) - len({r.key for r in runs} - _finished(out))
     processes = args.workers or os.cpu_count() or 1
     workers = (
@@ -441,7 +455,7 @@ def _sweep(args: argparse.Namespace) -> int:
         from .plots import save_sweep_plot
         from .study import rows
 
-        print(f"plot: {save_sweep_plot(rows(records), plot[0], plot[1], [*vary], plot[2])}")
+        print(f"plot: {save_sweep_plot(rows(records), plot[0], plot[1], keys, plot[2])}")
     return EXIT_FAILURE if failed else EXIT_OK
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import reprlib
+import sys
 from collections.abc import Iterable
 from difflib import get_close_matches
 from typing import TYPE_CHECKING
@@ -10,7 +11,19 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:  # numpy is imported where used: the CLI's --help imports this module and no numpy
     import numpy as np
 
-_SHOWN = reprlib.Repr()
+
+class _Shown(reprlib.Repr):
+    """reprlib's repr cut to a line, a numpy scalar shown as the Python number it holds: the message
+    of a scene's size [0.2, -0.1] says -0.1, as the file does, not np.float64(-0.1)."""
+
+    def repr1(self, x: object, level: int) -> str:
+        numpy = sys.modules.get("numpy")  # a numpy scalar exists only once numpy is imported
+        if numpy is not None and isinstance(x, numpy.generic):
+            x = x.item()
+        return super().repr1(x, level)
+
+
+_SHOWN = _Shown()
 _SHOWN.maxlist = _SHOWN.maxtuple = _SHOWN.maxdict = 8
 _SHOWN.maxstring = _SHOWN.maxother = 60
 

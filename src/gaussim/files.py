@@ -63,11 +63,27 @@ def check_writable(path: str | Path, what: str, suffixes: tuple[str, ...] = ()) 
         raise OutputError(f"{what} {path}: is a directory; give a file name")
     if suffixes and path.suffix.lower() not in suffixes:
         raise OutputError(f"{what} {path}: the file's name must end in {' or '.join(suffixes)}")
+    _probe(path.parent, f"{what} {path}")
+    return path
+
+
+def check_folder(path: str | Path, what: str) -> Path:
+    """Raise OutputError unless files can be created in the folder ``path`` (made if missing): a file in
+    its place, or a parent that is a file or read-only. ``what`` names it in the message."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise OutputError(f"{what} {path}: is a file, not a folder; give a folder")
+    _probe(path, f"{what} {path}")
+    return path
+
+
+def _probe(folder: Path, named: str) -> None:
+    """Make ``folder`` if missing, and create and remove a file in it; an OSError is an OutputError
+    that begins with ``named``."""
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".check", dir=path.parent)
+        folder.mkdir(parents=True, exist_ok=True)
+        fd, name = tempfile.mkstemp(prefix=".gaussim.", suffix=".check", dir=folder)
         os.close(fd)
         os.unlink(name)
     except OSError as err:
-        raise OutputError(f"{what} {path}: cannot be written ({err.strerror or err})") from err
-    return path
+        raise OutputError(f"{named}: cannot be written ({err.strerror or err})") from err

@@ -3,22 +3,71 @@
 A job runs in a local process pool, or on a Dask cluster when given its scheduler address (or a
 client). Each finished job's record, a JSON-able dict with a ``"key"`` that names the job, is appended
 to a JSON-lines file at once: an interrupted batch keeps what it finished, and the same batch started
-again skips every key already in the file. Used by the benchmark's knob sweep
-(:mod:`gaussim.bench.sweep`) and the user's parameter studies (:mod:`gaussim.study`).
+again skips every key already in the file. One batch at a time writes a folder (:func:`exclusive`).
+Used by the benchmark's knob sweep (:mod:`gaussim.bench.sweep`) and the user's parameter studies
+(:mod:`gaussim.study`).
 """
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
+import threading
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, TypeVar
+
+from .exceptions import GaussimError, InvalidOptions
 
 Job = TypeVar("Job")
 # called with (done, total, record) after each job: done counts this batch's jobs, total those it runs
 Progress = Callable[[int, int, dict], None]
+# the lock file of a folder a batch writes (exclusive), and the folders this process holds: by which thread
+LOCK = ".lock"
+_HELD: dict[Path, int] = {}
+
+
+class FolderInUse(GaussimError):
+    """Another batch (another process) is writing the folder."""
+
+
+@contextmanager
+def exclusive(folder: Path) -> Iterator[None]:
+    """Hold ``folder``'s lock (its file LOCK, the folder made if missing) while the block runs: a second
+    batch into the folder would make every job again and append its records twice, so it stops at
+    once. The lock is an flock, which the OS releases when its process ends, even by a kill: a lock
+    file left behind stops nobody. The thread that holds it may take it again (gaussim sweep holds it
+    from its count of the finished runs to its table, and :func:`run_all` takes it).
+
+    Raises:
+        FolderInUse: another process holds the lock (the message names the folder and that process).
+    """
+    absolute = folder.absolute()
+    if _HELD.get(absolute) == threading.get_ident():
+        yield
+        return
+    folder.mkdir(parents=True, exist_ok=True)
+    with open(folder / LOCK, "a+") as lock:
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            lock.seek(0)
+            holder = lock.read().strip()
+            raise FolderInUse(
+                f"{folder}: another sweep{f' (process {holder})' if holder else ''} is writing this folder;"
+                " wait for it to end, or give another output folder"
+            ) from None
+        lock.truncate(0)
+        lock.write(str(os.getpid()))  # who holds it, for the message of the one it stops
+        lock.flush()
+        _HELD[absolute] = threading.get_ident()
+        try:
+            yield
+        finally:
+            del _HELD[absolute]
 
 
 def load(path: Path) -> list[dict]:
@@ -56,21 +105,51 @@ def run_all(
         scheduler: a Dask scheduler address ("tcp://host:8786"), or a ``dask.distributed.Client``-like
             object with ``map``; the jobs then run on that cluster.
         progress: called with (done, total, record) after each job.
+
+    Raises:
+        InvalidOptions: ``scheduler`` is no Dask address (:func:`check_scheduler`), before any job.
+        FolderInUse: another batch is writing ``path``'s folder (:func:`exclusive`).
     """
-    path.parent.mkdir(parents=True, exist_ok=True)
-    done = {r["key"]: r for r in load(path) if "key" in r}
-    remaining = [item for item in todo if key(item) not in done]
-    torn = path.exists() and path.stat().st_size > 0 and not path.read_bytes().endswith(b"\n")
-    with path.open("a") as out:
-        if torn:  # a line cut by an interruption ends here: the next record starts a line of its own
-            out.write("\n")
-        for count, record in enumerate(_results(job, remaining, workers, scheduler), start=1):
-            out.write(json.dumps(record, default=str) + "\n")
-            out.flush()
-            done[record["key"]] = record
-            if progress is not None:
-                progress(count, len(remaining), record)
+    if isinstance(scheduler, str):
+        check_scheduler(scheduler)
+    with exclusive(path.parent):
+        done = {r["key"]: r for r in load(path) if "key" in r}
+        remaining = [item for item in todo if key(item) not in done]
+        torn = path.exists() and path.stat().st_size > 0 and not path.read_bytes().endswith(b"\n")
+        with path.open("a") as out:
+            if torn:  # a line cut by an interruption ends here: the next record starts a line of its own
+                out.write("\n")
+            for count, record in enumerate(_results(job, remaining, workers, scheduler), start=1):
+                out.write(json.dumps(record, default=str) + "\n")
+                out.flush()
+                done[record["key"]] = record
+                if progress is not None:
+                    progress(count, len(remaining), record)
     return [done[key(item)] for item in todo if key(item) in done]
+
+
+def check_scheduler(address: str) -> None:
+    """Raise InvalidOptions naming ``--scheduler`` unless ``address`` is one a Dask client can connect
+    to: a known scheme, a host that resolves and a port (``tcp://host:8786``, or ``host:8786``). A typo
+    stops the batch before any job, not in a traceback of dask's; a valid address that nobody answers
+    fails when the client connects.
+
+    Raises:
+        GaussimError: dask.distributed is not installed (the message gives the install command).
+    """
+    try:
+        from distributed.comm import resolve_address
+    except ImportError:
+        raise GaussimError("--scheduler needs dask.distributed: pip install 'dask[distributed]'") from None
+    try:
+        resolve_address(address)
+    except (ValueError, OSError) as err:
+        cause = err.strerror if isinstance(err, OSError) and err.strerror else str(err)
+        if cause.startswith("invalid literal for int()"):  # dask's reading of the port
+            cause = f"its port {cause.partition(': ')[2]} is not a number"
+        raise InvalidOptions(
+            "--scheduler", f"{address!r}: {cause}; a Dask scheduler's address is tcp://HOST:PORT"
+        ) from None
 
 
 def _results(

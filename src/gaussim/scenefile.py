@@ -710,8 +710,8 @@ class _Reader:
         """Refuse a key of ``section`` (a ``table`` at ``key``) that its type ``kind`` does not read,
         naming the types that read it: a gain under a zero controller would be ignored."""
         reads = TYPE_KEYS[table]
-        if kind not in reads:
-            return  # an unknown type: its own error follows
+        if not isinstance(kind, str) or kind not in reads:
+            return  # an unknown type, or no word (a list is no key of reads): its own error follows
         for name in sorted(set(section) - {"type", *reads[kind]}):
             readers = " or ".join(f'type = "{t}"' for t, keys in reads.items() if name in keys)
             default = "" if "type" in section else " (the default)"

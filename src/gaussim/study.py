@@ -44,10 +44,10 @@ import numpy as np
 
 from .exceptions import GaussimError, InvalidOptions, shown
 from .files import atomic_path
-from .options import Options
+from .options import Options, is_real
 from .pool import Progress, run_all
 from .runlog import ACCEPTED, RunLog
-from .scenefile import SECTIONS, SceneSpec, load_scene, load_scene_text
+from .scenefile import SECTIONS, SceneSpec, load_scene, load_scene_text, shipped_scene
 from .state import State
 
 # the arrays of tables of a scene file, and the key that names an entry (bilaterals have none)
@@ -95,9 +95,9 @@ class Run:
         seed: the perturbation's seed, or None for the scene's own initial state.
         noise: the perturbation's size (with a seed).
         text: the scene text the run loads (TOML).
-        scene_path: the scene file (its folder resolves relative robot paths).
+        scene_path: the scene file, absolute (its folder resolves relative robot paths).
         digest: a digest of the original scene text: a study of an edited scene reruns.
-        out: the study's output folder.
+        out: the study's output folder, absolute.
     """
 
     values: tuple[tuple[str, Any], ...]
@@ -123,7 +123,7 @@ class Run:
     def label(self) -> str:
         """The run's values and seed, as a progress line shows them."""
         parts = [f"{k}={_toml_value(v)}" for k, v in self.values]
-        return " ".join(parts + ([] if self.seed is None else [f"seed={self.seed}"])) or "the scene as given"
+        return " ".join(parts + ([] if self.seed is None else [f"seed={self.seed}"]))
 
 
 def parse_vary(text: str) -> tuple[str, list[Any]]:
@@ -181,28 +181,36 @@ def _value(token: str, where: str) -> Any:
 
 
 def _same(a: Any, b: Any) -> bool:
+    """Whether two values set a field alike: numbers by value (1 and 1.0 make the same run, as do
+    [0, 1] and [0, 1.0]), the others by type and value (true is not 1)."""
+    if is_real(a) and is_real(b):
+        return bool(a == b)
     return type(a) is type(b) and a == b
 
 
 def plan(
     scene: str | Path,
-    vary: Mapping[str, Sequence[Any]],
+    vary: Mapping[str, Sequence[Any] | np.ndarray],
     out: str | Path,
     seeds: int = 0,
     noise: Noise | None = None,
 ) -> list[Run]:
-    """The runs of a study: every combination of ``vary``'s values (the first key's values vary
-    slowest), each with seeds 0 to ``seeds`` - 1 when ``seeds`` > 0.
+    """The runs of a study: every combination of ``vary``'s values (a list, tuple or numpy array per
+    key; the first key's values vary slowest), each with seeds 0 to ``seeds`` - 1 when ``seeds`` > 0.
 
     Every key and every value is checked before any run: the scene loads with each value set alone.
+    The runs name the scene file and ``out`` by absolute paths: a Dask worker, which runs in a folder
+    of its own, writes each log into ``out`` and resolves the scene's relative paths as here.
 
     Raises:
         SceneFileError: the scene file itself is malformed.
-        InvalidOptions: an unknown key, a key the scene has no place for, no values, a value twice, a
-            value the scene refuses (the field named ``--vary KEY``), seeds < 0, a noise < 0 or
-            without seeds.
+        InvalidOptions: an unknown key, a key the scene has no place for, two keys that set one field
+            (two spellings of it, or a list and its element), a value not in a list, no values, a
+            value twice, a value the scene refuses (the field named ``--vary KEY``), no key and no
+            seeds, seeds < 0, a noise < 0 or without seeds.
     """
-    scene = Path(scene)
+    scene, out = Path(scene), Path(out).absolute()
+    path = shipped_scene(scene).absolute()  # a shipped scene's bare name: its file
     spec = load_scene(scene)
     data = tomllib.loads(spec.text)
     if isinstance(seeds, bool) or not isinstance(seeds, int) or seeds < 0:
@@ -214,11 +222,16 @@ def plan(
                 raise InvalidOptions(f"--{name}-noise", f"must be a finite number >= 0, got {value}")
         if not seeds:
             raise InvalidOptions("--position-noise/--velocity-noise", "perturb seeded runs: give --seeds N")
+    if not vary and not seeds:  # a single run of the scene: gaussim run's, with a run log of its own
+        raise InvalidOptions(
+            "--vary", "nothing varies: give --vary KEY=VALUES or --seeds N (gaussim run runs a scene once)"
+        )
+    vary = {key: _listed(key, values) for key, values in vary.items()}
     places: dict[str, tuple[Any, ...]] = {}
     for key, values in vary.items():
-        places[key] = _place(data, key)
-        if not values:
-            raise InvalidOptions(f"--vary {key}", "no values given")
+        place = _place(data, key)
+        _disjoint(places, key, place)
+        places[key] = place
         for i, value in enumerate(values):
             if any(_same(value, other) for other in values[:i]):
                 raise InvalidOptions(f"--vary {key}", f"the value {_toml_value(value)} is given twice")
@@ -237,8 +250,23 @@ def plan(
         )
         text = _scene_text(data, [(places[k], v) for k, v in values], header) if values else spec.text
         for seed in range(seeds) if seeds else [None]:
-            runs.append(Run(values, seed, noise or Noise(), text, str(scene), digest, str(out)))
+            runs.append(Run(values, seed, noise or Noise(), text, str(path), digest, str(out)))
     return runs
+
+
+def _listed(key: str, values: Any) -> list[Any]:
+    """``key``'s values as a list, a numpy array's numbers as Python's (their TOML is written from
+    Python's types); raises InvalidOptions naming the key for one value given bare (``0.1``, a
+    string), a set (its order is not the runs') or no value."""
+    if isinstance(values, np.ndarray):
+        values = values.tolist()
+    if isinstance(values, str | bytes) or not isinstance(values, Sequence):
+        raise InvalidOptions(
+            f"--vary {key}", f"needs a list of values (one value: [VALUE]), got {shown(values)}"
+        )
+    if not values:
+        raise InvalidOptions(f"--vary {key}", "no values given")
+    return [v.item() if isinstance(v, np.generic) else v for v in values]
 
 
 def _place(data: dict[str, Any], key: str) -> tuple[Any, ...]:
@@ -291,6 +319,21 @@ def _place(data: dict[str, Any], key: str) -> tuple[Any, ...]:
             )
             raise InvalidOptions(where, f"{what}: it has no element [{element}] to vary")
     return place
+
+
+def _disjoint(places: Mapping[str, tuple[Any, ...]], key: str, place: tuple[Any, ...]) -> None:
+    """Raise InvalidOptions when ``key`` sets a field (or an element of it) that a key of ``places``
+    sets: two spellings of one field (``bodies[1].mass``, ``bodies.crate.mass``) or a list and its
+    element. The later key's value would replace the earlier's in every run, and the table would
+    record for the earlier key a value that no run used."""
+    for other, earlier in places.items():
+        if earlier == place:
+            raise InvalidOptions(f"--vary {key}", f"sets the field --vary {other} sets: give it one --vary")
+        if earlier[:-1] == place[:-1] and None in (earlier[-1], place[-1]):
+            raise InvalidOptions(
+                f"--vary {key}",
+                f"overlaps --vary {other} (a list and one of its elements): vary the one or the other",
+            )
 
 
 def _entry(data: dict[str, Any], section: str, index: int | None, names: list, where: str) -> int:
