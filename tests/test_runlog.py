@@ -172,6 +172,23 @@ def test_parquet_round_trip(tmp_path):
     assert set(frame["contact"]) == {f"box_0/ground#{k}" for k in range(4)}
 
 
+def test_parquet_without_pyarrow_says_what_to_install(tmp_path, monkeypatch):
+    """One line naming the file and the install command (pandas' own error is several lines about
+    engines), and no file written."""
+    import importlib.util
+
+    log = gaussim.run(_short("box_incline", steps=5))
+    found = importlib.util.find_spec
+    monkeypatch.setattr(
+        importlib.util, "find_spec", lambda name, *a: None if name == "pyarrow" else found(name, *a)
+    )
+    path = tmp_path / "f.parquet"
+    with pytest.raises(gaussim.GaussimError) as err:
+        gaussim.runlog.write_forces(log, path, "parquet")
+    assert str(err.value) == f"{path} needs pyarrow: pip install 'gaussim[analysis]' (pandas and pyarrow)"
+    assert not path.exists()
+
+
 @pytest.mark.parametrize(
     ("args", "code", "message"),
     [

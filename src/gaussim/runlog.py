@@ -606,6 +606,18 @@ def split_forces(force: np.ndarray, normal: np.ndarray) -> tuple[np.ndarray, np.
     return fn, np.linalg.norm(force - fn[:, None] * normal, axis=1)
 
 
+def require_parquet(what: str) -> None:
+    """Raise GaussimError naming ``what`` and the install command unless pandas and pyarrow, which a
+    Parquet file needs, are installed (pandas' own error is several lines about engines)."""
+    import importlib.util
+
+    missing = [m for m in ("pandas", "pyarrow") if importlib.util.find_spec(m) is None]
+    if missing:
+        raise GaussimError(
+            f"{what} needs {' and '.join(missing)}: pip install 'gaussim[analysis]' (pandas and pyarrow)"
+        )
+
+
 def write_forces(log: RunLog, path: str | Path, kind: str = "csv") -> int:
     """Write ``log``'s per-contact force time series (:meth:`RunLog.contact_records`: its columns, units
     in their names) to ``path``, atomically, as ``kind`` "csv" or "parquet" (needs pandas and pyarrow);
@@ -617,12 +629,10 @@ def write_forces(log: RunLog, path: str | Path, kind: str = "csv") -> int:
             writer.writerow(columns)
             writer.writerows(zip(*columns.values()))
     elif kind == "parquet":
+        require_parquet(str(path))
         frame = log.contact_forces()
-        try:
-            with atomic_path(path) as tmp:
-                frame.to_parquet(tmp)
-        except ImportError as err:
-            raise GaussimError(f"{path}: Parquet needs pyarrow: pip install pyarrow ({err})") from err
+        with atomic_path(path) as tmp:
+            frame.to_parquet(tmp)
     else:
         raise InvalidOptions("kind", f"must be 'csv' or 'parquet', got {shown(kind)}")
     return len(columns["step"])

@@ -46,7 +46,7 @@ from .exceptions import GaussimError, InvalidOptions, shown
 from .files import atomic_path
 from .options import Options, is_real
 from .pool import Progress, run_all
-from .runlog import ACCEPTED, RunLog
+from .runlog import ACCEPTED, RunLog, require_parquet
 from .scenefile import SECTIONS, SceneSpec, load_scene, load_scene_text, shipped_scene
 from .state import State
 
@@ -538,14 +538,7 @@ def rows(records: Sequence[dict]) -> list[dict[str, Any]]:
 
 def require_table() -> None:
     """Raise GaussimError, with the install command, unless pandas and pyarrow are installed."""
-    import importlib.util
-
-    missing = [m for m in ("pandas", "pyarrow") if importlib.util.find_spec(m) is None]
-    if missing:
-        raise GaussimError(
-            f"a sweep's table needs {' and '.join(missing)}: pip install 'gaussim[analysis]'"
-            " (pandas and pyarrow)"
-        )
+    require_parquet("a sweep's table")
 
 
 def table(records: Sequence[dict]):  # type: ignore[no-untyped-def]
