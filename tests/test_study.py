@@ -1,9 +1,12 @@
 """Parameter studies (gaussim sweep): keys, values, the product, seeds, failures, resume, Dask, table."""
 
 import math
+import os
 import re
+import signal
 import subprocess
 import sys
+import threading
 import tomllib
 from pathlib import Path
 
@@ -14,7 +17,7 @@ import pytest
 from gaussim import study
 from gaussim.cli import main
 from gaussim.exceptions import GaussimError, InvalidOptions
-from gaussim.pool import FolderInUse, load
+from gaussim.pool import FolderInUse, exclusive, load
 from gaussim.runlog import RunLog
 from gaussim.scenefile import load_scene_text
 
@@ -326,8 +329,8 @@ with exclusive(Path(sys.argv[1])):
 
 def test_a_second_sweep_into_a_folder_being_written_stops_at_once(tmp_path, capsys):
     """Two sweeps into one folder would both make every run (runs.jsonl twice as long, each log kept as
-    .prev): the second stops, naming the folder. The lock dies with its process (an flock): a sweep
-    killed midway stops no later one."""
+    .prev): the second stops, naming the folder. The lock dies with its process: a sweep killed midway
+    stops no later one."""
     args = (INCLINE, "--vary", "ground.friction=0.1", "--vary", "simulation.duration=0.01", "--out", tmp_path)
     holder = subprocess.Popen([sys.executable, "-c", HOLD, str(tmp_path)], stdout=subprocess.PIPE, text=True)
     try:
@@ -343,6 +346,51 @@ def test_a_second_sweep_into_a_folder_being_written_stops_at_once(tmp_path, caps
         holder.kill()
         holder.wait()
     assert _sweep(*args) == 0, "the lock of a killed process is free"
+
+
+HOLD_AND_FORK = """
+import os, sys, time
+from pathlib import Path
+from gaussim.pool import exclusive
+with exclusive(Path(sys.argv[1])):
+    child = os.fork()  # as the process pool forks its workers
+    if child == 0:
+        time.sleep(600)
+        os._exit(0)
+    print(child, flush=True)
+    time.sleep(600)
+"""
+
+
+def test_a_killed_sweeps_forked_workers_do_not_hold_its_folder(tmp_path):
+    """The pool's workers are forked while the sweep holds the lock; killed by -9, the sweep leaves them
+    running (orphans waiting on its pipe), and a lock they inherited (an flock) kept the folder locked
+    until someone killed them. Only the process that took it holds it, and one thread's lock is not
+    another's."""
+    holder = subprocess.Popen(
+        [sys.executable, "-c", HOLD_AND_FORK, str(tmp_path)], stdout=subprocess.PIPE, text=True
+    )
+    child = int(holder.stdout.readline())
+    holder.kill()
+    holder.wait()
+    try:
+        with exclusive(tmp_path):  # the orphaned child still runs
+            other = []
+            thread = threading.Thread(target=lambda: other.append(_enter(tmp_path)))
+            thread.start()
+            thread.join()
+            assert other == ["another sweep of this process is writing this folder"]
+    finally:
+        os.kill(child, signal.SIGKILL)
+
+
+def _enter(folder: Path) -> str:
+    """What taking ``folder``'s lock raised, else ""."""
+    try:
+        with exclusive(folder):
+            return ""
+    except FolderInUse as err:
+        return str(err).split(": ", 1)[1]
 
 
 def test_the_sweep_command_runs_on_a_dask_cluster(tmp_path):

@@ -10,6 +10,7 @@ Used by the benchmark's knob sweep (:mod:`gaussim.bench.sweep`) and the user's p
 
 from __future__ import annotations
 
+import errno
 import fcntl
 import json
 import os
@@ -21,6 +22,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from .exceptions import GaussimError, InvalidOptions
+from .files import OutputError
 
 Job = TypeVar("Job")
 # called with (done, total, record) after each job: done counts this batch's jobs, total those it runs
@@ -38,22 +40,31 @@ class FolderInUse(GaussimError):
 def exclusive(folder: Path) -> Iterator[None]:
     """Hold ``folder``'s lock (its file LOCK, the folder made if missing) while the block runs: a second
     batch into the folder would make every job again and append its records twice, so it stops at
-    once. The lock is an flock, which the OS releases when its process ends, even by a kill: a lock
-    file left behind stops nobody. The thread that holds it may take it again (gaussim sweep holds it
-    from its count of the finished runs to its table, and :func:`run_all` takes it).
+    once. The lock is a POSIX record lock (lockf): the OS releases it when its process ends, even by a
+    kill, and the pool's forked workers do not inherit it (an flock they shared outlived a killed
+    sweep in its orphaned workers), so a lock file left behind stops nobody. The thread that holds it
+    may take it again (gaussim sweep holds it from its count of the finished runs to its table, and
+    :func:`run_all` takes it).
 
     Raises:
-        FolderInUse: another process holds the lock (the message names the folder and that process).
+        FolderInUse: another process, or another thread of this one, holds the lock (the message names
+            the folder and that process).
+        OutputError: the folder cannot be locked (a file system without locks).
     """
-    absolute = folder.absolute()
-    if _HELD.get(absolute) == threading.get_ident():
+    resolved = folder.resolve()
+    held = _HELD.get(resolved)
+    if held == threading.get_ident():
         yield
         return
+    if held is not None:  # a second descriptor's close would drop this process's lock: never open one
+        raise FolderInUse(f"{folder}: another sweep of this process is writing this folder")
     folder.mkdir(parents=True, exist_ok=True)
     with open(folder / LOCK, "a+") as lock:
         try:
-            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
+            fcntl.lockf(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError as err:
+            if err.errno not in (errno.EACCES, errno.EAGAIN):
+                raise OutputError(f"{folder}: cannot lock it for the sweep ({err.strerror or err})") from err
             lock.seek(0)
             holder = lock.read().strip()
             raise FolderInUse(
@@ -63,11 +74,11 @@ def exclusive(folder: Path) -> Iterator[None]:
         lock.truncate(0)
         lock.write(str(os.getpid()))  # who holds it, for the message of the one it stops
         lock.flush()
-        _HELD[absolute] = threading.get_ident()
+        _HELD[resolved] = threading.get_ident()
         try:
             yield
         finally:
-            del _HELD[absolute]
+            del _HELD[resolved]
 
 
 def load(path: Path) -> list[dict]:
