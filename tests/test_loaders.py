@@ -152,6 +152,11 @@ def test_mjcf_equality_to_the_world_is_left_out_with_a_warning(tmp_path):
     with pytest.warns(gaussim.GaussimWarning, match=r"<equality> constraints <connect pin> are not honoured"):
         robot = gaussim.load_robot(path)
     assert (robot.model.nq, robot.mass) == (1, 0.5)
+    free = path.with_name("free.xml")  # no joint of its own: floating_base=True adds the free root
+    free.write_text(path.read_text().replace('<joint name="j" axis="0 1 0"/>', ""))
+    with pytest.warns(gaussim.GaussimWarning, match=r"<equality> constraints <connect pin> are not honoured"):
+        robot = gaussim.load_robot(free, floating_base=True)
+    assert (robot.model.nq, robot.floating) == (7, True)
 
 
 MJCF_FAULTS = {

@@ -426,8 +426,8 @@ def _from_mjcf(path: Path, floating: bool | None, policies: Mapping[str, str]) -
     root = mjcf.read(path)
     mjcf.check_file(path, root)
     try:
-        # the model alone: the reader of its <equality> constraints, which gaussim leaves out (see
-        # mjcf.check), fails on valid ones (body2="world")
+        # the model alone (here and with a root joint): the reader of its <equality> constraints, which
+        # gaussim leaves out (see mjcf.check), fails on valid ones (body2="world")
         model = pin.buildModelFromMJCF(str(path))
         floats = _floats(model)
         if floating is False and floats:
@@ -436,9 +436,7 @@ def _from_mjcf(path: Path, floating: bool | None, policies: Mapping[str, str]) -
                 "floating_base=False cannot fix it (remove the <freejoint> to fix the base)"
             )
         if floating and not floats:
-            model, _ = pin.buildModelAndLegacyConstraintsFromMJCF(
-                str(path), pin.JointModelFreeFlyer(), "root_joint"
-            )
+            model = pin.buildModelFromMJCFAndRootJoint(str(path), pin.JointModelFreeFlyer(), "root_joint")
             if not _floats(model):
                 raise InvalidRobot(
                     f"{path}: floating_base=True: body '{_root_body(model)}' hangs from the world by its "
