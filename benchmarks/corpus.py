@@ -136,8 +136,8 @@ def _run(
     sim = gaussim.Simulator(scene, gaussim.Options(dt=DT))
     state = sim.reset(q0)
     model = sim.model
-    actuated = slice(6, model.nv) if robot.floating else slice(0, model.nv)
-    hold = run == "hold" and model.nv > (6 if robot.floating else 0)
+    actuated = robot.actuated
+    hold = run == "hold" and len(actuated) > 0
     gain = max(robot.mass, 1.0)
     pd = gaussim.control.PDHold(model, q0, HOLD_KP_PER_KG * gain, HOLD_KD_PER_KG * gain, actuated, DT)
     times, contacts, penetration, kkt = [], [], 0.0, 0.0

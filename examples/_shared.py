@@ -99,7 +99,7 @@ class Trot:
     ) -> None:
         self.standing = robot.configuration("standing")
         self.frequency, self.stride, self.lift, self.ramp = frequency, stride, lift, ramp
-        self.hold = PDHold(robot.model, self.standing.copy(), kp, kd, slice(6, robot.model.nv), dt)
+        self.hold = PDHold(robot.model, self.standing.copy(), kp, kd, robot.actuated, dt)
 
     def __call__(self, t: float, state: BodyState) -> Command:
         """The torque and implicit damping, each (12,), at time ``t`` [s] for the robot's state."""

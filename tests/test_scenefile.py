@@ -82,7 +82,17 @@ BALL = '[robot]\nname = "ball"\nfloating_base = true\n'
             r"bilaterals\[0\].frame",
             "no frame 'nose'",
         ),
-        (BALL + "[control]\ntype = 'pd'\nkp = -1.0\n", "control", "gains must be >= 0"),
+        (
+            "[robot]\nname = \"pendulum\"\n[control]\ntype = 'pd'\nkp = -1.0\n",
+            "control",
+            "gains must be >= 0",
+        ),
+        # gains or torques that would act on no joint (box_stack's PD hold was accepted and did nothing)
+        (
+            BALL + "[control]\ntype = 'pd'\nkp = 5.0\n",
+            "control.type",
+            r"'pd': robot 'ball' has no actuated joint \(its joints are free roots\); leave \[control\]",
+        ),
         # a key the type does not read is refused, not ignored (a gain under the default zero control)
         (
             BALL + "[control]\nkp = 5.0\nkd = 0.1\n",

@@ -1,5 +1,6 @@
 """Controllers for runs driven from scene files: joint torques tau(state), shape (nv,) (or a floating
-robot's actuated (nv - 6,)), or a :class:`Command` that adds implicit damping."""
+robot's actuated coordinates, :attr:`Robot.actuated`), or a :class:`Command` that adds implicit
+damping."""
 
 from __future__ import annotations
 

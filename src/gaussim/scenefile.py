@@ -784,6 +784,12 @@ class _Reader:
         actuated = robot.actuated
         if kind == "zero":
             return zero_torque
+        if kind in ("constant", "pd") and not len(actuated):  # its torques or gains would act on nothing
+            self.fail(
+                f"{key}.type",
+                f"{shown(kind)}: robot '{robot.name}' has no actuated joint (its joints are free roots); "
+                'leave [control] out or give type = "zero"',
+            )
         if kind == "constant":
             tau = self.array(f"{key}.tau", section.get("tau"), len(actuated))
             if np.abs(tau).max(initial=0.0) > MAX_TORQUE:

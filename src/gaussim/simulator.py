@@ -205,7 +205,7 @@ class Simulator:
     def step(self, state: State, tau: object = None, damping: object = None) -> State:
         """Advance ``state`` by one time step under joint torques ``tau`` [N m] and return the new state.
 
-        ``tau``: the world's (nv,), its actuated coordinates' (a floating robot's (nv - 6,)), or
+        ``tau``: the world's (nv,), its actuated coordinates' (:attr:`Robot.actuated`), or
         ``{body: tau_b}`` (see :mod:`.actuation`); ``damping`` D [N m s/rad], shaped alike and >= 0,
         is velocity feedback applied implicitly: the joints get tau - D v+ (stable at any time step).
 
