@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 import gaussim
+from gaussim.cli import told
 from gaussim.control import Command, PDHold
 from gaussim.state import BodyState
 from gaussim.viewer import Viewer
@@ -27,13 +28,13 @@ def positive(text: str) -> float:
 
 
 def run(main: Callable[[], int | None]) -> None:
-    """Exit with ``main()``'s status; a gaussim error (an option a scene refuses, ...) is told in one
-    line on stderr, exit status 2, as the gaussim command tells it."""
+    """Exit with ``main()``'s status; a gaussim error or a failed write is told in one line on stderr
+    with the gaussim command's exit status (2 for a user's mistake, 1 for a failed simulation or write)."""
     try:
         status = main()
-    except gaussim.GaussimError as err:
-        print(f"{Path(sys.argv[0]).name}: {err}", file=sys.stderr)
-        status = 2
+    except (OSError, gaussim.GaussimError) as err:
+        message, status = told(err)
+        print(f"{Path(sys.argv[0]).name}: {message}", file=sys.stderr)
     sys.exit(status)
 
 

@@ -50,24 +50,31 @@ def test_free_bodies():
 
 
 @pytest.mark.parametrize(
-    ("args", "said"),
+    ("args", "code", "said"),
     [
-        (("solo12_drop.py", "--duration", "0"), "argument --duration: must be a finite number > 0, got 0"),
-        (("bin_pile.py", "--dt", "nan"), "argument --dt: must be a finite number > 0, got nan"),
+        (("solo12_drop.py", "--duration", "0"), 2, "argument --duration: must be a finite number > 0, got 0"),
+        (("bin_pile.py", "--dt", "nan"), 2, "argument --dt: must be a finite number > 0, got nan"),
         (
             ("incline_friction_study.py", "--frictions", "0.1,abc", "--duration", "0.01"),
+            2,
             'incline_friction_study.py: --vary ground.friction: the value "abc"',
+        ),
+        (  # a write that fails: as the gaussim command, exit 1 naming the path
+            ("solo12_drop.py", "--duration", "0.001", "--csv", "/proc/none/forces.csv"),
+            1,
+            "solo12_drop.py: /proc/none: No such file or directory",
         ),
     ],
 )
-def test_an_example_refuses_a_bad_argument_in_one_line(tmp_path, args, said):
-    """A bad number or a value the scene refuses: one line on stderr (argparse's usage aside), exit
-    status 2, no traceback (a duration of 0 crashed solo12_drop with an AttributeError)."""
+def test_an_example_refuses_a_bad_argument_in_one_line(tmp_path, args, code, said):
+    """A bad number, a value the scene refuses or a path it cannot write: one line on stderr (argparse's
+    usage aside), the gaussim command's exit status, no traceback (a duration of 0 crashed solo12_drop
+    with an AttributeError)."""
     script, *rest = args
     result = subprocess.run(
         [sys.executable, str(EXAMPLES / script), *rest], capture_output=True, text=True, cwd=tmp_path
     )
-    assert result.returncode == 2
+    assert result.returncode == code
     assert said in result.stderr and "Traceback" not in result.stderr
 
 

@@ -23,7 +23,6 @@ from .exceptions import (
     GaussimError,
     GaussimWarning,
     InvalidOptions,
-    InvalidRobot,
     InvalidState,
     SolverError,
 )
@@ -246,21 +245,26 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:  # stdout's reader left (`| head`): what it read stands, as with Unix tools
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no error at the exit's flush
         return EXIT_FAILURE
-    except OSError as err:  # a write that failed midway (a full disk): the message names the file
-        where = f"{err.filename}: " if err.filename else ""
-        print(f"gaussim: {where}{err.strerror or err}", file=sys.stderr)
-        return EXIT_FAILURE
-    except SIMULATION_FAILURES as err:
-        _say(f"gaussim: simulation failed: {err}", sys.stderr)
-        return EXIT_FAILURE
-    except (InvalidOptions, InvalidRobot, InvalidState, GaussimError) as err:
-        _say(f"gaussim: {err}", sys.stderr)
-        return EXIT_BAD_INPUT
+    except (OSError, GaussimError) as err:
+        message, code = told(err)
+        _say(f"gaussim: {message}", sys.stderr)
+        return code
     finally:
         taken_stop()  # a stop this command had: none for a later run in the same process
         if argv is not None:  # called in-process (not as the command): its caller's handling as it was
             for s, handling in saved.items():
                 signal.signal(s, handling)
+
+
+def told(err: OSError | GaussimError) -> tuple[str, int]:
+    """The one line and the exit status a command gives for ``err``: a write that failed midway (a full
+    disk: the line names the file) or a failed simulation, 1; a user's mistake, 2."""
+    if isinstance(err, OSError):
+        where = f"{err.filename}: " if err.filename else ""
+        return f"{where}{err.strerror or err}", EXIT_FAILURE
+    if isinstance(err, SIMULATION_FAILURES):
+        return f"simulation failed: {err}", EXIT_FAILURE
+    return str(err), EXIT_BAD_INPUT
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None):  # type: ignore[no-untyped-def]
