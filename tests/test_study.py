@@ -436,6 +436,12 @@ def test_a_malformed_scheduler_address_is_refused_before_any_run(tmp_path, monke
     runs = study.plan(INCLINE, {"ground.friction": [0.1]}, tmp_path)
     with pytest.raises(InvalidOptions, match="--scheduler: 'tcp://127.0.0.1': missing port"):
         study.study(runs, tmp_path, scheduler="tcp://127.0.0.1")
+    # a port out of range: dask would try it for its 30 s connect timeout
+    with pytest.raises(InvalidOptions, match=r"'tcp://127.0.0.1:99999': its port 99999 is not one of 1 to"):
+        study.study(runs, tmp_path, scheduler="tcp://127.0.0.1:99999")
+    for workers in (0, -1, 1.5):  # from Python, where no --workers check ran before
+        with pytest.raises(InvalidOptions, match=rf"workers: must be a whole number >= 1, got {workers}"):
+            study.study(runs, tmp_path, workers=workers)  # type: ignore[arg-type]
     assert not (tmp_path / study.RESULTS).exists()
     monkeypatch.setitem(sys.modules, "distributed.comm", None)  # as if dask were not installed
     with pytest.raises(GaussimError, match=re.escape("pip install 'dask[distributed]'")):

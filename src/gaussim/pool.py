@@ -21,7 +21,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, TypeVar
 
-from .exceptions import GaussimError, InvalidOptions
+from .exceptions import GaussimError, InvalidOptions, shown
 from .files import OutputError
 
 Job = TypeVar("Job")
@@ -118,9 +118,12 @@ def run_all(
         progress: called with (done, total, record) after each job.
 
     Raises:
-        InvalidOptions: ``scheduler`` is no Dask address (:func:`check_scheduler`), before any job.
+        InvalidOptions: ``workers`` is not a whole number >= 1, or ``scheduler`` is no Dask address
+            (:func:`check_scheduler`), before any job.
         FolderInUse: another batch is writing ``path``'s folder (:func:`exclusive`).
     """
+    if workers is not None and not (isinstance(workers, int) and workers >= 1):
+        raise InvalidOptions("workers", f"must be a whole number >= 1, got {shown(workers)}")
     if isinstance(scheduler, str):
         check_scheduler(scheduler)
     with exclusive(path.parent):
@@ -149,11 +152,14 @@ def check_scheduler(address: str) -> None:
         GaussimError: dask.distributed is not installed (the message gives the install command).
     """
     try:
-        from distributed.comm import resolve_address
+        from distributed.comm import parse_address, parse_host_port, resolve_address
     except ImportError:
         raise GaussimError("--scheduler needs dask.distributed: pip install 'dask[distributed]'") from None
     try:
-        resolve_address(address)
+        scheme, location = parse_address(resolve_address(address))
+        port = parse_host_port(location)[1] if scheme in ("tcp", "tls") else 1
+        if not 0 < port < 65536:  # dask would try it for its 30 s timeout
+            raise ValueError(f"its port {port} is not one of 1 to 65535")
     except (ValueError, OSError) as err:
         cause = err.strerror if isinstance(err, OSError) and err.strerror else str(err)
         if cause.startswith("invalid literal for int()"):  # dask's reading of the port
