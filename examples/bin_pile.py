@@ -110,7 +110,7 @@ def main(argv: list[str] | None = None) -> int:
     recording = Recording(sim, state)
     print(f"{len(bodies)} objects, {len(scene.pairs)} contact pairs, {args.mode} friction", file=sys.stderr)
 
-    steps, every = max(1, round(args.duration / args.dt)), max(1, round(0.1 / args.dt))
+    steps, every = sim.options.steps(args.duration), sim.options.steps(0.1)
     deepest, uncertified, wall = 0.0, 0, time.perf_counter()
     for k in range(steps):
         state = recording.step(state)

@@ -84,7 +84,7 @@ def main(argv: list[str] | None = None) -> int:
     damping = np.full(panda.model.nv, KD + args.dt * KP)  # the PD's velocity feedback, implicit
 
     cube_start = state.body("cube").q[:3].copy()
-    steps, lag, peak = max(1, round(args.duration / args.dt)), 0.0, 0.0
+    steps, lag, peak = sim.options.steps(args.duration), 0.0, 0.0
     wall = time.perf_counter()
     for _ in range(steps):
         s = min(1.0, state.t / args.duration)  # a smooth step from SWEEP[0] to SWEEP[1]

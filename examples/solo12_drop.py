@@ -43,7 +43,7 @@ def main(argv: list[str] | None = None) -> int:
     log.start(state, scene.gravity)
 
     args.csv.parent.mkdir(parents=True, exist_ok=True)
-    steps = max(1, round(args.duration / args.dt))  # as gaussim run: at least one
+    steps = sim.options.steps(args.duration)
     start = time.perf_counter()
     for k in range(steps):
         tau = KP * (q_ref[7:] - state.q[7:]) - KD * state.v[6:]

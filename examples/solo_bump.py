@@ -49,7 +49,7 @@ def main(argv: list[str] | None = None) -> int:
     gaits = {name: Trot(solo, args.dt) for name in FACING}
     recording = Recording(sim, state)
 
-    steps, met, peak = max(1, round(args.duration / args.dt)), None, 0.0
+    steps, met, peak = sim.options.steps(args.duration), None, 0.0
     wall = time.perf_counter()
     for _ in range(steps):
         commands = {name: gait(state.t, state.body(name)) for name, gait in gaits.items()}

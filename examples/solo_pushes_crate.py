@@ -55,7 +55,7 @@ def main(argv: list[str] | None = None) -> int:
     recording = Recording(sim, state)
 
     crate_start, solo_start = state.body("crate").q[:3].copy(), state.body("solo").q[:3].copy()
-    steps, peak, pushing = max(1, round(args.duration / args.dt)), 0.0, 0
+    steps, peak, pushing = sim.options.steps(args.duration), 0.0, 0
     wall = time.perf_counter()
     for _ in range(steps):
         tau, damping = gait(state.t, state.body("solo"))

@@ -290,6 +290,12 @@ def test_bad_options_name_the_field(field, value):
         gaussim.Options(**{field: value})
 
 
+@pytest.mark.parametrize(("duration", "steps"), [(1e-4, 1), (0.3, 300), (2.0, 2000), (0.0026, 3)])
+def test_a_duration_is_the_nearest_whole_number_of_steps_at_least_one(duration, steps):
+    """One rule for gaussim run, the examples and the benchmarks: 0.3 / 1e-3 is 299.99999999999994."""
+    assert gaussim.Options(dt=1e-3).steps(duration) == steps
+
+
 def test_a_bad_override_of_a_scene_file_is_the_callers_not_the_files():
     """``load_scene(path, dt=-1)`` blamed the file: ``pendulum_limits.toml: options.dt: ...``."""
     path = SCENES / "pendulum_limits.toml"

@@ -121,6 +121,10 @@ class Options:
         if not (is_real(self.stabilisation) and 0.0 < self.stabilisation <= 1.0):
             raise InvalidOptions("stabilisation", f"must be in (0, 1], got {shown(self.stabilisation)}")
 
+    def steps(self, duration: float) -> int:
+        """The number of steps a run of ``duration`` [s] takes: the nearest whole number, at least one."""
+        return max(1, round(duration / self.dt))
+
     def replace(self, **changes: object) -> Options:
         """Return a copy with some fields changed (validated again)."""
         values = {f.name: getattr(self, f.name) for f in fields(self)}

@@ -78,7 +78,7 @@ def run(
     """
     if not (is_real(spec.duration) and spec.duration > 0):  # a spec's fields are the caller's to set
         raise InvalidOptions("duration", f"must be a finite number > 0 [s], got {shown(spec.duration)}")
-    steps = max(1, round(spec.duration / spec.options.dt))
+    steps = spec.options.steps(spec.duration)
     line = _Progress(progress, steps) if progress is not None else None
     with compile_notice(line.compiling if line is not None else None):
         return _steps(spec, out, steps, line, checkpoint_seconds, checkpoint_steps, observer)

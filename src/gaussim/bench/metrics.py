@@ -43,7 +43,7 @@ class Recorder:
 
     def run(self, state: State, duration: float, controller: Controller | None = None) -> State:
         """Step from ``state`` for ``duration`` simulated seconds; return the last state."""
-        for _ in range(max(1, round(duration / self.sim.options.dt))):
+        for _ in range(self.sim.options.steps(duration)):
             state = self.step(state, controller)
         return state
 
