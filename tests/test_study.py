@@ -432,6 +432,14 @@ def test_a_worker_in_another_folder_writes_each_log_into_the_sweeps_folder(tmp_p
     assert not (tmp_path / "worker" / "out").exists()
 
 
+def test_runs_planned_for_another_folder_are_refused(tmp_path):
+    """plan(out=A) then study(runs, B) put the logs in A and the records and lock in B."""
+    runs = study.plan(INCLINE, {"ground.friction": [0.1]}, tmp_path / "a")
+    with pytest.raises(InvalidOptions, match=r"out: .*b: the runs were planned for .*a: give plan"):
+        study.study(runs, tmp_path / "b", workers=1)
+    assert not (tmp_path / "b").exists() and not (tmp_path / "a").exists()
+
+
 def test_a_malformed_scheduler_address_is_refused_before_any_run(tmp_path, monkeypatch):
     runs = study.plan(INCLINE, {"ground.friction": [0.1]}, tmp_path)
     with pytest.raises(InvalidOptions, match="--scheduler: 'tcp://127.0.0.1': missing port"):

@@ -520,8 +520,17 @@ def study(
     progress: Progress | None = None,
 ) -> list[dict]:
     """Run the ``runs`` not already finished in ``out`` (:func:`gaussim.pool.run_all`: a local process
-    pool of ``workers``, or the Dask cluster at ``scheduler``); return the records of ``runs``."""
-    return run_all(runs, attrgetter("key"), run_one, Path(out) / RESULTS, workers, scheduler, progress)
+    pool of ``workers``, or the Dask cluster at ``scheduler``); return the records of ``runs``.
+
+    Raises:
+        InvalidOptions: a run was planned for another folder (its log would land outside ``out``)."""
+    folder = Path(out).absolute()
+    elsewhere = sorted({str(r.out) for r in runs if Path(r.out).resolve() != folder.resolve()})
+    if elsewhere:
+        raise InvalidOptions(
+            "out", f"{folder}: the runs were planned for {', '.join(elsewhere)}: give plan() the same folder"
+        )
+    return run_all(runs, attrgetter("key"), run_one, folder / RESULTS, workers, scheduler, progress)
 
 
 def rows(records: Sequence[dict]) -> list[dict[str, Any]]:
