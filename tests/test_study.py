@@ -19,7 +19,7 @@ from gaussim.cli import main
 from gaussim.exceptions import GaussimError, InvalidOptions
 from gaussim.pool import FolderInUse, exclusive, load
 from gaussim.runlog import RunLog
-from gaussim.scenefile import load_scene_text
+from gaussim.scenefile import load_scene, load_scene_text
 
 SCENES = Path(__file__).resolve().parents[1] / "robots" / "scenes"
 INCLINE = SCENES / "box_incline.toml"
@@ -284,6 +284,14 @@ def test_the_perturbation_is_the_seeds_and_moves_floating_bases_along_the_ground
     assert np.all(first.v != 0) and np.abs(first.v).max() < 10 * noise.velocity
     still = study.perturbed(spec, 3, study.Noise(0.0, 0.0))
     np.testing.assert_array_equal(still.q, spec.initial.q)
+
+
+def test_the_perturbation_moves_every_free_root_of_a_body():
+    """robots/box_stack.urdf: three boxes on free-flyer joints in one body; only the first was moved."""
+    spec = load_scene(SCENES / "box_stack.toml")
+    moved = study.perturbed(spec, 3, study.Noise(position=1e-3, velocity=0.0)).q - spec.initial.q
+    for first in (0, 7, 14):  # each box's x, y moved along the ground, z and orientation kept
+        assert np.all(moved[first : first + 2] != 0) and np.all(moved[first + 2 : first + 7] == 0), first
 
 
 def test_a_failing_run_is_a_row_and_the_others_go_on(tmp_path):

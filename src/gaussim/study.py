@@ -77,7 +77,7 @@ class Noise:
     """The perturbation of a seeded run's initial state (see the module docstring).
 
     Attributes:
-        position: standard deviation of each floating base's start position along each direction
+        position: standard deviation of each free root's start position along each direction
             parallel to the ground (or the world's x-y plane without one) [m].
         velocity: standard deviation added to each initial velocity coordinate [m/s or rad/s].
     """
@@ -431,12 +431,13 @@ def _toml_value(value: Any) -> str:
 
 
 def perturbed(spec: SceneSpec, seed: int, noise: Noise) -> State:
-    """``spec``'s initial state perturbed by ``seed``: each floating base's position moved parallel to
+    """``spec``'s initial state perturbed by ``seed``: each free root's position moved parallel to
     the ground (the first [ground]'s plane, else the world's x-y plane: a normal draw in 3D with its
     component along the plane's normal removed), body by body, then every velocity coordinate changed,
     drawn from ``numpy.random.default_rng(seed)`` with standard deviations ``noise.position`` [m] (per
     direction in the plane) and ``noise.velocity`` [m/s or rad/s]. A body moved this way keeps its
     height above the ground."""
+    from .dynamics import FloatingBases
     from .scene import Ground
 
     rng = np.random.default_rng(seed)
@@ -444,9 +445,10 @@ def perturbed(spec: SceneSpec, seed: int, noise: Noise) -> State:
     n = np.asarray(grounds[0].normal if grounds else (0.0, 0.0, 1.0))  # a unit normal
     q, v = spec.initial.q.copy(), spec.initial.v.copy()
     for layout in spec.scene.bodies.values():
-        if layout.floating:
+        for first in FloatingBases.of(layout.robot.model).configuration:  # each box of a stack's file too
             shift = rng.normal(0.0, noise.position, 3)
-            q[layout.q.start : layout.q.start + 3] += shift - (shift @ n) * n
+            start = layout.q.start + first
+            q[start : start + 3] += shift - (shift @ n) * n
     v += rng.normal(0.0, noise.velocity, v.shape)
     return State(spec.initial.t, q, v, spec.initial.world)
 
