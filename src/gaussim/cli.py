@@ -290,13 +290,13 @@ def _bench(args: argparse.Namespace) -> int:
     if args.scenes or args.motion:
         return _bench_suite(args)
     from .bench import CASES, run_bench
+    from .pool import check_workers
 
     if args.list:
         for name, case in CASES.items():
             print(f"{name:18s} {case.error}")
         return 0
-    if args.workers is not None and args.workers < 1:
-        raise InvalidOptions("--workers", f"must be >= 1, got {args.workers}")
+    check_workers(args.workers, "--workers")
     unknown = sorted(set(args.cases) - set(CASES))
     if unknown:
         raise InvalidOptions("cases", f"unknown {unknown}; known: {', '.join(CASES)}")
@@ -363,12 +363,11 @@ def _bench_suite(args: argparse.Namespace) -> int:
 
 
 def _sweep(args: argparse.Namespace) -> int:
-    from .pool import check_scheduler, exclusive
+    from .pool import check_scheduler, check_workers, exclusive
     from .study import Noise, plan, require_table, summary_columns
 
     require_table()  # before the runs, not after them
-    if args.workers is not None and args.workers < 1:
-        raise InvalidOptions("--workers", f"must be >= 1, got {args.workers}")
+    check_workers(args.workers, "--workers")
     if args.scheduler is not None:
         check_scheduler(args.scheduler)
     vary = _vary(args.vary)

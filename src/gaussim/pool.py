@@ -122,8 +122,7 @@ def run_all(
             (:func:`check_scheduler`), before any job.
         FolderInUse: another batch is writing ``path``'s folder (:func:`exclusive`).
     """
-    if workers is not None and not (isinstance(workers, int) and workers >= 1):
-        raise InvalidOptions("workers", f"must be a whole number >= 1, got {shown(workers)}")
+    check_workers(workers)
     if isinstance(scheduler, str):
         check_scheduler(scheduler)
     with exclusive(path.parent):
@@ -140,6 +139,13 @@ def run_all(
                 if progress is not None:
                     progress(count, len(remaining), record)
     return [done[key(item)] for item in todo if key(item) in done]
+
+
+def check_workers(workers: object, name: str = "workers") -> None:
+    """Raise InvalidOptions naming ``name`` unless ``workers`` is None (the machine's cores) or a whole
+    number >= 1 (0 read as the default, a negative one a traceback of the pool's)."""
+    if workers is not None and not (isinstance(workers, int) and workers >= 1):
+        raise InvalidOptions(name, f"must be a whole number >= 1, got {shown(workers)}")
 
 
 def check_scheduler(address: str) -> None:

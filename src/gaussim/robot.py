@@ -159,7 +159,7 @@ class Robot:
     @property
     def floating(self) -> bool:
         """True when the root joint is a free flyer."""
-        return self.model.njoints > 1 and self.model.joints[1].shortname() == "JointModelFreeFlyer"
+        return _floats(self.model)
 
     @property
     def actuated(self) -> np.ndarray:
