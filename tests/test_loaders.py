@@ -348,6 +348,54 @@ def test_sdf_world_joint_fixes_the_base(tmp_path):
         gaussim.load_robot(path, floating_base=True)
 
 
+def test_a_bare_sdf_link_named_world_is_the_world(tmp_path):
+    """A link named 'world' that a joint names as its parent, bare (no inertial, collision or pose), is
+    the world frame (as PyBullet fixes such a massless base): the model is the one whose joint names the
+    world itself; pybullet_data's WSG 50 gripper loads fixed, with PyBullet's moving joints and mass."""
+    import pybullet
+
+    body = joint("j", "revolute", "a", "b") + joint("anchor", "fixed", "world", "a")
+    reference, bare = tmp_path / "reference.sdf", tmp_path / "bare.sdf"
+    reference.write_text(sdf_model(body))
+    bare.write_text(sdf_model('<link name="world"/>' + body))
+    with pytest.warns(gaussim.GaussimWarning, match=r"the link 'world' has no <inertial>: joint 'anchor'"):
+        robot = gaussim.load_robot(bare)
+    expected = gaussim.load_robot(reference)
+    assert (robot.model.nq, robot.floating, robot.mass) == (expected.model.nq, False, expected.mass)
+    q = pin.neutral(robot.model)
+    np.testing.assert_array_equal(mass_matrix(robot, q), mass_matrix(expected, q))
+
+    path = KUKA.parent / "gripper" / "wsg50_one_motor_gripper_new.sdf"
+    with pytest.warns(gaussim.GaussimWarning):
+        gripper = gaussim.load_robot(path)
+    client = pybullet.connect(pybullet.DIRECT)
+    try:
+        (body_id,) = pybullet.loadSDF(str(path), physicsClientId=client)
+        joints = [
+            pybullet.getJointInfo(body_id, j, client) for j in range(pybullet.getNumJoints(body_id, client))
+        ]
+        moving = [info[1].decode() for info in joints if info[2] != pybullet.JOINT_FIXED]
+        masses = [pybullet.getDynamicsInfo(body_id, k, client)[0] for k in range(-1, len(joints))]
+    finally:
+        pybullet.disconnect(client)
+    assert masses[0] == 0.0  # PyBullet's base: massless, fixed
+    assert (gripper.floating, list(gripper.model.names)[1:]) == (False, moving)
+    assert gripper.mass == pytest.approx(sum(masses))
+
+
+@pytest.mark.parametrize("inside", ["<inertial><mass>0.1</mass></inertial>", "<pose>0 0 1 0 0 0</pose>"])
+def test_an_sdf_link_named_world_of_its_own_is_refused(tmp_path, inside):
+    """A link named 'world' with a body or a pose of its own cannot be told from the world frame its
+    joint names as parent (pybullet_data's free-base WSG 50: 0.1 kg): refused, naming both."""
+    path = tmp_path / "gripper.sdf"
+    body = joint("j", "revolute", "a", "b") + joint("anchor", "fixed", "world", "a")
+    path.write_text(sdf_model(f'<link name="world">{inside}</link>' + body))
+    with pytest.raises(
+        gaussim.InvalidRobot, match=r"link 'world': has the name of the world frame, which joint 'anchor'"
+    ):
+        gaussim.load_robot(path)
+
+
 # --- falling onto the ground ----------------------------------------------------------------------
 
 

@@ -81,6 +81,7 @@ class _Reader:
             raise self.fail(f"model '{model.get('name')}'", "nested models and <include> are not read")
         links = {link.get("name", ""): link for link in model.findall("link")}
         joints = model.findall("joint")
+        self.world_link(links, joints)
         for name, link in links.items():
             self.frames[name] = self.pose(link, f"link '{name}'", "__model__")
         for joint in joints:
@@ -137,6 +138,28 @@ class _Reader:
                 "1 kg with a unit inertia [kg m^2], is used"
             )
         return Converted(ET.tostring(robot, encoding="unicode"), world_joint, self.notes)
+
+    def world_link(self, links: dict[str, ET.Element], joints: list[ET.Element]) -> None:
+        """Drop a link named 'world' that a joint names as its parent, when it is the world frame
+        itself (bare: no <inertial> or <collision>, at the model's frame; PyBullet fixes such a massless
+        base, pybullet_data's WSG 50 grippers); refuse another, which gaussim cannot tell from the world."""
+        link = links.get("world")
+        parents = [j.get("name", "") for j in joints if j.findtext("parent", "").strip() == "world"]
+        if link is None or not parents:
+            return
+        named = ", ".join(repr(p) for p in parents)
+        held = [f"<{tag}>" for tag in ("inertial", "collision") if link.find(tag) is not None]
+        if held or not self.pose(link, "link 'world'", "__model__")[0].isIdentity():
+            raise self.fail(
+                "link 'world'",
+                f"has the name of the world frame, which joint {named} names as its parent, and "
+                f"{' and '.join(held) or 'a <pose>'} of its own: rename the link and that parent (the link "
+                "is then the model's base), or leave it bare (the model is fixed to the world)",
+            )
+        del links["world"]
+        self.notes.append(
+            f"the link 'world' has no <inertial>: joint {named} attaches the model to the world"
+        )
 
     def model(self) -> ET.Element:
         """The one model that moves: the file's, or the non-static one of its world."""
