@@ -1,5 +1,5 @@
-"""Every robot people already have: the example-robot-data and pybullet_data corpora, each robot
-loaded and dropped onto the ground, or refused with a reason.
+"""Every robot people already have: the example-robot-data and pybullet_data corpora (pybullet_data's
+URDF, MJCF and SDF files), each robot loaded and dropped onto the ground, or refused with a reason.
 
 Each robot runs in its own process (forked from this one, which has imported gaussim and compiled its
 kernels) with a time limit, twice: a PD hold of its initial pose (``hold``; zero torque for an object
@@ -87,13 +87,14 @@ class Row:
 
 def corpus(random_urdfs: int) -> list[tuple[str, str, str]]:
     """(name, corpus, what load_robot takes) of every robot: example-robot-data's names, pybullet_data's
-    URDFs (floating, as pybullet loads them by default) and every ``random_urdfs``-th random object
-    (0: none)."""
+    URDFs (floating, as pybullet loads them by default), MJCF (``mjcf/*.xml``) and SDF files (floating as
+    they say), and every ``random_urdfs``-th random object (0: none)."""
     import pybullet_data
 
     root = Path(pybullet_data.getDataPath())
     entries = [(name, "example-robot-data", name) for name in example_robot_names()]
     files = sorted(p for p in root.rglob("*.urdf") if "random_urdfs" not in p.parts)
+    files += sorted(root.glob("mjcf/*.xml")) + sorted(root.rglob("*.sdf"))
     entries += [(str(p.relative_to(root)), "pybullet_data", str(p)) for p in files]
     if random_urdfs:
         objects = sorted((root / "random_urdfs").rglob("*.urdf"))
@@ -180,10 +181,9 @@ def one(name: str, corpus_name: str, source: str, duration: float) -> list[Row]:
 def _passes(name: str, corpus_name: str, source: str, duration: float) -> list[Row]:
     rows = [Row(name, corpus_name, run) for run in PASSES]
     try:
-        if corpus_name == "example-robot-data":
-            robot = gaussim.load_robot(source)
-        else:
-            robot = gaussim.load_robot(source, floating_base=True)
+        # a URDF of pybullet_data floats, as PyBullet loads it by default; the others as their files say
+        floats = corpus_name != "example-robot-data" and source.endswith(".urdf")
+        robot = gaussim.load_robot(source, floating_base=True if floats else None)
     except GaussimError as err:
         for row in rows:
             row.outcome, row.message = "refused", f"{type(err).__name__}: {err}"

@@ -41,13 +41,17 @@ SAMPLE = {
     "mini_cheetah/mini_cheetah.urdf": ("ok", "link 'thigh_fl' (the body of joint"),  # I1 + I2 < I3: balanced
     "random_urdfs/000/000.urdf": ("ok", "['random_obj_000'] have no mass"),
     "sphere2red_nocol.urdf": ("refused", "has no collision geometry"),
+    "mjcf/half_cheetah.xml": ("ok", ""),  # an MJCF of slide and hinge joints, fixed as it says
+    "mjcf/humanoid_fixed.xml": ("refused", "has type 'fixed'; known: hinge, slide, ball, free"),
+    "gripper/wsg50_one_motor_gripper_new.sdf": ("ok", "the link 'world' has no <inertial>"),
 }
+PYBULLET_FILES = (".urdf", ".xml", ".sdf")
 
 
 @pytest.mark.parametrize("name", SAMPLE)
 def test_a_corpus_robot_simulates_or_is_refused_by_name(name):
     outcome, text = SAMPLE[name]
-    if name.endswith(".urdf"):
+    if name.endswith(PYBULLET_FILES):
         rows = corpus.one(name, "pybullet_data", str(PYBULLET / name), DURATION)
     else:
         rows = corpus.one(name, "example-robot-data", name, DURATION)
