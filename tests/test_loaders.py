@@ -94,6 +94,105 @@ def test_mjcf_hopper_is_mujocos_robot(hopper):
     )
 
 
+# Each a way Pinocchio's MJCF reader weighs a file otherwise than MuJoCo, which gaussim's rewrite
+# (mjcf.for_pinocchio, mjcf.set_total_mass) states for it; the arm: two hinged capsules and a box.
+ARM = (
+    '<mujoco>{head}<worldbody><body name="upper" pos="0 0 1"{upper}><joint name="shoulder" axis="0 1 0"/>'
+    '<geom type="capsule" fromto="0 0 0 0 0 -0.5" size="0.05"{geom}/><body name="lower" pos="0 0 -0.5">'
+    '<joint name="elbow" axis="1 0 0"/><geom type="box" pos="0 0 -0.2" size="0.04 0.05 0.2"{geom}/>'
+    "</body></body></worldbody></mujoco>"
+)
+WEIGHED = {
+    "default mass": ('<default><geom mass="2"/></default>', "", ""),
+    "class mass": (
+        '<default><default class="arm"><geom mass="0.7" density="10"/></default></default>',
+        ' childclass="arm"',
+        "",
+    ),
+    "no collisions": ('<default><geom contype="0" conaffinity="0"/></default>', "", ""),
+    "one geom colliding with nothing": ("", "", ' contype="0" conaffinity="0"'),
+    "total mass": ('<compiler settotalmass="7.5"/>', "", ""),
+}
+
+
+@pytest.mark.parametrize("case", WEIGHED)
+def test_mjcf_masses_are_mujocos(tmp_path, case):
+    """A class's geom mass, geoms that collide with nothing and <compiler settotalmass> weigh the arm as
+    MuJoCo weighs it: its bodies' masses and its mass matrix at random configurations (Pinocchio alone
+    left out the class's mass, weighed such geoms 0 kg and ignored the total mass)."""
+    head, upper, geom = WEIGHED[case]
+    path = tmp_path / "arm.xml"
+    path.write_text(ARM.format(head=head, upper=upper, geom=geom))
+    robot = gaussim.load_robot(path)
+    reference = mujoco.MjModel.from_xml_path(str(path))
+    data = mujoco.MjData(reference)
+    assert [robot.model.inertias[j].mass for j in (1, 2)] == pytest.approx(reference.body_mass[1:], rel=1e-12)
+    for q in random_configurations(robot):
+        data.qpos[:] = q
+        mujoco.mj_forward(reference, data)
+        M = np.zeros((2, 2))
+        mujoco.mj_fullM(reference, data, M)
+        np.testing.assert_allclose(mass_matrix(robot, q), M, rtol=1e-10, atol=1e-12)
+
+
+@pytest.mark.parametrize("collides", ["", 'contype="0" conaffinity="0"'])
+@pytest.mark.parametrize("weight", ['density="0"', 'mass="0"', ""])
+def test_mjcf_a_mesh_weighs_as_in_mujoco(tmp_path, weight, collides):
+    """A mesh geom, drawn only or colliding, in a body weighed by its geoms: weighing nothing (density
+    or mass 0) the arm loads with MuJoCo's masses; weighing something it is refused as every mesh that
+    weighs (Pinocchio would give it 1 kg and a unit inertia)."""
+    (tmp_path / "tetra.obj").write_text((DATA / "tetra.obj").read_text())
+    drawn = f'<geom type="mesh" mesh="tetra" {collides} {weight}/>'
+    path = tmp_path / "arm.xml"
+    path.write_text(
+        ARM.format(head='<asset><mesh name="tetra" file="tetra.obj"/></asset>', upper="", geom="").replace(
+            "</body></body></worldbody>", drawn + "</body></body></worldbody>"
+        )
+    )
+    if not weight:
+        with pytest.raises(
+            gaussim.InvalidRobot, match=r"the bodies 'lower' take their inertia from mesh geoms"
+        ):
+            gaussim.load_robot(path)
+        return
+    robot = gaussim.load_robot(path)
+    reference = mujoco.MjModel.from_xml_path(str(path))
+    assert [robot.model.inertias[j].mass for j in (1, 2)] == pytest.approx(reference.body_mass[1:], rel=1e-12)
+
+
+def test_mjcf_included_assets_are_read(tmp_path):
+    """dm_control's files include their materials, so that a file holds several <asset> sections, of
+    which Pinocchio read the first ("Cannot find material grid"); a mesh of an included file is found
+    from the main file's folder, as MuJoCo finds it."""
+    (tmp_path / "common").mkdir()
+    (tmp_path / "common" / "materials.xml").write_text(
+        '<mujoco><asset><material name="self" rgba=".7 .5 .3 1"/></asset></mujoco>'
+    )
+    (tmp_path / "common" / "meshes.xml").write_text(
+        '<mujoco><asset><mesh name="tetra" file="tetra.obj"/></asset></mujoco>'
+    )
+    (tmp_path / "tetra.obj").write_text(
+        "v 0 0 0\nv 0.1 0 0\nv 0 0.1 0\nv 0 0 0.1\nf 1 2 3\nf 1 2 4\nf 1 3 4\nf 2 3 4\n"
+    )
+    path = tmp_path / "arm.xml"
+    path.write_text(
+        ARM.format(
+            head='<include file="./common/meshes.xml"/><include file="./common/materials.xml"/>',
+            upper="",
+            geom=' material="self"',
+        ).replace(
+            "</body></body></worldbody>",
+            '<body name="tip" pos="0 0 -0.4"><inertial pos="0 0 0" mass="0.1" diaginertia="1e-4 1e-4 1e-4"/>'
+            '<geom type="mesh" mesh="tetra"/></body></body></body></worldbody>',
+        )
+    )
+    robot = gaussim.load_robot(path)
+    reference = mujoco.MjModel.from_xml_path(str(path))
+    assert robot.mass == pytest.approx(reference.body_mass.sum(), rel=1e-12)
+    assert robot.collision_model.ngeoms == 3
+    assert robot.visual_model.geometryObjects[0].meshColor.tolist() == pytest.approx([0.7, 0.5, 0.3, 1.0])
+
+
 def test_mjcf_geometry(hopper):
     """Collision geometry is what collides in MuJoCo (the visual-only sphere is drawn, not collided);
     the floor plane is left out; the mesh foot has its convex hull."""

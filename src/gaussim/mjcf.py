@@ -2,24 +2,30 @@
 departs from MuJoCo's reading of the same file without a word (measured on Pinocchio 4.1 against
 MuJoCo on the same files): it reads only the first body of ``<worldbody>``; gives each mesh geom
 1 kg and a unit inertia whatever its mass; takes every ``range`` as a limit, ``limited="false"``
-or not, subtracts ``ref`` from it, and converts a slide joint's range from degrees. This module
-finds those cases in the file: the first two are reported, the limits are set as MuJoCo sets them."""
+or not, subtracts ``ref`` from it, and converts a slide joint's range from degrees; reads the first
+``<asset>`` section alone (dm_control's files, whose ``<include>``s bring several: their materials
+are then missing); takes a ``<default>`` class's geom density but not its mass; leaves the geoms that
+collide with nothing (contype = conaffinity = 0) out of their body's inertia; ignores ``<compiler
+settotalmass>``. This module finds those cases in the file: the first two are reported, the limits
+are set as MuJoCo sets them, and Pinocchio reads a rewrite of the file that states the rest
+(:func:`for_pinocchio`, :func:`set_total_mass`)."""
 
 from __future__ import annotations
 
+import copy
 import math
+import tempfile
 import xml.etree.ElementTree as ET
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
-import coal
 import numpy as np
 import pinocchio as pin
 
 from .exceptions import InvalidRobot
 
 JOINT_TYPES = ("hinge", "slide", "ball", "free")
-# what Pinocchio makes of a mesh geom: a BVH from a file, a convex from inline vertices
-MESHES = (coal.BVHModelBase, coal.ConvexBase)
 # the numeric attributes of the elements that place and weigh bodies
 NUMERIC = (
     "pos", "quat", "euler", "axisangle", "xyaxes", "zaxis", "axis", "fromto", "size", "range", "ref",
@@ -74,6 +80,63 @@ def check_file(path: Path, root: ET.Element) -> None:
         raise InvalidRobot(f"{path}: <worldbody> has no <body>: nothing in it moves")
 
 
+@contextmanager
+def for_pinocchio(path: Path, root: ET.Element) -> Iterator[tuple[str, str]]:
+    """(the file Pinocchio builds the model from, the one it builds the geometry from): ``root`` (the
+    file at ``path``, its includes inlined) with its ``<asset>`` sections merged into one and its asset
+    folders absolute; for the model, besides, each geom's mass as its ``<default>`` class gives it, and
+    every geom counted in its body's inertia (see the module's docstring). Temporary files, removed
+    when the block ends."""
+    tree = copy.deepcopy(root)
+    sections = tree.findall("asset")
+    for section in sections[1:]:
+        sections[0].extend(list(section))
+        tree.remove(section)
+    _absolute_folders(tree, path.parent)
+    weighed = copy.deepcopy(tree)
+    defaults = _defaults(weighed)
+    for body, classname in _bodies_with_class(weighed, defaults):
+        for geom in body.findall("geom"):
+            mass = _mass(geom, geom.get("class", classname), defaults)
+            if mass == 0.0:  # Pinocchio would weigh a mesh 1 kg
+                body.remove(geom)
+                continue
+            if mass is not None:
+                geom.set("mass", repr(mass))
+            # MuJoCo weighs every geom, whether it collides or not
+            geom.set("contype", "1")
+            geom.set("conaffinity", "1")
+    with tempfile.TemporaryDirectory(prefix="gaussim-mjcf-") as folder:
+        model, geometry = Path(folder, path.name), Path(folder, "geometry-" + path.name)
+        ET.ElementTree(weighed).write(model)
+        ET.ElementTree(tree).write(geometry)
+        yield str(model), str(geometry)
+
+
+def _absolute_folders(root: ET.Element, base: Path) -> None:
+    """Make the mesh and texture folders of ``<compiler>`` absolute (relative to ``base``, the file's
+    folder, as MuJoCo takes them; ``assetdir`` or the file's folder where they are not given), so that a
+    copy of the file elsewhere finds its assets."""
+    assets = base / compiler(root, "assetdir", "")
+    folders = {key: str(assets / compiler(root, key, "")) for key in ("meshdir", "texturedir")}
+    root.insert(0, ET.Element("compiler", folders))  # before the assets, which Pinocchio reads in order
+    for settings in root.iter("compiler"):
+        settings.attrib.update(folders)
+
+
+def set_total_mass(root: ET.Element, model: pin.Model) -> None:
+    """Scale every body's mass and inertia by one factor so that they weigh ``<compiler
+    settotalmass>`` [kg] when it is positive, as MuJoCo's compiler does."""
+    total = float(compiler(root, "settotalmass", "-1"))
+    weighed = sum(inertia.mass for inertia in model.inertias[1:])
+    if total <= 0 or weighed <= 0:
+        return
+    factor = total / weighed
+    for j in range(1, model.njoints):
+        inertia = model.inertias[j]
+        model.inertias[j] = pin.Inertia(factor * inertia.mass, inertia.lever, factor * inertia.inertia)
+
+
 def compiler(root: ET.Element, attribute: str, default: str) -> str:
     """A ``<compiler>`` attribute (the last one given wins, as in MuJoCo)."""
     values = [c.get(attribute) for c in root.iter("compiler") if c.get(attribute) is not None]
@@ -85,18 +148,21 @@ def bodies(root: ET.Element) -> list[ET.Element]:
     return [b for world in root.iter("worldbody") for b in world.findall("body")]
 
 
-def check(path: Path, root: ET.Element, collision: pin.GeometryModel, model: pin.Model) -> list[str]:
-    """Raise :class:`InvalidRobot` when a body takes its inertia from a mesh geom (Pinocchio gives
-    such a geom 1 kg and a unit inertia [kg m^2]); return what the model leaves out of the file:
-    the top-level bodies after the first and the ``<equality>`` constraints, each a sentence."""
+def check(path: Path, root: ET.Element) -> list[str]:
+    """Raise :class:`InvalidRobot` when a body takes its inertia from a mesh geom that weighs (one that
+    collides with nothing too; Pinocchio gives such a geom 1 kg and a unit inertia [kg m^2]); return
+    what the model leaves out of the file: the top-level bodies after the first and the
+    ``<equality>`` constraints, each a sentence."""
     from_geoms = compiler(root, "inertiafromgeom", "auto")
-    explicit = {b.get("name") for b in root.iter("body") if b.find("inertial") is not None}
+    defaults = _defaults(root)
     meshes = sorted(
         {
-            model.frames[g.parentFrame].name
-            for g in collision.geometryObjects
-            if isinstance(g.geometry, MESHES)
-            and (from_geoms == "true" or model.frames[g.parentFrame].name not in explicit)
+            str(body.get("name", ""))
+            for body, classname in _bodies_with_class(root, defaults)
+            if from_geoms == "true" or body.find("inertial") is None
+            for geom in body.findall("geom")
+            if _attribute(geom, "type", geom.get("class", classname), defaults, "sphere") == "mesh"
+            and _mass(geom, geom.get("class", classname), defaults) != 0.0
         }
     )
     if from_geoms != "false" and meshes:
@@ -201,6 +267,17 @@ def _attribute(
             if entry.get(key) is not None:
                 return str(entry.get(key))
     return default
+
+
+def _mass(
+    geom: ET.Element, classname: str, defaults: dict[str, tuple[ET.Element, str | None]]
+) -> float | None:
+    """A geom's mass as MuJoCo takes it, its own or its class's [kg]: None when its density weighs it,
+    0 when that density is 0."""
+    mass = _attribute(geom, "mass", classname, defaults, "")
+    if mass:
+        return float(mass)
+    return 0.0 if float(_attribute(geom, "density", classname, defaults, "1000")) == 0.0 else None
 
 
 def _named(element: ET.Element) -> str:

@@ -425,29 +425,10 @@ def _from_urdf(
 def _from_mjcf(path: Path, floating: bool | None, policies: Mapping[str, str]) -> Robot:
     root = mjcf.read(path)
     mjcf.check_file(path, root)
-    try:
-        # the model alone (here and with a root joint): the reader of its <equality> constraints, which
-        # gaussim leaves out (see mjcf.check), fails on valid ones (body2="world")
-        model = pin.buildModelFromMJCF(str(path))
-        floats = _floats(model)
-        if floating is False and floats:
-            raise InvalidRobot(
-                f"{path}: body '{_root_body(model)}' has a <freejoint>, so the robot floats: "
-                "floating_base=False cannot fix it (remove the <freejoint> to fix the base)"
-            )
-        if floating and not floats:
-            model = pin.buildModelFromMJCFAndRootJoint(str(path), pin.JointModelFreeFlyer(), "root_joint")
-            if not _floats(model):
-                raise InvalidRobot(
-                    f"{path}: floating_base=True: body '{_root_body(model)}' hangs from the world by its "
-                    f"own joint '{model.names[1]}', above which Pinocchio's MJCF reader adds no free root: "
-                    "put it in a body of its own with a <freejoint/> to make the robot float"
-                )
-        collision = pin.buildGeomFromMJCF(model, str(path), pin.GeometryType.COLLISION)
-        visual = pin.buildGeomFromMJCF(model, str(path), pin.GeometryType.VISUAL)
-    except (RuntimeError, ValueError, OSError) as err:
-        raise InvalidRobot(f"{path}: cannot build a model from this MJCF: {_cause(err)}") from err
-    notes = mjcf.check(path, root, collision, model)
+    with mjcf.for_pinocchio(path, root) as (weighed, shaped):
+        model, collision, visual = _mjcf_models(path, weighed, shaped, floating)
+    mjcf.set_total_mass(root, model)
+    notes = mjcf.check(path, root)
     mjcf.set_joint_limits(root, model)
     planes = [
         g.name for g in collision.geometryObjects if isinstance(g.geometry, UNBOUNDED) and g.parentJoint == 0
@@ -465,6 +446,36 @@ def _from_mjcf(path: Path, floating: bool | None, policies: Mapping[str, str]) -
         warnings.warn(f"{path}: {note}", GaussimWarning, stacklevel=4)
     dirs = (str(path.parent),)
     return Robot(path.stem, model, collision, visual, str(path), dirs, _configurations(model), **policies)
+
+
+def _mjcf_models(
+    path: Path, weighed: str, shaped: str, floating: bool | None
+) -> tuple[pin.Model, pin.GeometryModel, pin.GeometryModel]:
+    """The model, collision and visual geometry of the MJCF at ``path``, from Pinocchio's reading of
+    its rewrites (:func:`.mjcf.for_pinocchio`): ``weighed`` for the model, ``shaped`` for the geometry."""
+    try:
+        # the model alone (here and with a root joint): the reader of its <equality> constraints, which
+        # gaussim leaves out (see mjcf.check), fails on valid ones (body2="world")
+        model = pin.buildModelFromMJCF(weighed)
+        floats = _floats(model)
+        if floating is False and floats:
+            raise InvalidRobot(
+                f"{path}: body '{_root_body(model)}' has a <freejoint>, so the robot floats: "
+                "floating_base=False cannot fix it (remove the <freejoint> to fix the base)"
+            )
+        if floating and not floats:
+            model = pin.buildModelFromMJCFAndRootJoint(weighed, pin.JointModelFreeFlyer(), "root_joint")
+            if not _floats(model):
+                raise InvalidRobot(
+                    f"{path}: floating_base=True: body '{_root_body(model)}' hangs from the world by its "
+                    f"own joint '{model.names[1]}', above which Pinocchio's MJCF reader adds no free root: "
+                    "put it in a body of its own with a <freejoint/> to make the robot float"
+                )
+        collision = pin.buildGeomFromMJCF(model, shaped, pin.GeometryType.COLLISION)
+        visual = pin.buildGeomFromMJCF(model, shaped, pin.GeometryType.VISUAL)
+    except (RuntimeError, ValueError, OSError) as err:
+        raise InvalidRobot(f"{path}: cannot build a model from this MJCF: {_cause(err)}") from err
+    return model, collision, visual
 
 
 def _floats(model: pin.Model) -> bool:
