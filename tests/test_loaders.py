@@ -16,6 +16,7 @@ import pybullet_data
 import pytest
 
 import gaussim
+from gaussim import mjcf
 from gaussim.robot import as_robot
 
 DATA = Path(__file__).resolve().parent / "data"
@@ -158,6 +159,45 @@ def test_mjcf_a_mesh_weighs_as_in_mujoco(tmp_path, weight, collides):
     robot = gaussim.load_robot(path)
     reference = mujoco.MjModel.from_xml_path(str(path))
     assert [robot.model.inertias[j].mass for j in (1, 2)] == pytest.approx(reference.body_mass[1:], rel=1e-12)
+
+
+PYBULLET_MJCF = sorted((Path(pybullet_data.getDataPath()) / "mjcf").glob("*.xml"))
+
+
+@pytest.mark.parametrize("path", PYBULLET_MJCF, ids=lambda path: path.name)
+def test_pybullet_mjcf_files_have_mujocos_mass_matrix(path):
+    """Each MJCF of pybullet_data that MuJoCo 3 loads (it refuses 8 of 26: global coordinates, undefined
+    materials, ...): gaussim loads it with MuJoCo's mass matrix at random configurations, or refuses it
+    by name, or leaves out its other top-level bodies with a warning (then only nv differs). The
+    weighing rules themselves are checked on small files above (test_mjcf_masses_are_mujocos)."""
+    try:
+        reference = mujoco.MjModel.from_xml_path(str(path))
+    except ValueError:  # MuJoCo 3 refuses it too (global coordinates, an undefined material, ...)
+        return
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", gaussim.GaussimWarning)
+        try:
+            robot = gaussim.load_robot(path)
+        except gaussim.InvalidRobot as err:
+            assert str(path) in str(err)
+            return
+    if robot.model.nv != reference.nv:
+        assert len(mjcf.bodies(mjcf.read(path))) > 1  # the bodies after the first, warned and left out
+        return
+    data = mujoco.MjData(reference)
+    for q in random_configurations(robot):
+        if robot.floating:
+            q[3:7] /= np.linalg.norm(q[3:7])
+        data.qpos[:] = mujoco_configuration(q) if robot.floating else q
+        mujoco.mj_forward(reference, data)
+        M = np.zeros((reference.nv, reference.nv))
+        mujoco.mj_fullM(reference, data, M)
+        T = np.eye(reference.nv)
+        if robot.floating:  # MuJoCo's free joint moves its linear velocity in the world frame
+            T[:3, :3] = pin.Quaternion(q[6], *q[3:6]).matrix()
+        np.testing.assert_allclose(
+            mass_matrix(robot, q), T.T @ M @ T, rtol=1e-10, atol=1e-12 * np.abs(M).max()
+        )
 
 
 def test_mjcf_included_assets_are_read(tmp_path):
