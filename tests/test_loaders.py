@@ -113,6 +113,13 @@ WEIGHED = {
     "no collisions": ('<default><geom contype="0" conaffinity="0"/></default>', "", ""),
     "one geom colliding with nothing": ("", "", ' contype="0" conaffinity="0"'),
     "total mass": ('<compiler settotalmass="7.5"/>', "", ""),
+    "groups that weigh": ('<compiler inertiagrouprange="0 2"/><default><geom group="1"/></default>', "", ""),
+    "a group that does not": (
+        '<compiler inertiagrouprange="0 2"/><default><default class="drawn"><geom group="3" mass="5"/>'
+        "</default></default>",
+        "",
+        '/><geom class="drawn" type="sphere" size="0.1"',
+    ),
 }
 
 

@@ -94,11 +94,11 @@ def for_pinocchio(path: Path, root: ET.Element) -> Iterator[tuple[str, str]]:
         tree.remove(section)
     _absolute_folders(tree, path.parent)
     weighed = copy.deepcopy(tree)
-    defaults = _defaults(weighed)
+    defaults, groups = _defaults(weighed), _weighed_groups(weighed)
     for body, classname in _bodies_with_class(weighed, defaults):
         for geom in body.findall("geom"):
-            mass = _mass(geom, geom.get("class", classname), defaults)
-            if mass == 0.0:  # Pinocchio would weigh a mesh 1 kg
+            mass = _mass(geom, geom.get("class", classname), defaults, groups)
+            if mass == 0.0:  # Pinocchio would weigh a mesh 1 kg, any geom of another group
                 body.remove(geom)
                 continue
             if mass is not None:
@@ -154,7 +154,7 @@ def check(path: Path, root: ET.Element) -> list[str]:
     what the model leaves out of the file: the top-level bodies after the first and the
     ``<equality>`` constraints, each a sentence."""
     from_geoms = compiler(root, "inertiafromgeom", "auto")
-    defaults = _defaults(root)
+    defaults, groups = _defaults(root), _weighed_groups(root)
     meshes = sorted(
         {
             str(body.get("name", ""))
@@ -162,7 +162,7 @@ def check(path: Path, root: ET.Element) -> list[str]:
             if from_geoms == "true" or body.find("inertial") is None
             for geom in body.findall("geom")
             if _attribute(geom, "type", geom.get("class", classname), defaults, "sphere") == "mesh"
-            and _mass(geom, geom.get("class", classname), defaults) != 0.0
+            and _mass(geom, geom.get("class", classname), defaults, groups) != 0.0
         }
     )
     if from_geoms != "false" and meshes:
@@ -270,14 +270,26 @@ def _attribute(
 
 
 def _mass(
-    geom: ET.Element, classname: str, defaults: dict[str, tuple[ET.Element, str | None]]
+    geom: ET.Element,
+    classname: str,
+    defaults: dict[str, tuple[ET.Element, str | None]],
+    groups: tuple[int, int],
 ) -> float | None:
     """A geom's mass as MuJoCo takes it, its own or its class's [kg]: None when its density weighs it,
-    0 when that density is 0."""
+    0 when that density is 0 or its group is outside ``groups`` (:func:`_weighed_groups`)."""
+    group = int(_attribute(geom, "group", classname, defaults, "0"))
+    if not groups[0] <= group <= groups[1]:
+        return 0.0
     mass = _attribute(geom, "mass", classname, defaults, "")
     if mass:
         return float(mass)
     return 0.0 if float(_attribute(geom, "density", classname, defaults, "1000")) == 0.0 else None
+
+
+def _weighed_groups(root: ET.Element) -> tuple[int, int]:
+    """The geom groups that weigh in their body's inertia: ``<compiler inertiagrouprange>``."""
+    low, high = compiler(root, "inertiagrouprange", "0 5").split()
+    return int(low), int(high)
 
 
 def _named(element: ET.Element) -> str:
