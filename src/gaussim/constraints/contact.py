@@ -65,6 +65,7 @@ from ..dynamics import (
     point_placements,
 )
 from ..kernels.bound import Bound
+from ..kernels.pairs import PATCH_TOLERANCE
 from ..kernels.solver import ACTIVE_SET_FLOOR
 from .base import LEVELS, ConstraintModule, Context, Rows, is_active
 
@@ -339,6 +340,13 @@ class ContactModule(ConstraintModule[ContactBatch]):
             for g in (geometry.geometryObjects if geometry is not None else [])
             if isinstance(g.geometry, (coal.Sphere, coal.Capsule))
         }
+        # each cylinder's radius, joint and placement on it: a contact on its rim rolls along the rim
+        # (see _drifts)
+        self.cylinders = {
+            g.name: (float(g.geometry.radius), g.parentJoint, g.placement)
+            for g in (geometry.geometryObjects if geometry is not None else [])
+            if isinstance(g.geometry, coal.Cylinder)
+        }
         self.facets = facets
         angles = 2.0 * np.pi * np.arange(facets) / facets
         self.cos, self.sin = np.cos(angles), np.sin(angles)
@@ -372,7 +380,9 @@ class ContactModule(ConstraintModule[ContactBatch]):
         m = len(contacts)
         no_slip, no_stops, no_force, no_drift = self._blank(m)
         # read-only, as the blanks are: one compiled signature (numba types writability)
-        drift = _read_only(_drifts(ctx, contacts, self.radii)) if level == "acceleration" else no_drift
+        drift = no_drift
+        if level == "acceleration":
+            drift = _read_only(_drifts(ctx, contacts, self.radii, self.cylinders))
         cone = (self.cos, self.sin, self.mode == "pyramid")
         first = no_slip if level != "velocity" else self._stuck_start(contacts, no_slip)
         iterate = (
@@ -596,18 +606,47 @@ def _secant(
 _NO_MOVE = np.zeros((0, 3))  # the first pass's: no secant yet
 
 
-def _drifts(ctx: Context, contacts: Contacts, radii: dict[str, float]) -> np.ndarray:
+def _drifts(
+    ctx: Context,
+    contacts: Contacts,
+    radii: dict[str, float],
+    cylinders: dict[str, tuple[float, int, pin.SE3]],
+) -> np.ndarray:
     """Jdot v of the contact points, shape (m, 3), relative to the other body's point when the
-    obstacle is another robot geometry.
+    obstacle is another robot geometry: the derivative of the velocity of the body's point at the
+    contact, J(q) v, along the motion, the contact point moving over the surface as the body turns.
 
-    On a sphere-swept geometry (``radii``) the contact point is not a material point: it stays at
-    the radius from the centre while the body rolls, so its acceleration is the centre's, without the
-    centripetal r |w|^2 of the material point that a rolling ball would take for a lift-off."""
+    On a sphere-swept geometry (``radii``) the contact point stays at the radius from the centre
+    while the body rolls, so its acceleration is the centre's, without the centripetal r |w|^2 of the
+    material point that a rolling ball would take for a lift-off. On a cylinder's rim (``cylinders``,
+    unless it stands on a cap, whose points are a flat face's) the point is the rim's lowest, C - r u
+    with C the rim's centre and u the normal's part across the axis a, normalised: its drift is C's
+    less r w x du/dt (for a cylinder on its side, r (n . (w x a))^2 along n, nothing from rolling)."""
     model, data = ctx.model, ctx.data
     joints = contacts.joint.tolist()
     n = contacts.normal
     centres = contacts.point + np.array([radii.get(g, 0.0) for g in contacts.geometry])[:, None] * n
+    rims = []  # (contact, radius, world angular velocity, axis, u) of the contacts rolling on a rim
+    for i, g in enumerate(contacts.geometry):
+        if g not in cylinders:
+            continue
+        radius, joint, placement = cylinders[g]
+        frame = data.oMi[joint] * placement
+        axis = frame.rotation[:, 2]
+        s = float(n[i] @ axis)
+        across = np.sqrt(max(0.0, 1.0 - s * s))
+        if radius * across * (1.0 + across) <= PATCH_TOLERANCE:  # on a cap: the detection's own test
+            continue
+        centres[i] = frame.translation + ((contacts.point[i] - frame.translation) @ axis) * axis
+        w = data.oMi[joint].rotation @ data.v[joint].angular
+        rims.append((i, radius, w, axis, s, across))
     result = point_drifts(model, data, joints, point_placements(data, joints, centres))
+    for i, radius, w, axis, s, across in rims:
+        axis_rate = np.cross(w, axis)
+        s_rate = float(n[i] @ axis_rate)
+        u = (n[i] - s * axis) / across
+        u_rate = -(s_rate * axis + s * axis_rate) / across + u * (s * s_rate / across**2)
+        result[i] -= radius * np.cross(w, u_rate)
     others = np.flatnonzero(contacts.other_joint)
     if len(others):
         other_joints = contacts.other_joint[others].tolist()
