@@ -22,10 +22,12 @@ between sticking and sliding no longer cycles), or, for the sliding contacts tha
 QP of at most NEWTON_UP_TO coordinates, is a Newton step on all their shifts at once (the solution's
 response to their bounds couples them), and passes that stall (:func:`_stalled`) within RELAX_TOLERANCE
 stop. When the passes of ``Options.friction_iterations`` do not come within RELAX_TOLERANCE of that
-fixed point (measured: mu = 1000, where a block sank through the ground under a tiny normal force whose
-friction relaxed the shifted bound), the last QP drops the shift: the plain relaxation, which may lift a
-sliding contact at mu |u_t+| but never lets it sink; the step's report says so
-(``StepReport.friction_relaxed``).
+fixed point, the last QP takes the slips of the pass nearest it if the passes closed in on it (its
+residual RELAX_MARGIN times below the first pass's: a box sliding and spinning, whose corners slide
+four ways); else (measured: mu = 1000, where a block sank through the ground under a tiny normal force
+whose friction relaxed the shifted bound, and no pass gains on the first) it drops the shift: the plain
+relaxation, which may lift a sliding contact at mu |u_t+| but never lets it sink; the step's report
+says so (``StepReport.friction_relaxed``).
 d_1 is turned against the tangential velocity the contact would have without friction, so a
 sliding or pulled contact sees the full cone, not a facet of the pyramid ("pyramid" mode keeps a
 fixed basis and no shift); below ALIGN_SPEED that velocity is round-off, and the basis is the fixed one
@@ -87,6 +89,9 @@ SLIP_TOLERANCE = {"accurate": 1e-4, "exact": 1e-9}
 # Still above this after the step's passes, the iteration is far from its fixed point: the last QP
 # drops the De Saxce shift [m/s] (below it, the last shifted solution is kept).
 RELAX_TOLERANCE = 1e-3
+# The last QP keeps the slips of the pass nearest the fixed point, rather than dropping the shift, when
+# that pass's residual is this many times below the first pass's: the passes were closing in on it.
+RELAX_MARGIN = 10.0
 # Acceleration-level sliding friction iterations stop when the normal force moves less than this [N].
 NORMAL_FORCE_TOLERANCE = 1e-8
 # The De Saxce passes have stalled when two of them do not divide the residual by more than 1 / this.
@@ -155,6 +160,7 @@ class FrictionIterate:
         passes: the De Saxce passes made.
         relaxed: True once the passes have not come within RELAX_TOLERANCE of the fixed point: the
             next QP drops the shift.
+        best: the smallest residual of the De Saxce passes and the lagged slips of its pass, or None.
     """
 
     slip: np.ndarray | None = None
@@ -165,6 +171,7 @@ class FrictionIterate:
     residuals: list[float] = field(default_factory=list)
     passes: int = 0
     relaxed: bool = False
+    best: tuple[float, np.ndarray] | None = None
 
 
 # The iterate of a solve's first QP (read, never written: refine makes each solve its own).
@@ -496,8 +503,17 @@ class ContactModule(ConstraintModule[ContactBatch]):
                 lagged = self._iterate(ctx)
                 lagged.passes += 1
                 lagged.residuals.append(residual)
+                if lagged.best is None or residual < lagged.best[0]:
+                    lagged.best = (residual, b.slip)
                 last = lagged.passes >= ctx.options.friction_iterations - 1  # one QP left in the step
                 if last and residual > RELAX_TOLERANCE:
+                    nearest, used = lagged.best
+                    # passes that closed in on the fixed point without settling keep the nearest
+                    # (a box sliding and spinning at mu 0.5 came within 1e-3 m/s, and the relaxation
+                    # threw it up); passes that made no headway drop the shift (mu 1000: it sank)
+                    if nearest * RELAX_MARGIN <= lagged.residuals[0]:
+                        lagged.slip = used
+                        return True
                     lagged.relaxed = True  # far from the fixed point: the last QP drops the shift
                     lagged.slip = np.zeros_like(slip)
                     return True
