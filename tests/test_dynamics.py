@@ -182,3 +182,49 @@ def test_a_torque_of_another_size_is_refused(solo12):
         stage.free_motion(q, v, np.zeros(12), 1e-3)
     with pytest.raises(gaussim.InvalidState, match=r"tau must have shape \(18,\), got \(12,\)"):
         compute_dynamics(model, model.createData(), q, v, np.zeros(12), 1e-3)
+
+
+@pytest.mark.parametrize("tilt", [np.pi / 2, 1.2, 0.6, 0.2])
+def test_a_cylinders_rim_drift_is_the_second_derivative_of_its_gap(tilt):
+    """A cylinder touching the ground on its rim (on its side, or tilted like a rolling coin): the
+    normal drift of its contact is phi'' of the rim's gap phi = n . C - r sqrt(1 - (n . a)^2) (C the
+    lower cap's centre, a the axis) along a motion of zero acceleration, by finite differences. The
+    material point's drift (the contact taken as a point of the body) is off by the rim's rolling:
+    a cylinder on its side rolled into the ground at the acceleration level."""
+    from gaussim.collision import Contacts
+    from gaussim.constraints.base import Context
+    from gaussim.constraints.contact import ContactModule, _drifts
+
+    r, length = 0.1, 0.3
+    cylinder = gaussim.FreeBody.cylinder("c", r, length, mass=1.0)
+    scene = gaussim.Scene(bodies={"c": cylinder}, ground=gaussim.Ground())
+    model, geometry = scene.robot.model, scene.robot.collision_model
+    data, geometry_data = model.createData(), pin.GeometryData(geometry)
+    module = ContactModule(model, 4, "accurate", geometry)
+    n = np.array([0.0, 0.0, 1.0])
+
+    def rim(q_):  # the gap, and the lower cap's centre, its axis and n . axis
+        pin.forwardKinematics(model, data, q_)
+        pin.updateGeometryPlacements(model, data, geometry, geometry_data)
+        frame = geometry_data.oMg[0]
+        a = frame.rotation[:, 2]
+        s = n @ a
+        cap = frame.translation - (np.sign(s) if abs(s) > 1e-3 else 1.0) * length / 2 * a  # one cap
+        return n @ cap - r * np.sqrt(1 - s * s), cap, a, s
+
+    q = pin.neutral(model)
+    q[3:7] = pin.Quaternion(pin.rpy.rpyToMatrix(tilt, 0.3, 0.5)).coeffs()
+    v = np.random.default_rng(0).normal(scale=3.0, size=6)
+    step = 1e-4
+    gaps = [rim(pin.integrate(model, q, t * v))[0] for t in (-step, 0.0, step)]
+    _, cap, a, s = rim(q)
+    point = cap - r * (n - s * a) / np.sqrt(1 - s * s)  # the rim's lowest point
+    pin.forwardKinematics(model, data, q, v, np.zeros(model.nv))
+    one = np.ones(1)
+    contacts = Contacts(
+        ["c"], [geometry.geometryObjects[0].name], ["ground"], np.array([1]), np.array([0]),
+        point[None], n[None], np.zeros(1), 0.5 * one, 0.0 * one,
+    )  # fmt: skip
+    ctx = Context(model, data, q, v, v, contacts, gaussim.Options(), "acceleration")
+    drift = _drifts(ctx, contacts, module.radii, module.cylinders)[0]
+    assert n @ drift == pytest.approx((gaps[0] - 2 * gaps[1] + gaps[2]) / step**2, rel=1e-5, abs=1e-5)

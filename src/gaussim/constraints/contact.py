@@ -22,10 +22,12 @@ between sticking and sliding no longer cycles), or, for the sliding contacts tha
 QP of at most NEWTON_UP_TO coordinates, is a Newton step on all their shifts at once (the solution's
 response to their bounds couples them), and passes that stall (:func:`_stalled`) within RELAX_TOLERANCE
 stop. When the passes of ``Options.friction_iterations`` do not come within RELAX_TOLERANCE of that
-fixed point (measured: mu = 1000, where a block sank through the ground under a tiny normal force whose
-friction relaxed the shifted bound), the last QP drops the shift: the plain relaxation, which may lift a
-sliding contact at mu |u_t+| but never lets it sink; the step's report says so
-(``StepReport.friction_relaxed``).
+fixed point, the last QP takes the slips of the pass nearest it if the passes closed in on it (its
+residual RELAX_MARGIN times below the first pass's: a box sliding and spinning, whose corners slide
+four ways); else (measured: mu = 1000, where a block sank through the ground under a tiny normal force
+whose friction relaxed the shifted bound, and no pass gains on the first) it drops the shift: the plain
+relaxation, which may lift a sliding contact at mu |u_t+| but never lets it sink; the step's report
+says so (``StepReport.friction_relaxed``).
 d_1 is turned against the tangential velocity the contact would have without friction, so a
 sliding or pulled contact sees the full cone, not a facet of the pyramid ("pyramid" mode keeps a
 fixed basis and no shift); below ALIGN_SPEED that velocity is round-off, and the basis is the fixed one
@@ -65,6 +67,7 @@ from ..dynamics import (
     point_placements,
 )
 from ..kernels.bound import Bound
+from ..kernels.pairs import PATCH_TOLERANCE
 from ..kernels.solver import ACTIVE_SET_FLOOR
 from .base import LEVELS, ConstraintModule, Context, Rows, is_active
 
@@ -86,6 +89,9 @@ SLIP_TOLERANCE = {"accurate": 1e-4, "exact": 1e-9}
 # Still above this after the step's passes, the iteration is far from its fixed point: the last QP
 # drops the De Saxce shift [m/s] (below it, the last shifted solution is kept).
 RELAX_TOLERANCE = 1e-3
+# The last QP keeps the slips of the pass nearest the fixed point, rather than dropping the shift, when
+# that pass's residual is this many times below the first pass's: the passes were closing in on it.
+RELAX_MARGIN = 10.0
 # Acceleration-level sliding friction iterations stop when the normal force moves less than this [N].
 NORMAL_FORCE_TOLERANCE = 1e-8
 # The De Saxce passes have stalled when two of them do not divide the residual by more than 1 / this.
@@ -154,6 +160,7 @@ class FrictionIterate:
         passes: the De Saxce passes made.
         relaxed: True once the passes have not come within RELAX_TOLERANCE of the fixed point: the
             next QP drops the shift.
+        best: the smallest residual of the De Saxce passes and the lagged slips of its pass, or None.
     """
 
     slip: np.ndarray | None = None
@@ -164,6 +171,7 @@ class FrictionIterate:
     residuals: list[float] = field(default_factory=list)
     passes: int = 0
     relaxed: bool = False
+    best: tuple[float, np.ndarray] | None = None
 
 
 # The iterate of a solve's first QP (read, never written: refine makes each solve its own).
@@ -339,6 +347,13 @@ class ContactModule(ConstraintModule[ContactBatch]):
             for g in (geometry.geometryObjects if geometry is not None else [])
             if isinstance(g.geometry, (coal.Sphere, coal.Capsule))
         }
+        # each cylinder's radius, joint and placement on it: a contact on its rim rolls along the rim
+        # (see _drifts)
+        self.cylinders = {
+            g.name: (float(g.geometry.radius), g.parentJoint, g.placement)
+            for g in (geometry.geometryObjects if geometry is not None else [])
+            if isinstance(g.geometry, coal.Cylinder)
+        }
         self.facets = facets
         angles = 2.0 * np.pi * np.arange(facets) / facets
         self.cos, self.sin = np.cos(angles), np.sin(angles)
@@ -372,7 +387,9 @@ class ContactModule(ConstraintModule[ContactBatch]):
         m = len(contacts)
         no_slip, no_stops, no_force, no_drift = self._blank(m)
         # read-only, as the blanks are: one compiled signature (numba types writability)
-        drift = _read_only(_drifts(ctx, contacts, self.radii)) if level == "acceleration" else no_drift
+        drift = no_drift
+        if level == "acceleration":
+            drift = _read_only(_drifts(ctx, contacts, self.radii, self.cylinders))
         cone = (self.cos, self.sin, self.mode == "pyramid")
         first = no_slip if level != "velocity" else self._stuck_start(contacts, no_slip)
         iterate = (
@@ -486,8 +503,17 @@ class ContactModule(ConstraintModule[ContactBatch]):
                 lagged = self._iterate(ctx)
                 lagged.passes += 1
                 lagged.residuals.append(residual)
+                if lagged.best is None or residual < lagged.best[0]:
+                    lagged.best = (residual, b.slip)
                 last = lagged.passes >= ctx.options.friction_iterations - 1  # one QP left in the step
                 if last and residual > RELAX_TOLERANCE:
+                    nearest, used = lagged.best
+                    # passes that closed in on the fixed point without settling keep the nearest
+                    # (a box sliding and spinning at mu 0.5 came within 1e-3 m/s, and the relaxation
+                    # threw it up); passes that made no headway drop the shift (mu 1000: it sank)
+                    if nearest * RELAX_MARGIN <= lagged.residuals[0]:
+                        lagged.slip = used
+                        return True
                     lagged.relaxed = True  # far from the fixed point: the last QP drops the shift
                     lagged.slip = np.zeros_like(slip)
                     return True
@@ -596,18 +622,47 @@ def _secant(
 _NO_MOVE = np.zeros((0, 3))  # the first pass's: no secant yet
 
 
-def _drifts(ctx: Context, contacts: Contacts, radii: dict[str, float]) -> np.ndarray:
+def _drifts(
+    ctx: Context,
+    contacts: Contacts,
+    radii: dict[str, float],
+    cylinders: dict[str, tuple[float, int, pin.SE3]],
+) -> np.ndarray:
     """Jdot v of the contact points, shape (m, 3), relative to the other body's point when the
-    obstacle is another robot geometry.
+    obstacle is another robot geometry: the derivative of the velocity of the body's point at the
+    contact, J(q) v, along the motion, the contact point moving over the surface as the body turns.
 
-    On a sphere-swept geometry (``radii``) the contact point is not a material point: it stays at
-    the radius from the centre while the body rolls, so its acceleration is the centre's, without the
-    centripetal r |w|^2 of the material point that a rolling ball would take for a lift-off."""
+    On a sphere-swept geometry (``radii``) the contact point stays at the radius from the centre
+    while the body rolls, so its acceleration is the centre's, without the centripetal r |w|^2 of the
+    material point that a rolling ball would take for a lift-off. On a cylinder's rim (``cylinders``,
+    unless it stands on a cap, whose points are a flat face's) the point is the rim's lowest, C - r u
+    with C the rim's centre and u the normal's part across the axis a, normalised: its drift is C's
+    less r w x du/dt (for a cylinder on its side, r (n . (w x a))^2 along n, nothing from rolling)."""
     model, data = ctx.model, ctx.data
     joints = contacts.joint.tolist()
     n = contacts.normal
     centres = contacts.point + np.array([radii.get(g, 0.0) for g in contacts.geometry])[:, None] * n
+    rims = []  # (contact, radius, world angular velocity, axis, u) of the contacts rolling on a rim
+    for i, g in enumerate(contacts.geometry):
+        if g not in cylinders:
+            continue
+        radius, joint, placement = cylinders[g]
+        frame = data.oMi[joint] * placement
+        axis = frame.rotation[:, 2]
+        s = float(n[i] @ axis)
+        across = np.sqrt(max(0.0, 1.0 - s * s))
+        if radius * across * (1.0 + across) <= PATCH_TOLERANCE:  # on a cap: the detection's own test
+            continue
+        centres[i] = frame.translation + ((contacts.point[i] - frame.translation) @ axis) * axis
+        w = data.oMi[joint].rotation @ data.v[joint].angular
+        rims.append((i, radius, w, axis, s, across))
     result = point_drifts(model, data, joints, point_placements(data, joints, centres))
+    for i, radius, w, axis, s, across in rims:
+        axis_rate = np.cross(w, axis)
+        s_rate = float(n[i] @ axis_rate)
+        u = (n[i] - s * axis) / across
+        u_rate = -(s_rate * axis + s * axis_rate) / across + u * (s * s_rate / across**2)
+        result[i] -= radius * np.cross(w, u_rate)
     others = np.flatnonzero(contacts.other_joint)
     if len(others):
         other_joints = contacts.other_joint[others].tolist()
