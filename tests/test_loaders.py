@@ -208,6 +208,60 @@ def test_pybullet_mjcf_files_have_mujocos_mass_matrix(path, tmp_path, monkeypatc
         )
 
 
+TWO_BODIES = """<mujoco>
+  <worldbody>
+    <geom name="table" type="box" pos="0 0 -0.05" size="1 1 0.05"/>
+    <body name="arm" pos="0 0 0.5"><joint type="hinge" axis="0 1 0"/>
+      <geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.03"/></body>
+    <body name="ball" pos="0.5 0 0.3"><freejoint/><geom type="sphere" size="0.05" density="800"/></body>
+  </worldbody>
+  <keyframe><key name="home" qpos="0.3  0.5 0.1 0.3  0.8 0 0.6 0"/></keyframe>
+</mujoco>"""
+
+
+def test_mjcf_top_level_bodies_each_load(tmp_path):
+    """A file of two top-level bodies and a keyframe of both (Pinocchio refused it: "Keyframe size does
+    not match model size"): the first loads by default with the world's geoms, the other with
+    body=...; each has MuJoCo's mass, mass matrix (its block of MuJoCo's) and its part of the
+    keyframe; a Scene of both runs, the ball coming to rest on the first body's table."""
+    path = tmp_path / "two.xml"
+    path.write_text(TWO_BODIES)
+    reference = mujoco.MjModel.from_xml_path(str(path))
+    data = mujoco.MjData(reference)
+    mujoco.mj_resetDataKeyframe(reference, data, 0)
+    mujoco.mj_forward(reference, data)
+    M = np.zeros((reference.nv, reference.nv))
+    mujoco.mj_fullM(reference, data, M)
+    with pytest.warns(gaussim.GaussimWarning, match=r"the bodies 'ball' are left out \(load each with"):
+        arm = gaussim.load_robot(path)
+    ball = gaussim.load_robot(path, body="ball")
+    assert (arm.name, arm.floating, ball.name, ball.floating) == ("two", False, "ball", True)
+    assert [g.name for g in arm.collision_model.geometryObjects][0] == "table"
+    assert "table" not in [g.name for g in ball.collision_model.geometryObjects]
+    assert (arm.mass, ball.mass) == pytest.approx(reference.body_mass[1:], rel=1e-12)
+    q_arm, q_ball = arm.configuration("home"), ball.configuration("home")
+    np.testing.assert_array_equal(
+        np.concatenate([q_arm, mujoco_configuration(q_ball)]), reference.key_qpos[0]
+    )
+    np.testing.assert_allclose(mass_matrix(arm, q_arm), M[:1, :1], rtol=1e-12)
+    T = np.eye(6)
+    T[:3, :3] = pin.Quaternion(q_ball[6], *q_ball[3:6]).matrix()
+    np.testing.assert_allclose(mass_matrix(ball, q_ball), T.T @ M[1:, 1:] @ T, rtol=1e-12, atol=1e-15)
+    with pytest.raises(
+        gaussim.InvalidRobot, match=r"no top-level body 'bal' in <worldbody> \(did you mean ball\?\)"
+    ):
+        gaussim.load_robot(path, body="bal")
+    with pytest.raises(gaussim.InvalidOptions, match=r"body: selects a top-level body of an MJCF file"):
+        gaussim.load_robot(WALKER_URDF, body="torso")
+
+    scene = gaussim.Scene(bodies={"arm": arm, "ball": ball}, ground=gaussim.Ground(height=-1.0))
+    sim = gaussim.Simulator(scene)
+    state = sim.reset({"arm": q_arm, "ball": q_ball})
+    for _ in range(1000):
+        state = sim.step(state)
+    assert state.body("ball").q[2] == pytest.approx(0.05, abs=1e-4)  # on the table top (z = 0), radius 0.05
+
+
 def test_mjcf_included_assets_are_read(tmp_path):
     """dm_control's files include their materials, so that a file holds several <asset> sections, of
     which Pinocchio read the first ("Cannot find material grid"); a mesh of an included file is found
@@ -356,12 +410,12 @@ def test_mjcf_faults_name_the_file_and_cause(tmp_path, fault):
 
 
 def test_mjcf_left_out_bodies_are_warned(tmp_path):
-    """Pinocchio reads only the first body of <worldbody>: the others are named."""
+    """Pinocchio reads one body of <worldbody>, the first by default: the others are named."""
     path = tmp_path / "two.xml"
     body = '<body name="{0}" pos="{1} 0 1"><freejoint/><geom size="0.1" mass="1"/></body>'
     path.write_text(f"<mujoco><worldbody>{body.format('a', 0)}{body.format('b', 1)}</worldbody></mujoco>")
     with pytest.warns(
-        gaussim.GaussimWarning, match=r"only the first body of <worldbody> \('a'\): the bodies 'b'"
+        gaussim.GaussimWarning, match=r"one body of <worldbody>, the first \('a'\): the bodies 'b' are"
     ):
         assert gaussim.load_robot(path).model.nq == 7
 

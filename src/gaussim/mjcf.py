@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from .exceptions import InvalidRobot
+from .exceptions import InvalidRobot, _meant
 
 JOINT_TYPES = ("hinge", "slide", "ball", "free")
 # the numeric attributes of the elements that place and weigh bodies
@@ -81,13 +81,15 @@ def check_file(path: Path, root: ET.Element) -> None:
 
 
 @contextmanager
-def for_pinocchio(path: Path, root: ET.Element) -> Iterator[tuple[str, str]]:
+def for_pinocchio(path: Path, root: ET.Element, body: str | None = None) -> Iterator[tuple[str, str]]:
     """(the file Pinocchio builds the model from, the one it builds the geometry from): ``root`` (the
-    file at ``path``, its includes inlined) with its ``<asset>`` sections merged into one and its asset
-    folders absolute; for the model, besides, each geom's mass as its ``<default>`` class gives it, and
-    every geom counted in its body's inertia (see the module's docstring). Temporary files, removed
-    when the block ends."""
+    file at ``path``, its includes inlined) with one top-level body of ``<worldbody>``, ``body`` (the
+    first when None; the world's own geoms go with the first), its keyframes cut to that body's
+    coordinates, its ``<asset>`` sections merged into one and its asset folders absolute; for the
+    model, besides, each geom's mass as its ``<default>`` class gives it, and every geom counted in its
+    body's inertia (see the module's docstring). Temporary files, removed when the block ends."""
     tree = copy.deepcopy(root)
+    _one_body(path, tree, body)
     sections = tree.findall("asset")
     for section in sections[1:]:
         sections[0].extend(list(section))
@@ -95,11 +97,11 @@ def for_pinocchio(path: Path, root: ET.Element) -> Iterator[tuple[str, str]]:
     _absolute_folders(tree, path.parent)
     weighed = copy.deepcopy(tree)
     defaults, groups = _defaults(weighed), _weighed_groups(weighed)
-    for body, classname in _bodies_with_class(weighed, defaults):
-        for geom in body.findall("geom"):
+    for element, classname in _bodies_with_class(weighed, defaults):
+        for geom in element.findall("geom"):
             mass = _mass(geom, geom.get("class", classname), defaults, groups)
             if mass == 0.0:  # Pinocchio would weigh a mesh 1 kg, any geom of another group
-                body.remove(geom)
+                element.remove(geom)
                 continue
             if mass is not None:
                 geom.set("mass", repr(mass))
@@ -111,6 +113,56 @@ def for_pinocchio(path: Path, root: ET.Element) -> Iterator[tuple[str, str]]:
         ET.ElementTree(weighed).write(model)
         ET.ElementTree(tree).write(geometry)
         yield str(model), str(geometry)
+
+
+def _one_body(path: Path, root: ET.Element, name: str | None) -> None:
+    """Keep the top-level body ``name`` of ``root`` (the first when None) and cut each keyframe's qpos
+    to its coordinates (MuJoCo's qpos holds every body's, in their order, where Pinocchio's reader
+    wants the model's alone: "Keyframe size does not match model size")."""
+    top = bodies(root)
+    names = [str(b.get("name", "")) for b in top]
+    if name is not None and name not in names:
+        listed = ", ".join(repr(n) for n in names)
+        raise InvalidRobot(
+            f"{path}: no top-level body '{name}' in <worldbody>{_meant(name, names)}; its bodies: {listed}"
+        )
+    kept = top[0] if name is None else top[names.index(name)]
+    defaults = _defaults(root)
+    sizes = [_coordinates(b, "main", defaults) for b in top]
+    start = sizes[: top.index(kept)]
+    for world in root.iter("worldbody"):
+        for element in list(world):
+            # the world's own geoms are the first body's robot's (as a file of one body has them)
+            if (element.tag == "body" and element is not kept) or (
+                element.tag == "geom" and kept is not top[0]
+            ):
+                world.remove(element)
+    if len(top) == 1:
+        return
+    offset, size = sum(start), sizes[top.index(kept)]
+    for key in root.iter("key"):
+        for other in ("qvel", "act", "ctrl", "mpos", "mquat"):  # sized by the whole file too
+            key.attrib.pop(other, None)
+        values = key.get("qpos", "").split()
+        if len(values) >= offset + size:
+            key.set("qpos", " ".join(values[offset : offset + size]))
+        elif "qpos" in key.attrib:  # MuJoCo fills the rest with qpos0, which the file does not state
+            key.attrib.pop("qpos")
+
+
+# the qpos size of each joint type (MuJoCo's: a free joint's position and quaternion, a ball's quaternion)
+COORDINATES = {"free": 7, "ball": 4, "hinge": 1, "slide": 1}
+
+
+def _coordinates(body: ET.Element, classname: str, defaults: dict[str, tuple[ET.Element, str | None]]) -> int:
+    """The qpos size of ``body`` and the bodies below it, as MuJoCo counts it."""
+    classname = body.get("childclass", classname)
+    count = 7 * len(body.findall("freejoint"))
+    for joint in body.findall("joint"):
+        count += COORDINATES.get(
+            _attribute(joint, "type", joint.get("class", classname), defaults, "hinge"), 0
+        )
+    return count + sum(_coordinates(child, classname, defaults) for child in body.findall("body"))
 
 
 def _absolute_folders(root: ET.Element, base: Path) -> None:
@@ -148,11 +200,11 @@ def bodies(root: ET.Element) -> list[ET.Element]:
     return [b for world in root.iter("worldbody") for b in world.findall("body")]
 
 
-def check(path: Path, root: ET.Element) -> list[str]:
+def check(path: Path, root: ET.Element, body: str | None = None) -> list[str]:
     """Raise :class:`InvalidRobot` when a body takes its inertia from a mesh geom that weighs (one that
     collides with nothing too; Pinocchio gives such a geom 1 kg and a unit inertia [kg m^2]); return
-    what the model leaves out of the file: the top-level bodies after the first and the
-    ``<equality>`` constraints, each a sentence."""
+    what the model leaves out of the file: the top-level bodies after the first (when no ``body`` of
+    them was chosen) and the ``<equality>`` constraints, each a sentence."""
     from_geoms = compiler(root, "inertiafromgeom", "auto")
     defaults, groups = _defaults(root), _weighed_groups(root)
     meshes = sorted(
@@ -174,11 +226,12 @@ def check(path: Path, root: ET.Element) -> list[str]:
         )
     left_out = []
     top = bodies(root)
-    if len(top) > 1:
+    if len(top) > 1 and body is None:
         names = ", ".join(repr(b.get("name", "")) for b in top[1:])
         left_out.append(
-            f"Pinocchio's MJCF parser reads only the first body of <worldbody> ('{top[0].get('name', '')}'): "
-            f"the bodies {names} are left out (give each its own file to load it)"
+            f"Pinocchio's MJCF parser reads one body of <worldbody>, the first ('{top[0].get('name', '')}'): "
+            f"the bodies {names} are left out (load each with gaussim.load_robot(path, body=...) and give "
+            "the Scene all of them)"
         )
     equalities = [e for section in root.iter("equality") for e in section]
     if equalities:

@@ -219,6 +219,7 @@ def load_robot(
     floating_base: bool | None = None,
     on_massless: str = "lump",
     on_bad_inertia: str = "balance",
+    body: str | None = None,
 ) -> Robot:
     """Load a robot.
 
@@ -235,6 +236,9 @@ def load_robot(
             robots (mobile robots float). A file that says the opposite of the value given is refused.
         on_massless: ``"lump"`` or ``"error"``: see :class:`Robot`.
         on_bad_inertia: ``"balance"`` or ``"error"``: see :class:`Robot`.
+        body: of an MJCF file, the top-level body of ``<worldbody>`` to load (default: the first, with
+            the world's own geoms); the robot is named after it. Each top-level body is its own robot:
+            load each and give a :class:`Scene` all of them.
 
     Raises:
         RobotNotFound: the name is none of the above (the message lists the known names).
@@ -246,7 +250,9 @@ def load_robot(
     if path.suffix in SUFFIXES or path.exists():
         if not path.is_file():
             raise RobotNotFound(str(name), _known_names(), file=True)
-        return _from_file(path, tuple(package_dirs), floating_base, policies)
+        return _from_file(path, tuple(package_dirs), floating_base, policies, body)
+    if body is not None:
+        raise InvalidOptions("body", f"selects a top-level body of an MJCF file; '{name}' is no file")
     if local.is_file():
         if str(name) in example_robot_names():  # the shipped robot comes first: say so
             warnings.warn(
@@ -387,7 +393,11 @@ def _known_names() -> list[str]:
 
 
 def _from_file(
-    path: Path, package_dirs: tuple[str, ...], floating: bool | None, policies: Mapping[str, str]
+    path: Path,
+    package_dirs: tuple[str, ...],
+    floating: bool | None,
+    policies: Mapping[str, str],
+    body: str | None = None,
 ) -> Robot:
     """A robot of a URDF, MJCF or SDF file, told apart by its root element."""
     try:
@@ -395,7 +405,9 @@ def _from_file(
     except ET.ParseError as err:
         raise InvalidRobot(f"{path}: not well-formed XML ({err})") from err
     if tag == "mujoco":
-        return _from_mjcf(path, floating, policies)
+        return _from_mjcf(path, floating, policies, body)
+    if body is not None:
+        raise InvalidOptions("body", f"selects a top-level body of an MJCF file; {path} is no MJCF")
     if tag == "sdf":
         return _from_sdf(path, package_dirs, floating, policies)
     if tag == "robot":
@@ -422,13 +434,15 @@ def _from_urdf(
     return Robot(path.stem, model, collision, visual, str(path), tuple(dirs), {}, **policies)
 
 
-def _from_mjcf(path: Path, floating: bool | None, policies: Mapping[str, str]) -> Robot:
+def _from_mjcf(
+    path: Path, floating: bool | None, policies: Mapping[str, str], body: str | None = None
+) -> Robot:
     root = mjcf.read(path)
     mjcf.check_file(path, root)
-    with mjcf.for_pinocchio(path, root) as (weighed, shaped):
+    with mjcf.for_pinocchio(path, root, body) as (weighed, shaped):
         model, collision, visual = _mjcf_models(path, weighed, shaped, floating)
     mjcf.set_total_mass(root, model)
-    notes = mjcf.check(path, root)
+    notes = mjcf.check(path, root, body)
     mjcf.set_joint_limits(root, model)
     planes = [
         g.name for g in collision.geometryObjects if isinstance(g.geometry, UNBOUNDED) and g.parentJoint == 0
@@ -445,7 +459,8 @@ def _from_mjcf(path: Path, floating: bool | None, policies: Mapping[str, str]) -
     for note in notes:
         warnings.warn(f"{path}: {note}", GaussimWarning, stacklevel=4)
     dirs = (str(path.parent),)
-    return Robot(path.stem, model, collision, visual, str(path), dirs, _configurations(model), **policies)
+    name = path.stem if body is None else body
+    return Robot(name, model, collision, visual, str(path), dirs, _configurations(model), **policies)
 
 
 def _mjcf_models(
