@@ -55,7 +55,20 @@ def read(path: Path) -> ET.Element:
 def check_file(path: Path, root: ET.Element) -> None:
     """Raise :class:`InvalidRobot` naming the element for what Pinocchio's parser would take without a
     word or with an error naming nothing: a number that is not finite, a joint of unknown type, a
-    world without bodies."""
+    world without bodies, global coordinates (which MuJoCo 3 refuses too), ``<frame>`` and
+    ``<replicate>`` (whose bodies and geoms Pinocchio leaves out)."""
+    if compiler(root, "coordinate", "local") == "global":
+        raise InvalidRobot(
+            f'{path}: <compiler coordinate="global"> is not read (MuJoCo 3 refuses it too): convert the file '
+            "to local coordinates (load it in MuJoCo 2.3.3 or older and save it with mujoco.mj_saveLastXML)"
+        )
+    for tag in ("frame", "replicate"):
+        found = next(root.iter(tag), None)
+        if found is not None:
+            raise InvalidRobot(
+                f"{path}: {_named(found)}: Pinocchio's MJCF reader leaves out the bodies and geoms of a "
+                f"<{tag}>: move them into its parent body (MuJoCo's mj_saveLastXML writes them out)"
+            )
     for element in root.iter():
         for key in NUMERIC:
             text = element.get(key)
@@ -81,15 +94,22 @@ def check_file(path: Path, root: ET.Element) -> None:
 
 
 @contextmanager
-def for_pinocchio(path: Path, root: ET.Element, body: str | None = None) -> Iterator[tuple[str, str]]:
+def for_pinocchio(path: Path, root: ET.Element, body: str | int | None = None) -> Iterator[tuple[str, str]]:
     """(the file Pinocchio builds the model from, the one it builds the geometry from): ``root`` (the
-    file at ``path``, its includes inlined) with one top-level body of ``<worldbody>``, ``body`` (the
-    first when None; the world's own geoms go with the first), its keyframes cut to that body's
-    coordinates, its ``<asset>`` sections merged into one and its asset folders absolute; for the
-    model, besides, each geom's mass as its ``<default>`` class gives it, and every geom counted in its
-    body's inertia (see the module's docstring). Temporary files, removed when the block ends."""
+    file at ``path``, its includes inlined) with one top-level body of ``<worldbody>``, ``body`` (by
+    name or place; the first when None; the world's own geoms go with the first), its keyframes cut
+    to that body's coordinates, its ``<asset>`` sections merged into one and its asset folders
+    absolute; for the model, besides, each geom's mass as its ``<default>`` class gives it, and every
+    geom counted in its body's inertia (see the module's docstring). Temporary files, removed when the
+    block ends."""
     tree = copy.deepcopy(root)
     _one_body(path, tree, body)
+    tops = tree.findall("default")
+    if not tops:  # before the bodies, which Pinocchio reads in order
+        tops = [ET.Element("default")]
+        tree.insert(0, tops[0])
+    for top in tops:
+        top.set("class", top.get("class", "main"))  # MuJoCo's name of it, which Pinocchio does not know
     sections = tree.findall("asset")
     for section in sections[1:]:
         sections[0].extend(list(section))
@@ -115,18 +135,18 @@ def for_pinocchio(path: Path, root: ET.Element, body: str | None = None) -> Iter
         yield str(model), str(geometry)
 
 
-def _one_body(path: Path, root: ET.Element, name: str | None) -> None:
-    """Keep the top-level body ``name`` of ``root`` (the first when None) and cut each keyframe's qpos
-    to its coordinates (MuJoCo's qpos holds every body's, in their order, where Pinocchio's reader
-    wants the model's alone: "Keyframe size does not match model size")."""
+def _one_body(path: Path, root: ET.Element, name: str | int | None) -> None:
+    """Keep the top-level body ``name`` of ``root`` (by name or place; the first when None) and cut
+    each keyframe's qpos to its coordinates (MuJoCo's qpos holds every body's, in their order, where
+    Pinocchio's reader wants the model's alone: "Keyframe size does not match model size")."""
     top = bodies(root)
     names = [str(b.get("name", "")) for b in top]
-    if name is not None and name not in names:
+    if isinstance(name, str) and name not in names:
         listed = ", ".join(repr(n) for n in names)
         raise InvalidRobot(
             f"{path}: no top-level body '{name}' in <worldbody>{_meant(name, names)}; its bodies: {listed}"
         )
-    kept = top[0] if name is None else top[names.index(name)]
+    kept = top[0 if name is None else names.index(name) if isinstance(name, str) else name]
     defaults = _defaults(root)
     sizes = [_coordinates(b, "main", defaults) for b in top]
     start = sizes[: top.index(kept)]
@@ -166,25 +186,33 @@ def _coordinates(body: ET.Element, classname: str, defaults: dict[str, tuple[ET.
 
 
 def _absolute_folders(root: ET.Element, base: Path) -> None:
-    """Make the mesh and texture folders of ``<compiler>`` absolute (relative to ``base``, the file's
-    folder, as MuJoCo takes them; ``assetdir`` or the file's folder where they are not given), so that a
-    copy of the file elsewhere finds its assets."""
-    assets = base / compiler(root, "assetdir", "")
-    folders = {key: str(assets / compiler(root, key, "")) for key in ("meshdir", "texturedir")}
-    root.insert(0, ET.Element("compiler", folders))  # before the assets, which Pinocchio reads in order
-    for settings in root.iter("compiler"):
-        settings.attrib.update(folders)
+    """One ``<compiler>`` first in ``root`` (Pinocchio reads the first alone), of every attribute as MuJoCo
+    takes it (the last given wins), its mesh and texture folders absolute: each relative to ``base``,
+    the file's folder, and ``assetdir`` where not given (as MuJoCo takes them), so that a copy of the
+    file elsewhere finds its assets."""
+    base = base.absolute()
+    merged: dict[str, str] = {}
+    for parent in list(root.iter()):
+        for settings in parent.findall("compiler"):
+            merged.update(settings.attrib)
+            parent.remove(settings)
+    assets = merged.pop("assetdir", "")
+    for key in ("meshdir", "texturedir"):
+        merged[key] = str(base / merged.get(key, assets))
+    root.insert(0, ET.Element("compiler", merged))
 
 
-def set_total_mass(root: ET.Element, model: pin.Model) -> None:
-    """Scale every body's mass and inertia by one factor so that they weigh ``<compiler
-    settotalmass>`` [kg] when it is positive, as MuJoCo's compiler does."""
+def total_mass(root: ET.Element) -> float | None:
+    """``<compiler settotalmass>`` [kg], or None when not positive (MuJoCo then leaves the masses)."""
     total = float(compiler(root, "settotalmass", "-1"))
-    weighed = sum(inertia.mass for inertia in model.inertias[1:])
-    if total <= 0 or weighed <= 0:
-        return
-    factor = total / weighed
-    for j in range(1, model.njoints):
+    return total if total > 0 else None
+
+
+def set_total_mass(model: pin.Model, factor: float) -> None:
+    """Scale every body's mass and inertia by ``factor``, as MuJoCo's compiler does for ``<compiler
+    settotalmass>`` (the factor that brings the whole file's mass to it), the bodies welded to the world
+    (Pinocchio's universe, joint 0) too."""
+    for j in range(model.njoints):
         inertia = model.inertias[j]
         model.inertias[j] = pin.Inertia(factor * inertia.mass, inertia.lever, factor * inertia.inertia)
 

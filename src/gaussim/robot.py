@@ -441,7 +441,9 @@ def _from_mjcf(
     mjcf.check_file(path, root)
     with mjcf.for_pinocchio(path, root, body) as (weighed, shaped):
         model, collision, visual = _mjcf_models(path, weighed, shaped, floating)
-    mjcf.set_total_mass(root, model)
+    total = mjcf.total_mass(root)
+    if total is not None:
+        mjcf.set_total_mass(model, total / _file_mass(path, root, body, model))
     notes = mjcf.check(path, root, body)
     mjcf.set_joint_limits(root, model)
     planes = [
@@ -461,6 +463,22 @@ def _from_mjcf(
     dirs = (str(path.parent),)
     name = path.stem if body is None else body
     return Robot(name, model, collision, visual, str(path), dirs, _configurations(model), **policies)
+
+
+def _file_mass(path: Path, root: ET.Element, body: str | None, model: pin.Model) -> float:
+    """The mass of every body of the MJCF at ``path`` as Pinocchio reads it (before ``settotalmass``):
+    ``model``'s (that of ``body``, or of the first top-level body) and each other top-level body's."""
+    names = [str(b.get("name", "")) for b in mjcf.bodies(root)]
+    loaded = names.index(body) if body is not None else 0
+    mass = sum(inertia.mass for inertia in model.inertias)
+    for k in range(len(names)):
+        if k != loaded:
+            with mjcf.for_pinocchio(path, root, k) as (weighed, _):
+                other = pin.buildModelFromMJCF(weighed)
+            mass += sum(inertia.mass for inertia in other.inertias)
+    if mass <= 0:
+        raise InvalidRobot(f"{path}: <compiler settotalmass> scales the masses of a file that weighs nothing")
+    return mass
 
 
 def _mjcf_models(
@@ -488,7 +506,7 @@ def _mjcf_models(
                 )
         collision = pin.buildGeomFromMJCF(model, shaped, pin.GeometryType.COLLISION)
         visual = pin.buildGeomFromMJCF(model, shaped, pin.GeometryType.VISUAL)
-    except (RuntimeError, ValueError, OSError) as err:
+    except (RuntimeError, ValueError, OSError, IndexError) as err:  # IndexError: a name Pinocchio misses
         raise InvalidRobot(f"{path}: cannot build a model from this MJCF: {_cause(err)}") from err
     return model, collision, visual
 
