@@ -291,6 +291,31 @@ def test_bilaterals_name_the_frames_of_bodies(tmp_path):
     assert [b.name for b in spec.scene.bilaterals] == ["anchor arm/tip", "loop arm/tip-crate/crate"]
 
 
+def test_the_bodies_of_an_mjcf_file_are_a_scene(tmp_path):
+    """[[bodies]] tables take each top-level body of one MJCF file (body = ...): an arm and a ball, the
+    ball coming to rest on the table, the world's geom that goes with the first body."""
+    (tmp_path / "two.xml").write_text(
+        '<mujoco><worldbody><geom name="table" type="box" pos="0 0 -0.05" size="1 1 0.05"/>'
+        '<body name="arm" pos="0 0 0.5"><joint type="hinge" axis="0 1 0"/>'
+        '<geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.03"/></body>'
+        '<body name="ball" pos="0.5 0 0.3"><freejoint/><geom type="sphere" size="0.05"/></body>'
+        "</worldbody></mujoco>"
+    )
+    path = _write(
+        tmp_path,
+        '[[bodies]]\nname = "arm"\nmjcf = "two.xml"\nbody = "arm"\n'
+        '[[bodies]]\nname = "ball"\nmjcf = "two.xml"\nbody = "ball"\nconfiguration = "qpos0"\n'
+        "[ground]\nheight = -1.0\n[simulation]\nduration = 1.0\n",
+    )
+    spec = gaussim.load_scene(path)
+    assert [b.robot.name for b in spec.scene.bodies.values()] == ["arm", "ball"]
+    sim = gaussim.Simulator(spec.scene, spec.options)
+    state = sim.reset(spec.initial.q, spec.initial.v)
+    for _ in range(spec.options.steps(1.0)):
+        state = sim.step(state)
+    assert state.body("ball").q[2] == pytest.approx(0.05, abs=1e-4)
+
+
 BOX = '[[bodies]]\nname = "crate"\nshape = "box"\nsize = [0.2, 0.2, 0.2]\nmass = 1.0\n'
 SOLO = '[[bodies]]\nname = "solo"\nrobot = "solo12"\n'
 
@@ -317,6 +342,8 @@ SOLO = '[[bodies]]\nname = "solo"\nrobot = "solo12"\n'
             "missing: a capsule needs radius and length",
         ),
         (BOX + "floating = true\n", r"bodies\[0\].floating", "only a robot takes it"),
+        (SOLO + 'body = "base"\n', r"bodies\[0\].body", "a top-level body of an mjcf file, not of a robot"),
+        (SOLO + "body = 3\n", r"bodies\[0\].body", "must be a string"),
         (SOLO + "mass = 3.0\n", r"bodies\[0\].mass", "only a shape takes it"),
         (SOLO.replace("solo12", "solo13"), r"bodies\[0\].robot", "no robot 'solo13'.*solo12"),
         ('[[bodies]]\nname = "m"\nmjcf = "missing.xml"\n', r"bodies\[0\].mjcf", "no such file"),

@@ -6,8 +6,9 @@ One robot:
     [control]      type = "zero" | "constant" (tau = [...]) | "pd" (target = name | [...], kp, kd)
 or several bodies, one table each (in place of [robot], [initial] and [control]):
     [[bodies]]     name; robot = "solo12" | urdf | mjcf | sdf = "path" (package_dirs, floating for
-                   a URDF) | shape = "box" (size = [x, y, z]) | "sphere" (radius) | "cylinder" |
-                   "capsule" (radius, length) | "mesh" (path, scale) with mass or density;
+                   a URDF, body: a top-level body of an MJCF) | shape = "box" (size = [x, y, z]) |
+                   "sphere" (radius) | "cylinder" | "capsule" (radius, length) | "mesh" (path, scale)
+                   with mass or density;
                    position, rpy: a floating body's start pose, a fixed-base robot's placement;
                    configuration = name | [...] (nq_b), velocity = [...] (nv_b), ground_clearance;
                    self_collision, friction, restitution, contype, conaffinity, color = [r, g, b, a]
@@ -68,6 +69,7 @@ SECTIONS = {
         "sdf",
         "package_dirs",
         "floating",
+        "body",
         "shape",
         "size",
         "radius",
@@ -112,7 +114,7 @@ SHAPE_DIMENSIONS = {
     "mesh": ("path", "scale"),
 }
 # the keys of a [[bodies]] table that only a robot, or only a shape, takes
-ROBOT_KEYS = ("package_dirs", "floating")
+ROBOT_KEYS = ("package_dirs", "floating", "body")
 SHAPE_KEYS = ("size", "radius", "length", "path", "scale", "mass", "density")
 # The largest joint torque a scene may command [N m] (Talos's strongest joint gives 300): beyond it the
 # QP's rows span hundreds of orders of magnitude and ProxQP stops without a motion (tau = 1e300)
@@ -528,10 +530,14 @@ class _Reader:
             self.fail(key, f"no such file: {target}")
         return target
 
-    def load(self, key: str, source: str | Path, dirs: list[str], floating: bool | None) -> Robot:
-        if not dirs and (str(source), floating) in self.loaded:
+    def load(
+        self, key: str, source: str | Path, dirs: list[str], floating: bool | None, body: str | None = None
+    ) -> Robot:
+        if not dirs and body is None and (str(source), floating) in self.loaded:
             return self.loaded[str(source), floating]
-        return self.wrap(key, lambda: load_robot(source, package_dirs=dirs, floating_base=floating))
+        return self.wrap(
+            key, lambda: load_robot(source, package_dirs=dirs, floating_base=floating, body=body)
+        )
 
     def bodies(self) -> list[_BodyEntry]:
         for section in ("robot", "initial", "control"):
@@ -620,9 +626,14 @@ class _Reader:
         if floating is not None:
             self.boolean(f"{key}.floating", floating)
         dirs = self.folders(f"{key}.package_dirs", section.get("package_dirs", []))
+        body = section.get("body")
+        if body is not None:
+            self.string(f"{key}.body", body)
+            if kind != "mjcf":
+                self.fail(f"{key}.body", f"selects a top-level body of an mjcf file, not of a {kind}")
         where = f"{key}.{kind}"
         source = self.string(where, section[kind]) if kind == "robot" else self.file(where, section[kind])
-        return self.load(where, source, dirs, floating)
+        return self.load(where, source, dirs, floating, body)
 
     def shape(self, key: str, name: str, section: dict[str, Any]) -> FreeBody:
         """The free body of a [[bodies]] table that gives a ``shape``."""
