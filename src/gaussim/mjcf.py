@@ -258,8 +258,8 @@ def check(path: Path, root: ET.Element, body: str | None = None) -> list[str]:
         names = ", ".join(repr(b.get("name", "")) for b in top[1:])
         left_out.append(
             f"Pinocchio's MJCF parser reads one body of <worldbody>, the first ('{top[0].get('name', '')}'): "
-            f"the bodies {names} are left out (load each with gaussim.load_robot(path, body=...) and give "
-            "the Scene all of them)"
+            f"the bodies {names} are left out (load each with gaussim.load_robot(path, body=...), or in a "
+            "scene file's [[bodies]] table of mjcf = PATH with body = NAME, and give the scene all of them)"
         )
     equalities = [e for section in root.iter("equality") for e in section]
     if equalities:
