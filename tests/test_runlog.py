@@ -14,7 +14,7 @@ import pytest
 
 import gaussim
 from gaussim.files import OutputError
-from gaussim.runlog import RunLogError
+from gaussim.runlog import WRITING, RunLogError
 
 SCENES = Path(__file__).resolve().parents[1] / "robots" / "scenes"
 
@@ -122,6 +122,39 @@ def test_a_failed_save_never_replaces_a_good_log(tmp_path, monkeypatch):
         gaussim.run(_short("ball_bounce", 20), out)
     assert gaussim.RunLog.load(out).steps == 10
     assert [p.name for p in tmp_path.iterdir()] == ["run.npz"], "no temporary file left behind"
+
+
+# a process that holds the lock of the file argv[1], as a run writing its log does, until it is killed
+HOLDER = (
+    "import fcntl, os, sys, time; fd = os.open(sys.argv[1], os.O_RDWR); fcntl.lockf(fd, fcntl.LOCK_EX); "
+    "print('held', flush=True); time.sleep(600)"
+)
+
+
+def test_what_a_kill_midway_through_a_write_leaves_is_ignored_then_cleared(tmp_path):
+    """A SIGKILL while a chunk is written leaves its hidden temporary file in the log, and one before the
+    log's first state its temporary folder beside it: a read ignores them; the next run into the path
+    removes them (the folder of a run still starting, whose lock is held, is left alone)."""
+    out = tmp_path / "r"
+    gaussim.run(_short("ball_bounce", 10), out)
+    torn = out / ".chunk-000002.npz.ab12cd_x.tmp.npz"
+    torn.write_bytes(b"PK\x03\x04 torn")
+    stale, starting = tmp_path / ".r.k3j4h5g6.new", tmp_path / ".r.a1b2c3d4.new"
+    for folder in (stale, starting):
+        folder.mkdir()
+        (folder / WRITING).write_text("")
+    holder = subprocess.Popen([sys.executable, "-c", HOLDER, str(starting / WRITING)], stdout=subprocess.PIPE)
+    try:
+        assert holder.stdout.readline() == b"held\n"
+        log = gaussim.RunLog.load(out)
+        assert log.complete and log.steps == 10
+        gaussim.run(_short("ball_bounce", 5), out)
+    finally:
+        holder.kill()
+        holder.communicate()
+    assert sorted(p.name for p in tmp_path.iterdir()) == [starting.name, "r", "r.prev"]
+    assert not [p.name for p in (tmp_path / "r.prev").iterdir() if p.name.endswith(".tmp.npz")]
+    assert gaussim.RunLog.load(tmp_path / "r.prev").steps == 10
 
 
 def test_not_a_log_is_named(tmp_path):

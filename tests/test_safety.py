@@ -17,7 +17,7 @@ import gaussim
 import gaussim.viewer
 from gaussim.cli import main
 from gaussim.files import OutputError
-from gaussim.runlog import RUNNING, RunLogWriter
+from gaussim.runlog import LIVE, STOPPED, WRITING, RunLogWriter
 from gaussim.runner import STOP_SIGNALS
 from gaussim.viewer import Viewer
 
@@ -217,17 +217,35 @@ def test_the_log_is_a_valid_prefix_at_any_instant_and_after_a_sigkill(tmp_path):
     seen = []
     for _ in range(5):
         log = gaussim.RunLog.load(out)
-        assert log.reason == RUNNING and log.steps % 10 == 0 and len(log.t) == log.steps + 1
+        assert log.reason == LIVE.format(process.pid) and log.steps % 10 == 0 and len(log.t) == log.steps + 1
         seen.append(log.steps)
     process.kill()
     process.communicate(timeout=30)
-    log = gaussim.RunLog.load(out)
-    assert not log.complete and log.reason == RUNNING
+    log = gaussim.RunLog.load(out)  # its writer gone: it says so, not "still running"
+    assert not log.complete and log.reason == STOPPED
     assert log.steps >= seen[-1] > 0 and log.steps % 10 == 0 and len(log.t) == log.steps + 1
     # a prefix of the run: the same steps as an uninterrupted run's
     spec = gaussim.load_scene(SCENES / "fourbar.toml")
     spec.duration = log.steps * spec.options.dt
     np.testing.assert_array_equal(gaussim.run(spec).q, log.q)
+
+
+def test_a_run_into_a_log_another_run_is_writing_is_refused_and_leaves_it_whole(tmp_path, capsys):
+    """Moved aside, the log would have taken the first run's next chunks into the second's (a mix of two
+    runs); once the first is killed, the same command replaces it."""
+    out = tmp_path / "r"
+    process = _long_run(out, 10)
+    _wait_for_chunks(out, 2, process)
+    argv = ["run", str(SCENES / "box_incline.toml"), "--out", str(out), "--duration", "0.01", "--quiet"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert f"another run (process {process.pid}) is still writing {out}" in err and "Traceback" not in err
+    assert not (tmp_path / "r.prev").exists()
+    process.kill()
+    process.communicate(timeout=30)
+    assert gaussim.RunLog.load(out).robot == "fourbar"
+    assert main(argv) == 0
+    assert gaussim.RunLog.load(out).robot == "box" and gaussim.RunLog.load(f"{out}.prev").robot == "fourbar"
 
 
 # -- the log's format ------------------------------------------------------------------------------------
@@ -365,7 +383,8 @@ def test_a_full_disk_midway_stops_the_run_and_keeps_what_fits(tmp_path, capsys):
         assert "the log of the first" in stderr
         log = gaussim.RunLog.load(small / "r")
         assert not log.complete and log.steps >= 20 and len(log.t) == log.steps + 1
-        assert not [p for p in (small / "r").iterdir() if p.name.startswith(".")], "no temporary file left"
+        left = [p.name for p in (small / "r").iterdir() if p.name.startswith(".") and p.name != WRITING]
+        assert not left, "no temporary file left"
 
 
 def test_a_page_rewritten_on_a_full_disk_keeps_the_previous_one(tmp_path, capsys):

@@ -500,7 +500,7 @@ def _stability(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from .runlog import is_run_log
+    from .runlog import check_replaceable, is_run_log
     from .runner import (
         CHECKPOINT_STEPS,
         Interrupted,
@@ -538,6 +538,7 @@ def _run(args: argparse.Namespace) -> int:
         check_writable(args.plot, "--plot")
     if args.force_scale is not None:
         _positive("--force-scale", args.force_scale)
+    check_replaceable(out)  # before saying the log there is kept: it may be refused
     if is_run_log(out):
         print(f"gaussim: {out} holds a run log: it will be kept as {out}.prev", file=sys.stderr)
     viewer = None

@@ -10,8 +10,6 @@ Used by the benchmark's knob sweep (:mod:`gaussim.bench.sweep`) and the user's p
 
 from __future__ import annotations
 
-import errno
-import fcntl
 import json
 import os
 import threading
@@ -22,7 +20,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from .exceptions import GaussimError, InvalidOptions, shown
-from .files import OutputError
+from .files import Busy, OutputError, take_lock
 
 Job = TypeVar("Job")
 # called with (done, total, record) after each job: done counts this batch's jobs, total those it runs
@@ -59,26 +57,21 @@ def exclusive(folder: Path) -> Iterator[None]:
     if held is not None:  # a second descriptor's close would drop this process's lock: never open one
         raise FolderInUse(f"{folder}: another sweep of this process is writing this folder")
     folder.mkdir(parents=True, exist_ok=True)
-    with open(folder / LOCK, "a+") as lock:
-        try:
-            fcntl.lockf(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError as err:
-            if err.errno not in (errno.EACCES, errno.EAGAIN):
-                raise OutputError(f"{folder}: cannot lock it for the sweep ({err.strerror or err})") from err
-            lock.seek(0)
-            holder = lock.read().strip()
-            raise FolderInUse(
-                f"{folder}: another sweep{f' (process {holder})' if holder else ''} is writing this folder;"
-                " wait for it to end, or give another output folder"
-            ) from None
-        lock.truncate(0)
-        lock.write(str(os.getpid()))  # who holds it, for the message of the one it stops
-        lock.flush()
-        _HELD[resolved] = threading.get_ident()
-        try:
-            yield
-        finally:
-            del _HELD[resolved]
+    try:
+        fd = take_lock(folder / LOCK)
+    except Busy as busy:
+        raise FolderInUse(
+            f"{folder}: another sweep{f' (process {busy.holder})' if busy.holder else ''} is writing this "
+            "folder; wait for it to end, or give another output folder"
+        ) from None
+    except OSError as err:
+        raise OutputError(f"{folder}: cannot lock it for the sweep ({err.strerror or err})") from err
+    _HELD[resolved] = threading.get_ident()
+    try:
+        yield
+    finally:
+        del _HELD[resolved]
+        os.close(fd)
 
 
 def load(path: Path) -> list[dict]:
