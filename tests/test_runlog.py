@@ -475,6 +475,28 @@ def test_inspect_lists_the_bodies_and_their_pairs(tmp_path, capsys):
     assert "    solo - crate: 17: solo/base_link_0/crate/box, " in out and ", ... (11 more)\n" in out
 
 
+def test_inspect_reads_a_stopped_log_and_a_log_in_place_of_a_scene_is_named(tmp_path, capsys):
+    """`inspect` on a log told its scene file "cannot read it: Is a directory"; run and sweep, which take a
+    scene, say it is a log and what reads it."""
+    from gaussim.cli import main
+
+    spec = _short("box_incline", 30)
+    spec.options = spec.options.replace(max_iter=1, solver="proxqp", dt=2e-3)  # it fails at its first QP
+    with pytest.raises(gaussim.SolverError):
+        gaussim.run(spec, tmp_path / "r")
+    capsys.readouterr()
+    assert main(["inspect", str(tmp_path / "r")]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith(f"run log {tmp_path / 'r'}: ") and "; INCOMPLETE: SolverError at step" in out
+    assert f"made from {SCENES / 'box_incline.toml'}" in out and "robot box" in out
+    assert "options: dt = 0.002 s" in out, "the run's options, not its scene file's"
+    for command in ("run", "sweep"):
+        assert main([command, str(tmp_path / "r"), "--seeds" if command == "sweep" else "--quiet", *(
+            ["2"] if command == "sweep" else [])]) == 2  # fmt: skip
+        err = capsys.readouterr().err
+        assert f"r: file: a run log, not a scene file: `gaussim inspect {tmp_path / 'r'}` shows it" in err
+
+
 def test_cli_tells_gaussims_warnings_as_its_own_lines(tmp_path):
     """The command prints a GaussimWarning as ``gaussim: warning: ...``, not as Python shows it (the
     gaussim source file and line that raised it)."""

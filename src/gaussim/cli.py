@@ -32,6 +32,7 @@ from .stops import STOP_SIGNALS, interrupt, taken_stop
 
 if TYPE_CHECKING:
     from .scene import Scene
+    from .scenefile import SceneSpec
     from .study import Run
     from .world import BodyLayout
 
@@ -133,8 +134,12 @@ def main(argv: list[str] | None = None) -> int:
         "--bodies", nargs="+", metavar="NAME", help="forces of these bodies' (or obstacles') contacts only"
     )
 
-    inspect = commands.add_parser("inspect", help="describe a scene's robot, constraints and QP size")
-    inspect.add_argument("scene", type=Path, help="scene file (TOML), or a robot (see gaussim run)")
+    inspect = commands.add_parser(
+        "inspect", help="describe a scene's robot, constraints and QP size; or a run log and its scene"
+    )
+    inspect.add_argument(
+        "scene", type=Path, help="scene file (TOML), a robot (see gaussim run), or a run log"
+    )
 
     forces = commands.add_parser("forces", help="export the per-contact force time series of a run log")
     forces.add_argument("log", type=Path, help="run log directory (written by gaussim run)")
@@ -637,15 +642,22 @@ def _read_log(path: Path):  # type: ignore[no-untyped-def]
 
 def _log_and_scene(path: Path):  # type: ignore[no-untyped-def]
     """A run log and the scene it was made from (its scene text is stored in it)."""
-    from .scenefile import load_scene_text
-
     log = _read_log(path)
     if log.steps == 0:
         raise GaussimError(f"{path}: the run log holds no step")
+    return log, _log_spec(path, log).scene
+
+
+def _log_spec(path: Path, log) -> SceneSpec:  # type: ignore[no-untyped-def]
+    """The scene file a run log was made from (the text it stores), with the options the run used."""
+    from .scenefile import load_scene_text
+
     try:
-        return log, load_scene_text(log.scene_text, log.scene_path or path).scene
+        spec = load_scene_text(log.scene_text, log.scene_path or path)
     except GaussimError as err:
         raise GaussimError(f"{path}: the scene this log holds does not load: {err}") from err
+    spec.options = log.options  # a run's --dt, --scheme, --friction-mode
+    return spec
 
 
 def _write_replay(
@@ -701,10 +713,24 @@ def _plot(args: argparse.Namespace) -> int:
 def _inspect(args: argparse.Namespace) -> int:
     import numpy as np
 
+    from .runlog import is_run_log
     from .scenefile import load_scene
     from .simulator import Simulator
 
-    spec = load_scene(args.scene)
+    if is_run_log(args.scene):  # a log: what it holds, then the scene it was made from
+        from .runlog import RunLog
+
+        log = RunLog.load(args.scene)
+        t = log.t
+        status = "complete" if log.complete else f"INCOMPLETE: {log.reason}"
+        _say(f"run log {args.scene}: {log.steps} steps, t = {t[0]:.6g} to {t[-1]:.6g} s; {status}")
+        if not log.scene_text.strip():
+            _say("  no scene file stored (a log written from Python without its scene's text)")
+            return EXIT_OK
+        _say(f"  made from {log.scene_path or 'a scene file'}, with its options; that scene:")
+        spec = _log_spec(args.scene, log)
+    else:
+        spec = load_scene(args.scene)
     robot, scene, o = spec.robot, spec.scene, spec.options
     model = robot.model
     _say(f"robot {robot.name} ({robot.urdf or f'{len(scene.bodies)} bodies merged'})")

@@ -202,6 +202,15 @@ def load_scene(path: str | Path, **overrides: Any) -> SceneSpec:
     try:
         raw = path.read_bytes()
     except OSError as err:
+        from .runlog import is_run_log
+
+        if is_run_log(path):  # the commands that read a log would be the user's next try
+            raise SceneFileError(
+                path,
+                "file",
+                f"a run log, not a scene file: `gaussim inspect {path}` shows it and the scene it was made "
+                "from; gaussim replay, plot and forces read it",
+            ) from err
         scenes = sorted(p.stem for p in (ROBOTS_DIR / "scenes").glob("*.toml"))
         close = get_close_matches(str(path), [*scenes, *example_robot_names()], n=3)
         meant = f"did you mean {' or '.join(close)}? " if close and path.parent == Path() else ""
