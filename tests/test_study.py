@@ -211,6 +211,19 @@ def test_two_keys_that_set_one_field_are_refused_naming_both(tmp_path, first, se
         (["--vary", "ground.friction=1", "--plot", "box.speed", "--against", "options.dt"], "not varied"),
         (["--vary", "ground.friction=1", "--plot", "speed", "--against", "ground.friction"], "box.speed"),
         (
+            [
+                "--vary",
+                "ground.friction=1",
+                "--plot",
+                "box.x",
+                "--against",
+                "ground.friction",
+                "--plot-file",
+                "x.jpg",
+            ],
+            "--plot-file x.jpg: the image's suffix must be one of .png, .pdf, .svg",
+        ),
+        (
             ["--vary", "ground.friction=1", "--scheduler", "127.0.0.1"],
             "--scheduler: '127.0.0.1': missing port",
         ),

@@ -406,7 +406,7 @@ def _sweep(args: argparse.Namespace) -> int:
         plot = (
             args.plot,
             args.against,
-            plot_path(args.plot_file or out / f"{args.plot}-vs-{args.against}.png"),
+            plot_path(args.plot_file or out / f"{args.plot}-vs-{args.against}.png", "--plot-file"),
         )
         check_writable(plot[2], "--plot-file")
     with exclusive(out):  # from the count of the finished runs to the table: a second sweep stops at once
@@ -519,7 +519,7 @@ def _run(args: argparse.Namespace) -> int:
     if args.plot:
         from .plots import plot_path
 
-        plot_path(args.plot)  # before the run, not after it
+        plot_path(args.plot, "--plot")  # before the run, not after it
     if args.dt is not None:
         _positive("--dt", args.dt)
     # placing the robot on the ground compiles kernels too
@@ -703,7 +703,7 @@ def _serve(message: str) -> None:
 def _plot(args: argparse.Namespace) -> int:
     from .plots import plot_path, save_plot
 
-    plot_path(args.output)
+    plot_path(args.output, "--output")
     check_writable(args.output, "--output")
     log, scene = _log_and_scene(args.log)
     print(f"{args.what} plot: {save_plot(log, scene, args.output, args.what, args.bodies)}")
