@@ -14,6 +14,7 @@ import psutil
 import pytest
 
 import gaussim
+import gaussim.files
 import gaussim.viewer
 from gaussim.cli import main
 from gaussim.files import OutputError
@@ -369,6 +370,20 @@ def test_an_unwritable_output_is_refused_before_the_first_step(tmp_path, capsys)
             stderr = capsys.readouterr().err
             assert "cannot be written (Read-only file system)" in stderr
             assert "steps/s" not in stderr, "no step made"
+        # the reports of the benchmarks and the stability cases (minutes to hours of work) as well
+        for command in (
+            ["stability", "--report", str(ro / "s.md")],
+            ["bench", "--quick", "--no-peers", "--out", str(ro / "b")],
+            ["bench", "--quick", "--no-peers", "--out", str(tmp_path / "b"), "--report", str(ro / "b.md")],
+            ["bench", "--scenes", "--quick", "--no-peers", "--report", str(ro / "s.md")],
+        ):
+            assert main(command) == 2, command
+            stderr = capsys.readouterr().err
+            assert f"{command[-2]} {command[-1]}: cannot be written (Read-only file system)" in stderr
+            assert "pass " not in stderr and "[1/" not in stderr, "no case run"
+        with pytest.raises(OSError) as raised:  # named after the file asked for, not its temporary one
+            gaussim.files.write_atomic(ro / "page.html", b"")
+        assert raised.value.filename == str(ro / "page.html")
     (tmp_path / "dir.png").mkdir()
     assert main(["run", str(SCENES / "fourbar.toml"), "--plot", str(tmp_path / "dir.png")]) == 2
     assert "dir.png: is a directory" in capsys.readouterr().err

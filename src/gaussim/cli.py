@@ -305,6 +305,9 @@ def _bench(args: argparse.Namespace) -> int:
     unknown = sorted(set(args.cases) - set(CASES))
     if unknown:
         raise InvalidOptions("cases", f"unknown {unknown}; known: {', '.join(CASES)}")
+    check_folder(args.out, "--out")  # before the runs, not after them
+    if args.report is not None:
+        check_writable(args.report, "--report")
 
     def progress(done: int, total: int, record: dict) -> None:
         print(f"[{done}/{total}] {record['key']}: {record['status']}", file=sys.stderr, flush=True)
@@ -341,6 +344,8 @@ def _bench_suite(args: argparse.Namespace) -> int:
     unknown = sorted(set(args.cases) - set(suite.SCENES))
     if unknown:
         raise InvalidOptions("cases", f"unknown {unknown}; known: {', '.join(suite.SCENES)}")
+    if args.report is not None:
+        check_writable(args.report, "--report")  # before the suite, not after it
     flags = " --quick" if args.quick else ""
     command = f"gaussim bench --{'scenes' if args.scenes else 'motion'}{flags} {' '.join(args.cases)}".strip()
     before = python_loop()  # the machine's speed around the run: timings compare within one spell
@@ -491,6 +496,7 @@ def _finished(out: Path) -> set[str]:
 def _stability(args: argparse.Namespace) -> int:
     from .bench.stability import cases, markdown
 
+    check_writable(args.report, "--report")  # before the cases, not after them
     rows = []
     for case in cases(args.long):
         row = case()

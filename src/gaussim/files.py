@@ -36,11 +36,15 @@ _TEMPORARY = re.compile(r"\..+\.[a-z0-9_]{8}\.tmp(\.[^.]*)?")
 @contextmanager
 def atomic_path(path: str | Path) -> Iterator[Path]:
     """A temporary path beside ``path`` (same suffix, for writers that pick the format from it), renamed
-    to ``path`` when the block succeeds and removed when it fails; an OSError of the block (a full disk
-    midway, whose write names no file) is raised again naming ``path``."""
+    to ``path`` when the block succeeds and removed when it fails; an OSError of its making or of the
+    block (a read-only folder, a full disk midway, whose write names no file) is raised again naming
+    ``path``."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=f".tmp{path.suffix}", dir=path.parent)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=f".tmp{path.suffix}", dir=path.parent)
+    except OSError as err:  # named after path, not the temporary file no one asked for
+        raise OSError(err.errno, err.strerror or str(err), str(path)) from err
     os.close(fd)
     tmp = Path(name)
     try:
