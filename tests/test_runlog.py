@@ -232,6 +232,13 @@ def test_parquet_without_pyarrow_says_what_to_install(tmp_path, monkeypatch):
             "--dt: must be a finite number > 0, got -1.0",
         ),
         (["forces", "missing.npz", "--csv", "x.csv"], 2, "missing.npz: cannot read it: No such file"),
+        # flags of a live view, without one: they were ignored without a word
+        (
+            ["run", str(SCENES / "ball_bounce.toml"), "--speed", "0.5"],
+            2,
+            "--speed: applies to a live view only",
+        ),
+        (["run", str(SCENES / "ball_bounce.toml"), "--no-wait"], 2, "--no-wait: applies to a live view only"),
     ],
 )
 def test_cli_bad_input_exits_2_without_traceback(tmp_path, args, code, message):

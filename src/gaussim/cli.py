@@ -99,7 +99,7 @@ def main(argv: list[str] | None = None) -> int:
     run.add_argument("--duration", type=float, help="simulated time [s]")
     run.add_argument("--quiet", action="store_true", help="no progress line")
     run.add_argument("--view", action="store_true", help="show the run live in the browser (meshcat)")
-    run.add_argument("--speed", type=float, default=1.0, help="with --view: times real time (default 1)")
+    run.add_argument("--speed", type=float, help="with --view: times real time (default 1)")
     run.add_argument(
         "--no-wait",
         action="store_true",
@@ -528,6 +528,12 @@ def _run(args: argparse.Namespace) -> int:
         plot_path(args.plot, "--plot")  # before the run, not after it
     if args.dt is not None:
         _positive("--dt", args.dt)
+    for flag, given in (("--speed", args.speed is not None), ("--no-wait", args.no_wait)):
+        if given and not args.view:  # else ignored without a word
+            raise InvalidOptions(
+                flag,
+                "applies to a live view only: add --view (a replay page's speed: gaussim replay --speed)",
+            )
     # placing the robot on the ground compiles kernels too
     with compile_notice(None if args.quiet else functools.partial(announce, sys.stderr)):
         spec = load_scene(args.scene, dt=args.dt, scheme=args.scheme, friction_mode=args.friction_mode)
@@ -556,7 +562,8 @@ def _run(args: argparse.Namespace) -> int:
     if args.view:
         from .viewer import Viewer, follow
 
-        _positive("--speed", args.speed)
+        speed = 1.0 if args.speed is None else args.speed
+        _positive("--speed", speed)
         viewer = Viewer(spec.scene, force_scale=args.force_scale)
         viewer.show(spec.initial.q, t=0.0)  # the page shows the scene while the kernels compile
         print(f"gaussim: watch the run at {viewer.url}", file=sys.stderr, flush=True)
@@ -567,7 +574,7 @@ def _run(args: argparse.Namespace) -> int:
             out,
             progress=None if args.quiet else sys.stderr,
             checkpoint_steps=checkpoint_steps,
-            observer=follow(viewer, args.speed) if viewer else None,
+            observer=follow(viewer, speed) if viewer else None,
         )
         done = True
     except Interrupted as stop:
