@@ -334,6 +334,20 @@ def test_bad_materials_name_the_field(field, kwargs):
         gaussim.Ground(**kwargs)
 
 
+def test_a_message_echoes_numpy_values_as_the_file_wrote_them(tmp_path):
+    """A scene's colour [1, 2, 3, 4, 5] was echoed as "got array([1., 2., 3., 4., 5.])"."""
+    scene = tmp_path / "colour.toml"
+    scene.write_text(
+        '[[bodies]]\nname = "a"\nshape = "sphere"\nradius = 1\nmass = 1\ncolor = [1, 2, 3, 4, 5]\n'
+    )
+    with pytest.raises(gaussim.GaussimError) as raised:
+        gaussim.load_scene(scene)
+    assert str(raised.value).endswith(
+        "bodies[0].color: must be [r, g, b] or [r, g, b, a] in [0, 1], got [1.0, 2.0, 3.0, 4.0, 5.0]"
+    )
+    assert gaussim.exceptions.shown(np.zeros(1000)).startswith("array([0., 0."), "a large one stays cut short"
+
+
 def test_non_convergence_is_reported_or_raised(box, monkeypatch):
     """One ProxQP iteration for a box landing while it slides and spins: neither ProxQP nor the
     active set of its iterate solves the step (a box landing straight down, the active set does).
@@ -616,7 +630,7 @@ TRACEBACKS = [  # item 15: each of these leaked a Python traceback with exit 1
     ("[robot]\nurdf = 12\n", "robot.urdf", "must be a string"),
     ('[robot]\nname = "ball"\npackage_dirs = 5\n', "robot.package_dirs", "list of folder names"),
     ('[robot]\nname = "ball"\npackage_dirs = "meshes"\n', "robot.package_dirs", "list of folder names"),
-    (BALL_SCENE + '[ground]\nheight = "x"\n', "ground.height", "must be 1 finite numbers"),
+    (BALL_SCENE + '[ground]\nheight = "x"\n', "ground.height", r"must be a finite number \[m\], got 'x'"),
     (BALL_SCENE + '[ground]\nnormal = "up"\n', "ground.normal", "must be 3 finite numbers"),
     (
         BALL_SCENE + "[[obstacles]]\ntype = 'sphere'\nname = 's'\nradius = 'big'\n",

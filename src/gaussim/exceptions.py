@@ -13,13 +13,14 @@ if TYPE_CHECKING:  # numpy is imported where used: the CLI's --help imports this
 
 
 class _Shown(reprlib.Repr):
-    """reprlib's repr cut to a line, a numpy scalar shown as the Python number it holds: the message
-    of a scene's size [0.2, -0.1] says -0.1, as the file does, not np.float64(-0.1)."""
+    """reprlib's repr cut to a line, a numpy scalar or array shown as the Python number or list it
+    holds: the message of a scene's size [0.2, -0.1] says -0.1, as the file does, not np.float64(-0.1),
+    and a colour [1, 2, 3] is [1.0, 2.0, 3.0], not array([1., 2., 3.])."""
 
     def repr1(self, x: object, level: int) -> str:
-        numpy = sys.modules.get("numpy")  # a numpy scalar exists only once numpy is imported
-        if numpy is not None and isinstance(x, numpy.generic):
-            x = x.item()
+        numpy = sys.modules.get("numpy")  # a numpy value exists only once numpy is imported
+        if numpy is not None and isinstance(x, numpy.generic | numpy.ndarray):
+            x = x.tolist() if x.size <= 64 else x  # a large array stays reprlib's short "array(...)"
         return super().repr1(x, level)
 
 
@@ -39,6 +40,14 @@ class GaussimWarning(UserWarning):
 def shown(value: object) -> str:
     """``repr(value)`` cut to a line: an error echoes what it was given, never megabytes of it."""
     return _SHOWN.repr(value)
+
+
+def finite_numbers(size: int | None) -> str:
+    """What a field of ``size`` numbers must hold, for its message: "3 finite numbers", "1 finite
+    number" (a one-joint robot's q), "a list of finite numbers" (None: any length)."""
+    if size is None:
+        return "a list of finite numbers"
+    return f"{size} finite number{'' if size == 1 else 's'}"
 
 
 def _choices(known: Iterable[str], limit: int = 80) -> str:

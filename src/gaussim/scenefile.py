@@ -46,7 +46,7 @@ import pinocchio as pin
 
 from .control import Command, Controller, PDHold, command, constant_torque, zero_torque
 from .dynamics import FloatingBases
-from .exceptions import GaussimError, InvalidOptions, InvalidRobot, shown
+from .exceptions import GaussimError, InvalidOptions, InvalidRobot, finite_numbers, shown
 from .options import Options, is_real
 from .robot import ROBOTS_DIR, SUFFIXES, Robot, example_robot_names, load_robot
 from .scene import Anchor, Box, Ground, LoopClosure, Scene, Sphere
@@ -397,7 +397,7 @@ class _Reader:
         return value
 
     def array(self, key: str, value: Any, size: int | None = None) -> np.ndarray:
-        wanted = f"must be {'a list of' if size is None else size} finite numbers, got {shown(value)}"
+        wanted = f"must be {finite_numbers(size)}, got {shown(value)}"
         if not isinstance(value, (list, np.ndarray)) or any(not _is_number(x) for x in value):
             self.fail(key, wanted)
         arr = np.asarray(value, dtype=float)
