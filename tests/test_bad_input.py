@@ -111,7 +111,7 @@ def test_unknown_robot_lists_choices():
     with pytest.raises(gaussim.RobotNotFound) as caught:
         gaussim.load_robot("no_such_robot_at_all")
     assert str(caught.value).count("double_pendulum,") == 1, "a name of robots/ and example-robot-data, once"
-    with pytest.raises(gaussim.RobotNotFound, match=r"^no robot 'missing.urdf': no such file$"):
+    with pytest.raises(gaussim.RobotNotFound, match=r"^no robot file: no such file: missing.urdf$"):
         gaussim.load_robot("missing.urdf")
 
 
@@ -121,6 +121,24 @@ def test_a_mistyped_scene_name_is_offered_the_close_ones(capsys):
         code == 2
         and "box_stak: file: cannot read it: No such file or directory (did you mean box_stack?" in err
     )
+
+
+def test_a_mistyped_file_is_offered_the_files_of_its_kind_in_its_folder(tmp_path):
+    """A URDF path with a typo said only "no such file"."""
+    robots = Path(__file__).resolve().parents[1] / "robots"
+    scene = tmp_path / "s.toml"
+    scene.write_text(f'[robot]\nurdf = "{robots / "box_stak.urdf"}"\n')
+    with pytest.raises(gaussim.GaussimError) as raised:
+        gaussim.load_scene(scene)
+    assert str(raised.value) == (
+        f"{scene}: robot.urdf: no such file: {robots / 'box_stak.urdf'} (did you mean box_stack.urdf?)"
+    )
+    with pytest.raises(gaussim.RobotNotFound, match=r"bal.urdf \(did you mean ball.urdf\?\)$"):
+        gaussim.load_robot(robots / "bal.urdf")
+    with pytest.raises(
+        gaussim.RobotNotFound, match=r"no such file: .*robot/ball.urdf \(no folder .*robot\)$"
+    ):
+        gaussim.load_robot(robots.parent / "robot" / "ball.urdf")
 
 
 def test_malformed_urdf_names_the_file(tmp_path):

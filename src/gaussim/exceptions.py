@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import os
 import reprlib
 import sys
 from collections.abc import Iterable
 from difflib import get_close_matches
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:  # numpy is imported where used: the CLI's --help imports this module and no numpy
@@ -62,12 +64,27 @@ def _meant(name: str, known: Iterable[str]) -> str:
     return f" (did you mean {' or '.join(close)}?)" if close else ""
 
 
+def missing_file(path: str | os.PathLike[str]) -> str:
+    """Why ``path`` names no file: "no such file: PATH", with the files of its folder closest to its
+    name (a typo: "did you mean ball.urdf?"), or the folder that does not exist."""
+    path = Path(path)
+    if not path.parent.is_dir():
+        return f"no such file: {path} (no folder {path.parent})"
+    try:  # the files of its kind, by their stems (a shared ".urdf" makes every name look close)
+        kind = {p.stem: p.name for p in path.parent.iterdir() if p.suffix == path.suffix and p.is_file()}
+    except OSError:  # a folder that cannot be listed: no suggestion
+        kind = {}
+    close = get_close_matches(path.stem, sorted(kind), n=3)
+    meant = f" (did you mean {' or '.join(kind[c] for c in close)}?)" if close else ""
+    return f"no such file: {path}{meant}"
+
+
 class RobotNotFound(GaussimError):
     """A robot name is neither an example-robot-data robot nor an existing URDF file."""
 
     def __init__(self, name: str, known: Iterable[str], file: bool = False) -> None:
-        if file:  # a path: the names are no help
-            super().__init__(f"no robot '{name}': no such file")
+        if file:  # a path: the names are no help, its folder's files are
+            super().__init__(f"no robot file: {missing_file(name)}")
             return
         super().__init__(
             f"no robot '{name}': not an existing URDF path and not an example-robot-data "

@@ -46,7 +46,7 @@ import pinocchio as pin
 
 from .control import Command, Controller, PDHold, command, constant_torque, zero_torque
 from .dynamics import FloatingBases
-from .exceptions import GaussimError, InvalidOptions, InvalidRobot, finite_numbers, shown
+from .exceptions import GaussimError, InvalidOptions, InvalidRobot, finite_numbers, missing_file, shown
 from .options import Options, is_real
 from .robot import ROBOTS_DIR, SUFFIXES, Robot, example_robot_names, load_robot
 from .scene import Anchor, Box, Ground, LoopClosure, Scene, Sphere
@@ -534,7 +534,7 @@ class _Reader:
         """``value``, a path relative to the scene file, of a file that exists."""
         target = self.path.parent / self.string(key, value)
         if not target.is_file():
-            self.fail(key, f"no such file: {target}")
+            self.fail(key, missing_file(target))
         return target
 
     def load(self, key: str, source: str | Path, dirs: list[str], floating: bool | None) -> Robot:
