@@ -1,6 +1,7 @@
 """Faults on real processes: signals, kills, unwritable and full disks, the viewer's address and its server's
 life, sizes out of bounds. Each case runs ``python -m gaussim`` (or a small script) in a subprocess."""
 
+import contextlib
 import os
 import signal
 import subprocess
@@ -247,6 +248,46 @@ def test_a_run_into_a_log_another_run_is_writing_is_refused_and_leaves_it_whole(
     assert gaussim.RunLog.load(out).robot == "fourbar"
     assert main(argv) == 0
     assert gaussim.RunLog.load(out).robot == "box" and gaussim.RunLog.load(f"{out}.prev").robot == "fourbar"
+
+
+def _long_sweep(out: Path) -> subprocess.Popen:
+    """A sweep of two endless runs on two workers, in a process group of its own (a terminal's job)."""
+    process = subprocess.Popen(
+        [sys.executable, "-m", "gaussim", "sweep", str(SCENES / "fourbar.toml"),
+         "--vary", "options.eps_abs=1e-9,1e-10", "--vary", "simulation.duration=1000",
+         "--out", str(out), "--workers", "2"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV, preexec_fn=_default_signals,
+        start_new_session=True,
+    )  # fmt: skip
+    _started.append(process)
+    deadline = time.time() + STARTUP
+    while len(list((out / "runs").glob("*/chunk-000001.npz"))) < 2:  # both runs under way
+        assert process.poll() is None, process.communicate()
+        assert time.time() < deadline, "the runs never started"
+        time.sleep(0.05)
+    return process
+
+
+@pytest.mark.parametrize("group", [True, False], ids=["two-ctrl-c-to-the-group", "one-sigint-to-the-command"])
+def test_a_stopped_sweep_stops_its_runs_and_exits_without_a_traceback(tmp_path, group):
+    """Two Ctrl-Cs 10 ms apart (to the whole group, as a terminal sends them) hung the sweep at its exit,
+    on workers waiting for work, after workers printed KeyboardInterrupt tracebacks; a SIGINT to the
+    command alone left its runs going to their end (1000 s). Now each run stops at a step, its log
+    kept."""
+    out = tmp_path / "sweep"
+    process = _long_sweep(out)
+    try:
+        for _ in range(2 if group else 1):
+            (os.killpg if group else os.kill)(process.pid, signal.SIGINT)
+            time.sleep(0.01)
+        _, stderr = process.communicate(timeout=60)
+    finally:  # no worker left behind by a sweep that hangs
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(process.pid, signal.SIGKILL)
+    assert process.returncode == 1 and "gaussim: interrupted; 0 of 2 runs are kept" in stderr, stderr
+    assert "Traceback" not in stderr, stderr
+    for log in (out / "runs").iterdir():
+        assert "interrupted" in gaussim.RunLog.load(log).reason
 
 
 # -- the log's format ------------------------------------------------------------------------------------

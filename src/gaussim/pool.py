@@ -12,9 +12,10 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import threading
 from collections.abc import Callable, Iterator, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import Future, ProcessPoolExecutor, as_completed
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, TypeVar
@@ -27,6 +28,8 @@ Job = TypeVar("Job")
 Progress = Callable[[int, int, dict], None]
 # the lock file of a folder a batch writes (exclusive), and the folders this process holds: by which thread
 LOCK = ".lock"
+# a stopped batch's workers are told to stop again this often until they have [s]
+STOP_WAIT = 1.0
 _HELD: dict[Path, int] = {}
 
 
@@ -191,11 +194,53 @@ def _results(
     if workers == 1:
         yield from map(job, todo)
         return
-    with ProcessPoolExecutor(min(workers, len(todo))) as pool:
-        submitted = [pool.submit(job, item) for item in todo]
+    pool = ProcessPoolExecutor(min(workers, len(todo)), initializer=_worker_signals)
+    submitted = [pool.submit(job, item) for item in todo]
+    processes = list(pool._processes.values())  # the executor names them nowhere else
+    stopped = True
+    try:
+        for done in as_completed(submitted):
+            yield done.result()
+        stopped = False
+    finally:
+        if stopped:  # Ctrl-C, a kill of this process, an error: no job starts, the running ones stop
+            _stop_workers(pool, submitted, processes)
+        pool.shutdown(wait=True)
+
+
+def _worker_signals() -> None:
+    """A pool worker's stop signals (SIGINT, SIGTERM, SIGHUP) while no job runs: it exits quietly (the
+    handler it inherits from the command raised KeyboardInterrupt in multiprocessing's loop, a traceback
+    on the terminal). A job's run handles them its own way: it stops at the end of its step, its log
+    kept (:mod:`gaussim.runner`)."""
+    from .stops import STOP_SIGNALS
+
+    for stop in STOP_SIGNALS:
+        if signal.getsignal(stop) != signal.SIG_IGN:  # one the command ignores stays ignored
+            signal.signal(stop, _quit)
+
+
+def _quit(signum: int, frame: object) -> None:
+    raise SystemExit(128 + signum)
+
+
+def _stop_workers(pool: ProcessPoolExecutor, submitted: list[Future], processes: list[Any]) -> None:
+    """Stop a pool whose batch stopped midway: cancel the jobs not started and tell each worker to stop
+    (SIGTERM: a run stops at the end of its step, its log kept; an idle worker exits), again every
+    STOP_WAIT until all have exited (a worker whose run took the first one is then idle). A stop signal
+    that lands meanwhile (a second Ctrl-C) only makes the wait go on: the executor's own shutdown, left
+    midway, hung the command at its exit on workers waiting for work."""
+    for waiting in submitted:
+        waiting.cancel()
+    pool.shutdown(wait=False, cancel_futures=True)
+    while True:
         try:
-            for done in as_completed(submitted):
-                yield done.result()
-        finally:  # stopped midway (Ctrl-C, a kill of this process): the jobs not started never start
-            for waiting in submitted:
-                waiting.cancel()
+            alive = [process for process in processes if process.is_alive()]
+            if not alive:
+                return
+            for process in alive:
+                process.terminate()
+            for process in alive:
+                process.join(STOP_WAIT)
+        except KeyboardInterrupt:
+            continue
