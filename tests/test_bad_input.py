@@ -111,7 +111,7 @@ def test_unknown_robot_lists_choices():
     with pytest.raises(gaussim.RobotNotFound) as caught:
         gaussim.load_robot("no_such_robot_at_all")
     assert str(caught.value).count("double_pendulum,") == 1, "a name of robots/ and example-robot-data, once"
-    with pytest.raises(gaussim.RobotNotFound, match=r"^no robot 'missing.urdf': no such file$"):
+    with pytest.raises(gaussim.RobotNotFound, match=r"^no robot file: no such file: missing.urdf$"):
         gaussim.load_robot("missing.urdf")
 
 
@@ -121,6 +121,24 @@ def test_a_mistyped_scene_name_is_offered_the_close_ones(capsys):
         code == 2
         and "box_stak: file: cannot read it: No such file or directory (did you mean box_stack?" in err
     )
+
+
+def test_a_mistyped_file_is_offered_the_files_of_its_kind_in_its_folder(tmp_path):
+    """A URDF path with a typo said only "no such file"."""
+    robots = Path(__file__).resolve().parents[1] / "robots"
+    scene = tmp_path / "s.toml"
+    scene.write_text(f'[robot]\nurdf = "{robots / "box_stak.urdf"}"\n')
+    with pytest.raises(gaussim.GaussimError) as raised:
+        gaussim.load_scene(scene)
+    assert str(raised.value) == (
+        f"{scene}: robot.urdf: no such file: {robots / 'box_stak.urdf'} (did you mean box_stack.urdf?)"
+    )
+    with pytest.raises(gaussim.RobotNotFound, match=r"bal.urdf \(did you mean ball.urdf\?\)$"):
+        gaussim.load_robot(robots / "bal.urdf")
+    with pytest.raises(
+        gaussim.RobotNotFound, match=r"no such file: .*robot/ball.urdf \(no folder .*robot\)$"
+    ):
+        gaussim.load_robot(robots.parent / "robot" / "ball.urdf")
 
 
 def test_malformed_urdf_names_the_file(tmp_path):
@@ -332,6 +350,20 @@ def test_unknown_option_lists_known():
 def test_bad_materials_name_the_field(field, kwargs):
     with pytest.raises(gaussim.InvalidOptions, match=rf"^{field}: "):
         gaussim.Ground(**kwargs)
+
+
+def test_a_message_echoes_numpy_values_as_the_file_wrote_them(tmp_path):
+    """A scene's colour [1, 2, 3, 4, 5] was echoed as "got array([1., 2., 3., 4., 5.])"."""
+    scene = tmp_path / "colour.toml"
+    scene.write_text(
+        '[[bodies]]\nname = "a"\nshape = "sphere"\nradius = 1\nmass = 1\ncolor = [1, 2, 3, 4, 5]\n'
+    )
+    with pytest.raises(gaussim.GaussimError) as raised:
+        gaussim.load_scene(scene)
+    assert str(raised.value).endswith(
+        "bodies[0].color: must be [r, g, b] or [r, g, b, a] in [0, 1], got [1.0, 2.0, 3.0, 4.0, 5.0]"
+    )
+    assert gaussim.exceptions.shown(np.zeros(1000)).startswith("array([0., 0."), "a large one stays cut short"
 
 
 def test_non_convergence_is_reported_or_raised(box, monkeypatch):
@@ -616,7 +648,7 @@ TRACEBACKS = [  # item 15: each of these leaked a Python traceback with exit 1
     ("[robot]\nurdf = 12\n", "robot.urdf", "must be a string"),
     ('[robot]\nname = "ball"\npackage_dirs = 5\n', "robot.package_dirs", "list of folder names"),
     ('[robot]\nname = "ball"\npackage_dirs = "meshes"\n', "robot.package_dirs", "list of folder names"),
-    (BALL_SCENE + '[ground]\nheight = "x"\n', "ground.height", "must be 1 finite numbers"),
+    (BALL_SCENE + '[ground]\nheight = "x"\n', "ground.height", r"must be a finite number \[m\], got 'x'"),
     (BALL_SCENE + '[ground]\nnormal = "up"\n', "ground.normal", "must be 3 finite numbers"),
     (
         BALL_SCENE + "[[obstacles]]\ntype = 'sphere'\nname = 's'\nradius = 'big'\n",
@@ -763,11 +795,12 @@ def test_unwritable_outputs_exit_2_naming_the_path(tmp_path, capsys, small_log):
     code, err = _cli(capsys, "replay", log, "--html", tmp_path)
     assert code == 2 and f"--html {tmp_path}: is a directory" in err, err
     code, err = _cli(capsys, "plot", log, "-o", tmp_path / "forces")
-    assert code == 2 and f"{tmp_path / 'forces'}: the image's suffix must be one of .png, .pdf, .svg" in err
+    assert code == 2 and f"--output {tmp_path / 'forces'}: the image's suffix must be one of .png, " in err
     scene = tmp_path / "scene.toml"
     scene.write_text(BALL_SCENE)
     code, err = _cli(capsys, "run", scene, "--plot", tmp_path / "forces", "--out", tmp_path / "l.npz")
     assert code == 2 and not (tmp_path / "l.npz").exists(), "refused before the run"
+    assert f"--plot {tmp_path / 'forces'}: the image's suffix" in err, "the flag named, as --html's is"
 
 
 def test_echoed_values_are_cut_to_a_line(tmp_path, capsys):

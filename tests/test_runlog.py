@@ -14,7 +14,7 @@ import pytest
 
 import gaussim
 from gaussim.files import OutputError
-from gaussim.runlog import RunLogError
+from gaussim.runlog import WRITING, RunLogError
 
 SCENES = Path(__file__).resolve().parents[1] / "robots" / "scenes"
 
@@ -124,6 +124,39 @@ def test_a_failed_save_never_replaces_a_good_log(tmp_path, monkeypatch):
     assert [p.name for p in tmp_path.iterdir()] == ["run.npz"], "no temporary file left behind"
 
 
+# a process that holds the lock of the file argv[1], as a run writing its log does, until it is killed
+HOLDER = (
+    "import fcntl, os, sys, time; fd = os.open(sys.argv[1], os.O_RDWR); fcntl.lockf(fd, fcntl.LOCK_EX); "
+    "print('held', flush=True); time.sleep(600)"
+)
+
+
+def test_what_a_kill_midway_through_a_write_leaves_is_ignored_then_cleared(tmp_path):
+    """A SIGKILL while a chunk is written leaves its hidden temporary file in the log, and one before the
+    log's first state its temporary folder beside it: a read ignores them; the next run into the path
+    removes them (the folder of a run still starting, whose lock is held, is left alone)."""
+    out = tmp_path / "r"
+    gaussim.run(_short("ball_bounce", 10), out)
+    torn = out / ".chunk-000002.npz.ab12cd_x.tmp.npz"
+    torn.write_bytes(b"PK\x03\x04 torn")
+    stale, starting = tmp_path / ".r.k3j4h5g6.new", tmp_path / ".r.a1b2c3d4.new"
+    for folder in (stale, starting):
+        folder.mkdir()
+        (folder / WRITING).write_text("")
+    holder = subprocess.Popen([sys.executable, "-c", HOLDER, str(starting / WRITING)], stdout=subprocess.PIPE)
+    try:
+        assert holder.stdout.readline() == b"held\n"
+        log = gaussim.RunLog.load(out)
+        assert log.complete and log.steps == 10
+        gaussim.run(_short("ball_bounce", 5), out)
+    finally:
+        holder.kill()
+        holder.communicate()
+    assert sorted(p.name for p in tmp_path.iterdir()) == [starting.name, "r", "r.prev"]
+    assert not [p.name for p in (tmp_path / "r.prev").iterdir() if p.name.endswith(".tmp.npz")]
+    assert gaussim.RunLog.load(tmp_path / "r.prev").steps == 10
+
+
 def test_not_a_log_is_named(tmp_path):
     bad = tmp_path / "bad.npz"
     bad.write_text("hello")
@@ -199,6 +232,13 @@ def test_parquet_without_pyarrow_says_what_to_install(tmp_path, monkeypatch):
             "--dt: must be a finite number > 0, got -1.0",
         ),
         (["forces", "missing.npz", "--csv", "x.csv"], 2, "missing.npz: cannot read it: No such file"),
+        # flags of a live view, without one: they were ignored without a word
+        (
+            ["run", str(SCENES / "ball_bounce.toml"), "--speed", "0.5"],
+            2,
+            "--speed: applies to a live view only",
+        ),
+        (["run", str(SCENES / "ball_bounce.toml"), "--no-wait"], 2, "--no-wait: applies to a live view only"),
     ],
 )
 def test_cli_bad_input_exits_2_without_traceback(tmp_path, args, code, message):
@@ -440,6 +480,28 @@ def test_inspect_lists_the_bodies_and_their_pairs(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "  arm: robot pendulum; q[26:27], v[24:25]; fixed base at (2, 0, 0) m, 1 actuated" in out
     assert "    solo - crate: 17: solo/base_link_0/crate/box, " in out and ", ... (11 more)\n" in out
+
+
+def test_inspect_reads_a_stopped_log_and_a_log_in_place_of_a_scene_is_named(tmp_path, capsys):
+    """`inspect` on a log told its scene file "cannot read it: Is a directory"; run and sweep, which take a
+    scene, say it is a log and what reads it."""
+    from gaussim.cli import main
+
+    spec = _short("box_incline", 30)
+    spec.options = spec.options.replace(max_iter=1, solver="proxqp", dt=2e-3)  # it fails at its first QP
+    with pytest.raises(gaussim.SolverError):
+        gaussim.run(spec, tmp_path / "r")
+    capsys.readouterr()
+    assert main(["inspect", str(tmp_path / "r")]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith(f"run log {tmp_path / 'r'}: ") and "; INCOMPLETE: SolverError at step" in out
+    assert f"made from {SCENES / 'box_incline.toml'}" in out and "robot box" in out
+    assert "options: dt = 0.002 s" in out, "the run's options, not its scene file's"
+    for command in ("run", "sweep"):
+        assert main([command, str(tmp_path / "r"), "--seeds" if command == "sweep" else "--quiet", *(
+            ["2"] if command == "sweep" else [])]) == 2  # fmt: skip
+        err = capsys.readouterr().err
+        assert f"r: file: a run log, not a scene file: `gaussim inspect {tmp_path / 'r'}` shows it" in err
 
 
 def test_cli_tells_gaussims_warnings_as_its_own_lines(tmp_path):

@@ -1,6 +1,7 @@
 """Faults on real processes: signals, kills, unwritable and full disks, the viewer's address and its server's
 life, sizes out of bounds. Each case runs ``python -m gaussim`` (or a small script) in a subprocess."""
 
+import contextlib
 import os
 import signal
 import subprocess
@@ -14,10 +15,11 @@ import psutil
 import pytest
 
 import gaussim
+import gaussim.files
 import gaussim.viewer
 from gaussim.cli import main
 from gaussim.files import OutputError
-from gaussim.runlog import RUNNING, RunLogWriter
+from gaussim.runlog import LIVE, STOPPED, WRITING, RunLogWriter
 from gaussim.runner import STOP_SIGNALS
 from gaussim.viewer import Viewer
 
@@ -217,17 +219,75 @@ def test_the_log_is_a_valid_prefix_at_any_instant_and_after_a_sigkill(tmp_path):
     seen = []
     for _ in range(5):
         log = gaussim.RunLog.load(out)
-        assert log.reason == RUNNING and log.steps % 10 == 0 and len(log.t) == log.steps + 1
+        assert log.reason == LIVE.format(process.pid) and log.steps % 10 == 0 and len(log.t) == log.steps + 1
         seen.append(log.steps)
     process.kill()
     process.communicate(timeout=30)
-    log = gaussim.RunLog.load(out)
-    assert not log.complete and log.reason == RUNNING
+    log = gaussim.RunLog.load(out)  # its writer gone: it says so, not "still running"
+    assert not log.complete and log.reason == STOPPED
     assert log.steps >= seen[-1] > 0 and log.steps % 10 == 0 and len(log.t) == log.steps + 1
     # a prefix of the run: the same steps as an uninterrupted run's
     spec = gaussim.load_scene(SCENES / "fourbar.toml")
     spec.duration = log.steps * spec.options.dt
     np.testing.assert_array_equal(gaussim.run(spec).q, log.q)
+
+
+def test_a_run_into_a_log_another_run_is_writing_is_refused_and_leaves_it_whole(tmp_path, capsys):
+    """Moved aside, the log would have taken the first run's next chunks into the second's (a mix of two
+    runs); once the first is killed, the same command replaces it."""
+    out = tmp_path / "r"
+    process = _long_run(out, 10)
+    _wait_for_chunks(out, 2, process)
+    argv = ["run", str(SCENES / "box_incline.toml"), "--out", str(out), "--duration", "0.01", "--quiet"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert f"another run (process {process.pid}) is still writing {out}" in err and "Traceback" not in err
+    assert not (tmp_path / "r.prev").exists()
+    process.kill()
+    process.communicate(timeout=30)
+    assert gaussim.RunLog.load(out).robot == "fourbar"
+    assert main(argv) == 0
+    assert gaussim.RunLog.load(out).robot == "box" and gaussim.RunLog.load(f"{out}.prev").robot == "fourbar"
+
+
+def _long_sweep(out: Path) -> subprocess.Popen:
+    """A sweep of two endless runs on two workers, in a process group of its own (a terminal's job)."""
+    process = subprocess.Popen(
+        [sys.executable, "-m", "gaussim", "sweep", str(SCENES / "fourbar.toml"),
+         "--vary", "options.eps_abs=1e-9,1e-10", "--vary", "simulation.duration=1000",
+         "--out", str(out), "--workers", "2"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV, preexec_fn=_default_signals,
+        start_new_session=True,
+    )  # fmt: skip
+    _started.append(process)
+    deadline = time.time() + STARTUP
+    while len(list((out / "runs").glob("*/chunk-000001.npz"))) < 2:  # both runs under way
+        assert process.poll() is None, process.communicate()
+        assert time.time() < deadline, "the runs never started"
+        time.sleep(0.05)
+    return process
+
+
+@pytest.mark.parametrize("group", [True, False], ids=["two-ctrl-c-to-the-group", "one-sigint-to-the-command"])
+def test_a_stopped_sweep_stops_its_runs_and_exits_without_a_traceback(tmp_path, group):
+    """Two Ctrl-Cs 10 ms apart (to the whole group, as a terminal sends them) hung the sweep at its exit,
+    on workers waiting for work, after workers printed KeyboardInterrupt tracebacks; a SIGINT to the
+    command alone left its runs going to their end (1000 s). Now each run stops at a step, its log
+    kept."""
+    out = tmp_path / "sweep"
+    process = _long_sweep(out)
+    try:
+        for _ in range(2 if group else 1):
+            (os.killpg if group else os.kill)(process.pid, signal.SIGINT)
+            time.sleep(0.01)
+        _, stderr = process.communicate(timeout=60)
+    finally:  # no worker left behind by a sweep that hangs
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(process.pid, signal.SIGKILL)
+    assert process.returncode == 1 and "gaussim: interrupted; 0 of 2 runs are kept" in stderr, stderr
+    assert "Traceback" not in stderr, stderr
+    for log in (out / "runs").iterdir():
+        assert "interrupted" in gaussim.RunLog.load(log).reason
 
 
 # -- the log's format ------------------------------------------------------------------------------------
@@ -351,6 +411,20 @@ def test_an_unwritable_output_is_refused_before_the_first_step(tmp_path, capsys)
             stderr = capsys.readouterr().err
             assert "cannot be written (Read-only file system)" in stderr
             assert "steps/s" not in stderr, "no step made"
+        # the reports of the benchmarks and the stability cases (minutes to hours of work) as well
+        for command in (
+            ["stability", "--report", str(ro / "s.md")],
+            ["bench", "--quick", "--no-peers", "--out", str(ro / "b")],
+            ["bench", "--quick", "--no-peers", "--out", str(tmp_path / "b"), "--report", str(ro / "b.md")],
+            ["bench", "--scenes", "--quick", "--no-peers", "--report", str(ro / "s.md")],
+        ):
+            assert main(command) == 2, command
+            stderr = capsys.readouterr().err
+            assert f"{command[-2]} {command[-1]}: cannot be written (Read-only file system)" in stderr
+            assert "pass " not in stderr and "[1/" not in stderr, "no case run"
+        with pytest.raises(OSError) as raised:  # named after the file asked for, not its temporary one
+            gaussim.files.write_atomic(ro / "page.html", b"")
+        assert raised.value.filename == str(ro / "page.html")
     (tmp_path / "dir.png").mkdir()
     assert main(["run", str(SCENES / "fourbar.toml"), "--plot", str(tmp_path / "dir.png")]) == 2
     assert "dir.png: is a directory" in capsys.readouterr().err
@@ -365,7 +439,8 @@ def test_a_full_disk_midway_stops_the_run_and_keeps_what_fits(tmp_path, capsys):
         assert "the log of the first" in stderr
         log = gaussim.RunLog.load(small / "r")
         assert not log.complete and log.steps >= 20 and len(log.t) == log.steps + 1
-        assert not [p for p in (small / "r").iterdir() if p.name.startswith(".")], "no temporary file left"
+        left = [p.name for p in (small / "r").iterdir() if p.name.startswith(".") and p.name != WRITING]
+        assert not left, "no temporary file left"
 
 
 def test_a_page_rewritten_on_a_full_disk_keeps_the_previous_one(tmp_path, capsys):

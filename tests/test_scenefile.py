@@ -46,6 +46,7 @@ def _write(tmp_path, text):
 
 
 BALL = '[robot]\nname = "ball"\nfloating_base = true\n'
+PENDULUM = '[robot]\nname = "pendulum"\n'  # a one-joint robot: q holds one number
 
 
 @pytest.mark.parametrize(
@@ -57,6 +58,7 @@ BALL = '[robot]\nname = "ball"\nfloating_base = true\n'
         (BALL + "[options]\nscheme = 'implicit'\n", "options.scheme", "not one of velocity, acceleration"),
         (BALL + "[options]\ndt = -1\n", "options.dt", "must be a finite number > 0"),
         (BALL + "[initial]\nq = [0, 0]\n", "initial.q", "must be 7 finite numbers"),
+        (PENDULUM + "[initial]\nq = [0, 0]\n", "initial.q", "must be 1 finite number, got"),
         (
             BALL + "[initial]\nconfiguration = 'standing'\n",
             "initial.configuration",

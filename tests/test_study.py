@@ -14,6 +14,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+import gaussim
 from gaussim import study
 from gaussim.cli import main
 from gaussim.exceptions import GaussimError, InvalidOptions
@@ -210,6 +211,19 @@ def test_two_keys_that_set_one_field_are_refused_naming_both(tmp_path, first, se
         (["--vary", "ground.friction=1", "--plot", "box.speed", "--against", "options.dt"], "not varied"),
         (["--vary", "ground.friction=1", "--plot", "speed", "--against", "ground.friction"], "box.speed"),
         (
+            [
+                "--vary",
+                "ground.friction=1",
+                "--plot",
+                "box.x",
+                "--against",
+                "ground.friction",
+                "--plot-file",
+                "x.jpg",
+            ],
+            "--plot-file x.jpg: the image's suffix must be one of .png, .pdf, .svg",
+        ),
+        (
             ["--vary", "ground.friction=1", "--scheduler", "127.0.0.1"],
             "--scheduler: '127.0.0.1': missing port",
         ),
@@ -292,6 +306,27 @@ def test_the_perturbation_moves_every_free_root_of_a_body():
     moved = study.perturbed(spec, 3, study.Noise(position=1e-3, velocity=0.0)).q - spec.initial.q
     for first in (0, 7, 14):  # each box's x, y moved along the ground, z and orientation kept
         assert np.all(moved[first : first + 2] != 0) and np.all(moved[first + 2 : first + 7] == 0), first
+
+
+def test_the_summary_follows_every_free_root_of_a_body_named_by_its_joint():
+    """box_stack.x, .z, .speed were the bottom box's alone: the top box could fall off unseen."""
+    spec = load_scene(SCENES / "box_stack.toml")
+    spec.duration = 0.05
+    q = spec.initial.q.copy()
+    q[14] += 0.3  # the top box starts beside the stack, 0.5 m up: it falls
+    spec.initial = gaussim.State(0.0, q, spec.initial.v, spec.initial.world)
+    summary = study.summarise(gaussim.run(spec), spec)
+    boxes = [f"box_stack.{box}_joint" for box in ("bottom", "middle", "top")]
+    assert study.summary_columns(spec) == [
+        *study.SUMMARY, *(f"{box}.{c}" for box in boxes for c in study.BODY_SUMMARY)
+    ]  # fmt: skip
+    assert list(summary) == study.summary_columns(spec)
+    assert summary["box_stack.top_joint.x"] == pytest.approx(0.3)
+    assert summary["box_stack.top_joint.z"] == pytest.approx(0.5 - 9.81 * 0.05**2 / 2, abs=2e-3)
+    assert summary["box_stack.top_joint.speed"] == pytest.approx(9.81 * 0.05, rel=1e-6)
+    assert summary["box_stack.middle_joint.z"] == pytest.approx(0.3, abs=1e-3)
+    assert summary["box_stack.bottom_joint.speed"] < 1e-3
+    assert study.summary_columns(load_scene(BALL))[-5:] == [f"ball.{c}" for c in study.BODY_SUMMARY]
 
 
 def test_a_failing_run_is_a_row_and_the_others_go_on(tmp_path):

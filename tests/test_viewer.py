@@ -17,7 +17,7 @@ from matplotlib.image import imread
 
 import gaussim
 from gaussim import Body, FreeBody, pose
-from gaussim.viewer import Viewer, _visual_model, page_dom, screenshot
+from gaussim.viewer import Viewer, _visual_model, page_dom, page_errors, screenshot
 
 # A pixel is drawn differently when one of its channels differs by more than this (of 1).
 PIXEL_TOLERANCE = 0.1
@@ -356,6 +356,26 @@ def test_replay_page_shows_time_and_controls_without_a_menu(two_bodies):
     dom = page_dom(two_bodies[0], wait_ms=4000, at=0.05)
     assert 'id="gaussim-play"' in dom and 'id="gaussim-scrub"' in dom and 'id="gaussim-time"' in dom
     assert "force arrows: 1 m = " in dom and "crate" in dom and "ball" in dom
+
+
+def test_the_page_of_a_run_that_stopped_early_says_so_and_loads_without_a_script_error(tmp_path):
+    """A killed or failed run's page passed for the whole run; its legend now says why it ended. Chromium
+    runs it with no uncaught JavaScript error (and page_errors does see one in a page that has it)."""
+    spec = gaussim.load_scene(SCENES / "ball_bounce.toml")
+    spec.duration = 0.1
+    log = gaussim.run(spec)
+    with Viewer(spec.scene, live=False) as viewer:
+        viewer.replay(log)
+        assert 'id="gaussim-stopped"' not in viewer.static_html()
+        log.finish(False, "interrupted (Ctrl-C) at step 100, t = 0.1 s")
+        viewer.replay(log)
+        page = viewer.save_html(tmp_path / "stopped.html")
+    said = '<span id="gaussim-stopped">the run did not finish: interrupted (Ctrl-C) at step 100, t = 0.1 s'
+    assert said in page.read_text()
+    assert page_errors(page) == []
+    broken = tmp_path / "broken.html"
+    broken.write_text("<html><body><script>undefined_function();</script></body></html>")
+    assert page_errors(broken) == ["Uncaught ReferenceError: undefined_function is not defined"]
 
 
 def test_arrows_have_heads_and_the_length_of_their_force(two_bodies):

@@ -32,6 +32,7 @@ from .stops import STOP_SIGNALS, interrupt, taken_stop
 
 if TYPE_CHECKING:
     from .scene import Scene
+    from .scenefile import SceneSpec
     from .study import Run
     from .world import BodyLayout
 
@@ -98,7 +99,7 @@ def main(argv: list[str] | None = None) -> int:
     run.add_argument("--duration", type=float, help="simulated time [s]")
     run.add_argument("--quiet", action="store_true", help="no progress line")
     run.add_argument("--view", action="store_true", help="show the run live in the browser (meshcat)")
-    run.add_argument("--speed", type=float, default=1.0, help="with --view: times real time (default 1)")
+    run.add_argument("--speed", type=float, help="with --view: times real time (default 1)")
     run.add_argument(
         "--no-wait",
         action="store_true",
@@ -133,8 +134,12 @@ def main(argv: list[str] | None = None) -> int:
         "--bodies", nargs="+", metavar="NAME", help="forces of these bodies' (or obstacles') contacts only"
     )
 
-    inspect = commands.add_parser("inspect", help="describe a scene's robot, constraints and QP size")
-    inspect.add_argument("scene", type=Path, help="scene file (TOML), or a robot (see gaussim run)")
+    inspect = commands.add_parser(
+        "inspect", help="describe a scene's robot, constraints and QP size; or a run log and its scene"
+    )
+    inspect.add_argument(
+        "scene", type=Path, help="scene file (TOML), a robot (see gaussim run), or a run log"
+    )
 
     forces = commands.add_parser("forces", help="export the per-contact force time series of a run log")
     forces.add_argument("log", type=Path, help="run log directory (written by gaussim run)")
@@ -300,6 +305,9 @@ def _bench(args: argparse.Namespace) -> int:
     unknown = sorted(set(args.cases) - set(CASES))
     if unknown:
         raise InvalidOptions("cases", f"unknown {unknown}; known: {', '.join(CASES)}")
+    check_folder(args.out, "--out")  # before the runs, not after them
+    if args.report is not None:
+        check_writable(args.report, "--report")
 
     def progress(done: int, total: int, record: dict) -> None:
         print(f"[{done}/{total}] {record['key']}: {record['status']}", file=sys.stderr, flush=True)
@@ -336,6 +344,8 @@ def _bench_suite(args: argparse.Namespace) -> int:
     unknown = sorted(set(args.cases) - set(suite.SCENES))
     if unknown:
         raise InvalidOptions("cases", f"unknown {unknown}; known: {', '.join(suite.SCENES)}")
+    if args.report is not None:
+        check_writable(args.report, "--report")  # before the suite, not after it
     flags = " --quick" if args.quick else ""
     command = f"gaussim bench --{'scenes' if args.scenes else 'motion'}{flags} {' '.join(args.cases)}".strip()
     before = python_loop()  # the machine's speed around the run: timings compare within one spell
@@ -401,7 +411,7 @@ def _sweep(args: argparse.Namespace) -> int:
         plot = (
             args.plot,
             args.against,
-            plot_path(args.plot_file or out / f"{args.plot}-vs-{args.against}.png"),
+            plot_path(args.plot_file or out / f"{args.plot}-vs-{args.against}.png", "--plot-file"),
         )
         check_writable(plot[2], "--plot-file")
     with exclusive(out):  # from the count of the finished runs to the table: a second sweep stops at once
@@ -486,6 +496,7 @@ def _finished(out: Path) -> set[str]:
 def _stability(args: argparse.Namespace) -> int:
     from .bench.stability import cases, markdown
 
+    check_writable(args.report, "--report")  # before the cases, not after them
     rows = []
     for case in cases(args.long):
         row = case()
@@ -500,7 +511,7 @@ def _stability(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from .runlog import is_run_log
+    from .runlog import check_replaceable, is_run_log
     from .runner import (
         CHECKPOINT_STEPS,
         Interrupted,
@@ -514,9 +525,15 @@ def _run(args: argparse.Namespace) -> int:
     if args.plot:
         from .plots import plot_path
 
-        plot_path(args.plot)  # before the run, not after it
+        plot_path(args.plot, "--plot")  # before the run, not after it
     if args.dt is not None:
         _positive("--dt", args.dt)
+    for flag, given in (("--speed", args.speed is not None), ("--no-wait", args.no_wait)):
+        if given and not args.view:  # else ignored without a word
+            raise InvalidOptions(
+                flag,
+                "applies to a live view only: add --view (a replay page's speed: gaussim replay --speed)",
+            )
     # placing the robot on the ground compiles kernels too
     with compile_notice(None if args.quiet else functools.partial(announce, sys.stderr)):
         spec = load_scene(args.scene, dt=args.dt, scheme=args.scheme, friction_mode=args.friction_mode)
@@ -538,13 +555,15 @@ def _run(args: argparse.Namespace) -> int:
         check_writable(args.plot, "--plot")
     if args.force_scale is not None:
         _positive("--force-scale", args.force_scale)
+    check_replaceable(out)  # before saying the log there is kept: it may be refused
     if is_run_log(out):
         print(f"gaussim: {out} holds a run log: it will be kept as {out}.prev", file=sys.stderr)
     viewer = None
     if args.view:
         from .viewer import Viewer, follow
 
-        _positive("--speed", args.speed)
+        speed = 1.0 if args.speed is None else args.speed
+        _positive("--speed", speed)
         viewer = Viewer(spec.scene, force_scale=args.force_scale)
         viewer.show(spec.initial.q, t=0.0)  # the page shows the scene while the kernels compile
         print(f"gaussim: watch the run at {viewer.url}", file=sys.stderr, flush=True)
@@ -555,7 +574,7 @@ def _run(args: argparse.Namespace) -> int:
             out,
             progress=None if args.quiet else sys.stderr,
             checkpoint_steps=checkpoint_steps,
-            observer=follow(viewer, args.speed) if viewer else None,
+            observer=follow(viewer, speed) if viewer else None,
         )
         done = True
     except Interrupted as stop:
@@ -636,15 +655,22 @@ def _read_log(path: Path):  # type: ignore[no-untyped-def]
 
 def _log_and_scene(path: Path):  # type: ignore[no-untyped-def]
     """A run log and the scene it was made from (its scene text is stored in it)."""
-    from .scenefile import load_scene_text
-
     log = _read_log(path)
     if log.steps == 0:
         raise GaussimError(f"{path}: the run log holds no step")
+    return log, _log_spec(path, log).scene
+
+
+def _log_spec(path: Path, log) -> SceneSpec:  # type: ignore[no-untyped-def]
+    """The scene file a run log was made from (the text it stores), with the options the run used."""
+    from .scenefile import load_scene_text
+
     try:
-        return log, load_scene_text(log.scene_text, log.scene_path or path).scene
+        spec = load_scene_text(log.scene_text, log.scene_path or path)
     except GaussimError as err:
         raise GaussimError(f"{path}: the scene this log holds does not load: {err}") from err
+    spec.options = log.options  # a run's --dt, --scheme, --friction-mode
+    return spec
 
 
 def _write_replay(
@@ -690,7 +716,7 @@ def _serve(message: str) -> None:
 def _plot(args: argparse.Namespace) -> int:
     from .plots import plot_path, save_plot
 
-    plot_path(args.output)
+    plot_path(args.output, "--output")
     check_writable(args.output, "--output")
     log, scene = _log_and_scene(args.log)
     print(f"{args.what} plot: {save_plot(log, scene, args.output, args.what, args.bodies)}")
@@ -700,10 +726,24 @@ def _plot(args: argparse.Namespace) -> int:
 def _inspect(args: argparse.Namespace) -> int:
     import numpy as np
 
+    from .runlog import is_run_log
     from .scenefile import load_scene
     from .simulator import Simulator
 
-    spec = load_scene(args.scene)
+    if is_run_log(args.scene):  # a log: what it holds, then the scene it was made from
+        from .runlog import RunLog
+
+        log = RunLog.load(args.scene)
+        t = log.t
+        status = "complete" if log.complete else f"INCOMPLETE: {log.reason}"
+        _say(f"run log {args.scene}: {log.steps} steps, t = {t[0]:.6g} to {t[-1]:.6g} s; {status}")
+        if not log.scene_text.strip():
+            _say("  no scene file stored (a log written from Python without its scene's text)")
+            return EXIT_OK
+        _say(f"  made from {log.scene_path or 'a scene file'}, with its options; that scene:")
+        spec = _log_spec(args.scene, log)
+    else:
+        spec = load_scene(args.scene)
     robot, scene, o = spec.robot, spec.scene, spec.options
     model = robot.model
     _say(f"robot {robot.name} ({robot.urdf or f'{len(scene.bodies)} bodies merged'})")

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import os
 import reprlib
 import sys
 from collections.abc import Iterable
 from difflib import get_close_matches
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:  # numpy is imported where used: the CLI's --help imports this module and no numpy
@@ -13,13 +15,14 @@ if TYPE_CHECKING:  # numpy is imported where used: the CLI's --help imports this
 
 
 class _Shown(reprlib.Repr):
-    """reprlib's repr cut to a line, a numpy scalar shown as the Python number it holds: the message
-    of a scene's size [0.2, -0.1] says -0.1, as the file does, not np.float64(-0.1)."""
+    """reprlib's repr cut to a line, a numpy scalar or array shown as the Python number or list it
+    holds: the message of a scene's size [0.2, -0.1] says -0.1, as the file does, not np.float64(-0.1),
+    and a colour [1, 2, 3] is [1.0, 2.0, 3.0], not array([1., 2., 3.])."""
 
     def repr1(self, x: object, level: int) -> str:
-        numpy = sys.modules.get("numpy")  # a numpy scalar exists only once numpy is imported
-        if numpy is not None and isinstance(x, numpy.generic):
-            x = x.item()
+        numpy = sys.modules.get("numpy")  # a numpy value exists only once numpy is imported
+        if numpy is not None and isinstance(x, numpy.generic | numpy.ndarray):
+            x = x.tolist() if x.size <= 64 else x  # a large array stays reprlib's short "array(...)"
         return super().repr1(x, level)
 
 
@@ -41,6 +44,14 @@ def shown(value: object) -> str:
     return _SHOWN.repr(value)
 
 
+def finite_numbers(size: int | None) -> str:
+    """What a field of ``size`` numbers must hold, for its message: "3 finite numbers", "1 finite
+    number" (a one-joint robot's q), "a list of finite numbers" (None: any length)."""
+    if size is None:
+        return "a list of finite numbers"
+    return f"{size} finite number{'' if size == 1 else 's'}"
+
+
 def _choices(known: Iterable[str], limit: int = 80) -> str:
     names = sorted(set(known))
     shown = ", ".join(names[:limit])
@@ -53,12 +64,27 @@ def _meant(name: str, known: Iterable[str]) -> str:
     return f" (did you mean {' or '.join(close)}?)" if close else ""
 
 
+def missing_file(path: str | os.PathLike[str]) -> str:
+    """Why ``path`` names no file: "no such file: PATH", with the files of its folder closest to its
+    name (a typo: "did you mean ball.urdf?"), or the folder that does not exist."""
+    path = Path(path)
+    if not path.parent.is_dir():
+        return f"no such file: {path} (no folder {path.parent})"
+    try:  # the files of its kind, by their stems (a shared ".urdf" makes every name look close)
+        kind = {p.stem: p.name for p in path.parent.iterdir() if p.suffix == path.suffix and p.is_file()}
+    except OSError:  # a folder that cannot be listed: no suggestion
+        kind = {}
+    close = get_close_matches(path.stem, sorted(kind), n=3)
+    meant = f" (did you mean {' or '.join(kind[c] for c in close)}?)" if close else ""
+    return f"no such file: {path}{meant}"
+
+
 class RobotNotFound(GaussimError):
     """A robot name is neither an example-robot-data robot nor an existing URDF file."""
 
     def __init__(self, name: str, known: Iterable[str], file: bool = False) -> None:
-        if file:  # a path: the names are no help
-            super().__init__(f"no robot '{name}': no such file")
+        if file:  # a path: the names are no help, its folder's files are
+            super().__init__(f"no robot file: {missing_file(name)}")
             return
         super().__init__(
             f"no robot '{name}': not an existing URDF path and not an example-robot-data "

@@ -4,7 +4,10 @@ spends time on what it would hold."""
 
 from __future__ import annotations
 
+import errno
+import fcntl
 import os
+import re
 import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -17,14 +20,31 @@ class OutputError(GaussimError):
     """An output path cannot be written (the message names it and the cause)."""
 
 
+class Busy(Exception):
+    """Another process holds the lock :func:`take_lock` asked for; ``holder`` is its process id as that
+    process wrote it in the lock file ("" when it wrote none)."""
+
+    def __init__(self, holder: str) -> None:
+        super().__init__(f"locked by process {holder or '(unknown)'}")
+        self.holder = holder
+
+
+# the name of a temporary file of atomic_path: ".NAME.XXXXXXXX.tmpSUFFIX" (mkstemp's 8 random characters)
+_TEMPORARY = re.compile(r"\..+\.[a-z0-9_]{8}\.tmp(\.[^.]*)?")
+
+
 @contextmanager
 def atomic_path(path: str | Path) -> Iterator[Path]:
     """A temporary path beside ``path`` (same suffix, for writers that pick the format from it), renamed
-    to ``path`` when the block succeeds and removed when it fails; an OSError of the block (a full disk
-    midway, whose write names no file) is raised again naming ``path``."""
+    to ``path`` when the block succeeds and removed when it fails; an OSError of its making or of the
+    block (a read-only folder, a full disk midway, whose write names no file) is raised again naming
+    ``path``."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=f".tmp{path.suffix}", dir=path.parent)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=f".tmp{path.suffix}", dir=path.parent)
+    except OSError as err:  # named after path, not the temporary file no one asked for
+        raise OSError(err.errno, err.strerror or str(err), str(path)) from err
     os.close(fd)
     tmp = Path(name)
     try:
@@ -37,6 +57,12 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+def leftovers(folder: str | Path) -> list[Path]:
+    """The temporary files of :func:`atomic_path` in ``folder``: those a process killed while writing
+    (SIGKILL, a power cut) left behind; none is ever renamed into a result."""
+    return [p for p in Path(folder).iterdir() if _TEMPORARY.fullmatch(p.name) and p.is_file()]
 
 
 def write_atomic(path: str | Path, data: bytes) -> Path:
@@ -87,3 +113,49 @@ def _probe(folder: Path, named: str) -> None:
         os.unlink(name)
     except OSError as err:
         raise OutputError(f"{named}: cannot be written ({err.strerror or err})") from err
+
+
+def take_lock(path: str | Path) -> int:
+    """Take the POSIX record lock (lockf) of the file ``path`` (made if missing) without waiting, and
+    write this process's id in it; the descriptor, whose close releases the lock. The system releases
+    it too when the process ends, however it ends (SIGKILL included), and forked children do not
+    inherit it. Each process must take a file's lock once: closing a second descriptor of the file
+    would release it (POSIX), so callers keep a registry of what they hold.
+
+    Raises:
+        Busy: another process holds it.
+        OSError: the file cannot be made or locked (a file system without locks).
+    """
+    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
+    try:
+        fcntl.lockf(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError as err:
+        holder = os.pread(fd, 64, 0).decode(errors="replace").strip()
+        os.close(fd)
+        if err.errno in (errno.EACCES, errno.EAGAIN):
+            raise Busy(holder) from None
+        raise
+    except BaseException:
+        os.close(fd)
+        raise
+    os.ftruncate(fd, 0)
+    os.pwrite(fd, str(os.getpid()).encode(), 0)  # who holds it, for the message of those it stops
+    return fd
+
+
+def lock_holder(path: str | Path) -> str | None:
+    """The process id (as text, "" when unknown) of the process holding the lock of the file ``path``
+    (:func:`take_lock`), or None when no process holds it; an OSError when that cannot be told (no
+    such file, a file system without locks). Never ask about a lock this process holds: the probe's
+    close would release it."""
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        try:
+            fcntl.lockf(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        except OSError as err:
+            if err.errno in (errno.EACCES, errno.EAGAIN):
+                return os.pread(fd, 64, 0).decode(errors="replace").strip()
+            raise
+        return None
+    finally:
+        os.close(fd)  # releases the probe's shared lock

@@ -127,12 +127,14 @@ def energy_figure(log: RunLog, scene: Scene) -> Any:
     return figure
 
 
-def plot_path(path: str | Path) -> Path:
+def plot_path(path: str | Path, what: str = "") -> Path:
     """``path`` as a Path, when its suffix names a format save_plot writes (matplotlib would add .png to
-    a name without one, and write elsewhere than told)."""
+    a name without one, and write elsewhere than told); ``what`` (an option's flag) names it in the
+    error, as files.check_writable does."""
     path = Path(path)
     if path.suffix.lower() not in FORMATS:
-        raise InvalidOptions(str(path), f"the image's suffix must be one of {', '.join(FORMATS)}")
+        named = f"{what} {path}" if what else str(path)
+        raise InvalidOptions(named, f"the image's suffix must be one of {', '.join(FORMATS)}")
     return path
 
 

@@ -10,25 +10,26 @@ Used by the benchmark's knob sweep (:mod:`gaussim.bench.sweep`) and the user's p
 
 from __future__ import annotations
 
-import errno
-import fcntl
 import json
 import os
+import signal
 import threading
 from collections.abc import Callable, Iterator, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import Future, ProcessPoolExecutor, as_completed
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, TypeVar
 
 from .exceptions import GaussimError, InvalidOptions, shown
-from .files import OutputError
+from .files import Busy, OutputError, take_lock
 
 Job = TypeVar("Job")
 # called with (done, total, record) after each job: done counts this batch's jobs, total those it runs
 Progress = Callable[[int, int, dict], None]
 # the lock file of a folder a batch writes (exclusive), and the folders this process holds: by which thread
 LOCK = ".lock"
+# a stopped batch's workers are told to stop again this often until they have [s]
+STOP_WAIT = 1.0
 _HELD: dict[Path, int] = {}
 
 
@@ -59,26 +60,21 @@ def exclusive(folder: Path) -> Iterator[None]:
     if held is not None:  # a second descriptor's close would drop this process's lock: never open one
         raise FolderInUse(f"{folder}: another sweep of this process is writing this folder")
     folder.mkdir(parents=True, exist_ok=True)
-    with open(folder / LOCK, "a+") as lock:
-        try:
-            fcntl.lockf(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError as err:
-            if err.errno not in (errno.EACCES, errno.EAGAIN):
-                raise OutputError(f"{folder}: cannot lock it for the sweep ({err.strerror or err})") from err
-            lock.seek(0)
-            holder = lock.read().strip()
-            raise FolderInUse(
-                f"{folder}: another sweep{f' (process {holder})' if holder else ''} is writing this folder;"
-                " wait for it to end, or give another output folder"
-            ) from None
-        lock.truncate(0)
-        lock.write(str(os.getpid()))  # who holds it, for the message of the one it stops
-        lock.flush()
-        _HELD[resolved] = threading.get_ident()
-        try:
-            yield
-        finally:
-            del _HELD[resolved]
+    try:
+        fd = take_lock(folder / LOCK)
+    except Busy as busy:
+        raise FolderInUse(
+            f"{folder}: another sweep{f' (process {busy.holder})' if busy.holder else ''} is writing this "
+            "folder; wait for it to end, or give another output folder"
+        ) from None
+    except OSError as err:
+        raise OutputError(f"{folder}: cannot lock it for the sweep ({err.strerror or err})") from err
+    _HELD[resolved] = threading.get_ident()
+    try:
+        yield
+    finally:
+        del _HELD[resolved]
+        os.close(fd)
 
 
 def load(path: Path) -> list[dict]:
@@ -198,11 +194,53 @@ def _results(
     if workers == 1:
         yield from map(job, todo)
         return
-    with ProcessPoolExecutor(min(workers, len(todo))) as pool:
-        submitted = [pool.submit(job, item) for item in todo]
+    pool = ProcessPoolExecutor(min(workers, len(todo)), initializer=_worker_signals)
+    submitted = [pool.submit(job, item) for item in todo]
+    processes = list(pool._processes.values())  # the executor names them nowhere else
+    stopped = True
+    try:
+        for done in as_completed(submitted):
+            yield done.result()
+        stopped = False
+    finally:
+        if stopped:  # Ctrl-C, a kill of this process, an error: no job starts, the running ones stop
+            _stop_workers(pool, submitted, processes)
+        pool.shutdown(wait=True)
+
+
+def _worker_signals() -> None:
+    """A pool worker's stop signals (SIGINT, SIGTERM, SIGHUP) while no job runs: it exits quietly (the
+    handler it inherits from the command raised KeyboardInterrupt in multiprocessing's loop, a traceback
+    on the terminal). A job's run handles them its own way: it stops at the end of its step, its log
+    kept (:mod:`gaussim.runner`)."""
+    from .stops import STOP_SIGNALS
+
+    for stop in STOP_SIGNALS:
+        if signal.getsignal(stop) != signal.SIG_IGN:  # one the command ignores stays ignored
+            signal.signal(stop, _quit)
+
+
+def _quit(signum: int, frame: object) -> None:
+    raise SystemExit(128 + signum)
+
+
+def _stop_workers(pool: ProcessPoolExecutor, submitted: list[Future], processes: list[Any]) -> None:
+    """Stop a pool whose batch stopped midway: cancel the jobs not started and tell each worker to stop
+    (SIGTERM: a run stops at the end of its step, its log kept; an idle worker exits), again every
+    STOP_WAIT until all have exited (a worker whose run took the first one is then idle). A stop signal
+    that lands meanwhile (a second Ctrl-C) only makes the wait go on: the executor's own shutdown, left
+    midway, hung the command at its exit on workers waiting for work."""
+    for waiting in submitted:
+        waiting.cancel()
+    pool.shutdown(wait=False, cancel_futures=True)
+    while True:
         try:
-            for done in as_completed(submitted):
-                yield done.result()
-        finally:  # stopped midway (Ctrl-C, a kill of this process): the jobs not started never start
-            for waiting in submitted:
-                waiting.cancel()
+            alive = [process for process in processes if process.is_alive()]
+            if not alive:
+                return
+            for process in alive:
+                process.terminate()
+            for process in alive:
+                process.join(STOP_WAIT)
+        except KeyboardInterrupt:
+            continue

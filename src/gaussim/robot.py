@@ -30,6 +30,7 @@ from .exceptions import (
     InvalidOptions,
     InvalidRobot,
     RobotNotFound,
+    finite_numbers,
     shown,
 )
 from .urdfcheck import check_urdf, mesh_fault, mimic_joints
@@ -630,7 +631,7 @@ def _check(robot: Robot, data: pin.Data) -> None:
     for key, q in robot.reference_configurations.items():
         if np.shape(q) != (model.nq,) or not np.all(np.isfinite(q)):
             raise InvalidRobot(
-                f"{where}: configuration '{key}' must be {model.nq} finite numbers, got {shown(q)}"
+                f"{where}: configuration '{key}' must be {finite_numbers(model.nq)}, got {shown(q)}"
             )
     mass_matrix = pin.crba(model, data, pin.neutral(model))
     if not np.all(np.isfinite(mass_matrix)):

@@ -9,7 +9,10 @@ atomically), and the directory a run writes as it goes (:class:`RunLogWriter`): 
 numbered chunks ``chunk-000000.npz``, ``chunk-000001.npz``, ... of the steps since the last one, each
 written atomically and never rewritten. Logging a run thus costs O(new steps) and bounded memory, and
 at any instant (a SIGKILL, a full disk) the directory is a valid log of a prefix of the run: the
-header says complete only once the last chunk is in. A directory is the simplest such format that
+header says complete only once the last chunk is in. The process writing a directory holds the lock
+of its file ``.writing`` (a POSIX record lock, released by the system however the process ends): a
+reader tells a run still going from one that was killed, and a second run refuses to replace a log
+being written. A directory is the simplest such format that
 keeps the dependencies to numpy (HDF5 or Zarr would add one, and an appended zip is invalid while
 its end is being written).
 """
@@ -17,6 +20,7 @@ its end is being written).
 from __future__ import annotations
 
 import csv
+import glob
 import json
 import os
 import re
@@ -31,7 +35,7 @@ from typing import Any
 import numpy as np
 
 from .exceptions import GaussimError, InvalidOptions, shown
-from .files import OutputError, atomic_path, umask, write_atomic
+from .files import Busy, OutputError, atomic_path, leftovers, lock_holder, take_lock, umask, write_atomic
 from .options import Options
 from .report import StepReport
 from .solver import CONVERGED
@@ -47,6 +51,17 @@ HEADER = "header.json"
 CHUNK = re.compile(r"chunk-(\d{6})\.npz")
 # the header of a run still going, or ended without a word (SIGKILL, power cut)
 RUNNING = "still running, or stopped by a kill: the log holds the steps of its chunks"
+# the file whose lock (files.take_lock) the process writing a log directory holds while it writes
+WRITING = ".writing"
+# the reason RunLog.load gives a log whose header says RUNNING when no process writes it any more
+STOPPED = (
+    "stopped early: the process writing it ended before finishing it (killed, e.g. by SIGKILL or the "
+    "out-of-memory killer, or crashed); the log holds the steps of its chunks"
+)
+# ... and while a process still writes it
+LIVE = "still running (process {}): the log holds the steps of the chunks written so far"
+# the log directories this process writes (their resolved paths): their lock is never probed here
+_WRITTEN_HERE: set[Path] = set()
 # A run whose contacts sink deeper than this is flagged by its summary [m] (the velocity scheme closes an
 # approach exactly and rests within g dt^2 of the surface: a deeper penetration is lost accuracy)
 PENETRATION_TOLERANCE = 1e-3
@@ -343,6 +358,8 @@ class RunLog:
         if path.is_dir():
             header, data = _read_directory(path)
             bodied = header["format_version"] >= BODIES_SINCE["directory"]
+            if not header["complete"] and header["reason"].startswith(RUNNING):
+                header["reason"] = _running_reason(path) + header["reason"][len(RUNNING) :]
         else:
             data = _read_npz(path)
             _check_version(path, data.get("format_version"), OLDEST_VERSION["file"], FORMAT_VERSION)
@@ -555,9 +572,11 @@ class RunLogWriter:
 
     def __init__(self, path: str | Path, log: RunLog) -> None:
         self.path, self.log, self.steps, self._chunks = Path(path), log, 0, 0
-        _check_replaceable(self.path)
+        self._lock: int | None = None
+        check_replaceable(self.path)
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
+            _remove_stale(self.path)
             # made under a temporary name, so that a failure here leaves what was at path as it was
             new = Path(tempfile.mkdtemp(prefix=f".{self.path.name}.", suffix=".new", dir=self.path.parent))
             new.chmod(0o777 & ~umask())
@@ -565,14 +584,34 @@ class RunLogWriter:
             raise OutputError(f"run log {self.path}: cannot be written ({err.strerror or err})") from err
         try:
             self.path, final = new, self.path
+            self._hold(new)
             self._write_header()
             self.append()  # the initial state: from here on the directory is a valid log
             self.previous = _set_aside(final)
             os.replace(new, final)
+            self._hold(final)
             self.path = final
         except OSError as err:
+            self._release()
             shutil.rmtree(new, ignore_errors=True)
             raise OutputError(f"run log {final}: cannot be written ({err.strerror or err})") from err
+
+    def _hold(self, path: Path) -> None:
+        """Take (the first time) the log's WRITING lock, held until :meth:`close`; the directory it is
+        in is ``path`` (renamed: the lock follows the file)."""
+        _WRITTEN_HERE.discard(self.path.resolve())
+        _WRITTEN_HERE.add(path.resolve())
+        if self._lock is None:
+            try:
+                self._lock = take_lock(path / WRITING)
+            except Busy as err:  # a directory this process just made: no other process knows its name
+                raise OSError(f"{path / WRITING}: {err}") from err
+
+    def _release(self) -> None:
+        _WRITTEN_HERE.discard(self.path.resolve())
+        if self._lock is not None:
+            os.close(self._lock)
+            self._lock = None
 
     def append(self) -> None:
         """Write the steps recorded since the last chunk as the next chunk (nothing when there is none)."""
@@ -586,11 +625,14 @@ class RunLogWriter:
 
     def close(self) -> None:
         """Write the last chunk, then the header with the log's outcome (complete or why not; the header
-        also when the chunk cannot be written)."""
+        also when the chunk cannot be written), and release the log's lock."""
         try:
             self.append()
         finally:
-            self._write_header()
+            try:
+                self._write_header()
+            finally:
+                self._release()
 
     def _write_header(self) -> None:
         header = {"format_version": DIRECTORY_VERSION, **self.log._header()}
@@ -649,11 +691,54 @@ def is_run_log(path: Path) -> bool:
         return False
 
 
-def _check_replaceable(path: Path) -> None:
-    """Raise OutputError when ``path`` or ``path.prev`` holds something that is not a run log."""
+def check_replaceable(path: Path) -> None:
+    """Raise OutputError when a run log cannot be written at ``path``: ``path`` or ``path.prev`` holds
+    something that is not a run log, or a log another run is still writing (moved aside, it would take
+    that run's next chunks into the new log)."""
     for p in (path, _previous(path)):
         if p.exists() and not is_run_log(p):
             raise OutputError(f"run log {path}: {p} exists and is not a run log; it is left alone")
+        try:
+            holder = _writer(p) if p.is_dir() else None
+        except OSError:  # a log from before the lock: nothing tells whether it is written
+            holder = None
+        if holder is not None:
+            by = f" (process {holder})" if holder else ""
+            raise OutputError(
+                f"run log {path}: another run{by} is still writing {p}; wait for it to end, or give "
+                "another path"
+            )
+
+
+def _writer(path: Path) -> str | None:
+    """The process id (text, "" when unknown) of the run still writing the log directory ``path``, or
+    None when none is; an OSError when that cannot be told (a log from before the WRITING lock, a file
+    system without locks)."""
+    if path.resolve() in _WRITTEN_HERE:
+        return str(os.getpid())
+    return lock_holder(path / WRITING)
+
+
+def _running_reason(path: Path) -> str:
+    """The reason of a log directory whose header says RUNNING: STOPPED when no process writes it any
+    more, LIVE while one does, RUNNING when that cannot be told."""
+    try:
+        holder = _writer(path)
+    except OSError:
+        return RUNNING
+    return STOPPED if holder is None else LIVE.format(holder)
+
+
+def _remove_stale(path: Path) -> None:
+    """Remove the temporary directory (``.NAME.*.new``) that a run killed before its log at ``path``
+    held its first state left beside it, once no process writes it."""
+    for new in path.parent.glob(f".{glob.escape(path.name)}.*.new"):
+        try:
+            stale = new.is_dir() and _writer(new) is None
+        except OSError:  # no lock file (not gaussim's), or no locks: left alone
+            continue
+        if stale:
+            shutil.rmtree(new, ignore_errors=True)
 
 
 def _previous(path: Path) -> Path:
@@ -664,6 +749,9 @@ def _set_aside(path: Path) -> Path | None:
     """Move the run log at ``path`` to ``path.prev`` (replacing an older one); None when there is none."""
     if not path.exists():
         return None
+    if path.is_dir():  # the chunk or header a kill interrupted: hidden, never read, only taking room
+        for leftover in leftovers(path):
+            leftover.unlink(missing_ok=True)
     previous = _previous(path)
     if previous.is_dir():
         shutil.rmtree(previous)

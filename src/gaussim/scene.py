@@ -10,7 +10,7 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from .exceptions import GeometryNotFound, InvalidOptions, shown
+from .exceptions import GeometryNotFound, InvalidOptions, finite_numbers, shown
 from .options import is_real
 from .robot import Robot
 from .world import BodyLayout, FreeBody, Material, World, check_material, combined
@@ -23,7 +23,7 @@ def _vector(field_name: str, value: object, size: int) -> np.ndarray:
         raw = np.zeros(0)
     arr = raw.astype(float) if raw.dtype.kind in "iuf" else np.zeros(0)  # not text, bool or complex
     if arr.shape != (size,) or not np.all(np.isfinite(arr)):
-        raise InvalidOptions(field_name, f"must be {size} finite numbers, got {shown(value)}")
+        raise InvalidOptions(field_name, f"must be {finite_numbers(size)}, got {shown(value)}")
     return arr
 
 
@@ -51,7 +51,10 @@ class Ground:
         if np.linalg.norm(n) < 1e-12:
             raise InvalidOptions(f"{self.name}.normal", "must be a non-zero vector")
         object.__setattr__(self, "normal", tuple(n / np.linalg.norm(n)))
-        _vector(f"{self.name}.height", [self.height], 1)
+        if not is_real(self.height):
+            raise InvalidOptions(
+                f"{self.name}.height", f"must be a finite number [m], got {shown(self.height)}"
+            )
 
     def shape(self) -> coal.CollisionGeometry:
         return coal.Halfspace(np.asarray(self.normal), float(self.height))

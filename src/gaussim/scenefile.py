@@ -47,7 +47,7 @@ import pinocchio as pin
 
 from .control import Command, Controller, PDHold, command, constant_torque, zero_torque
 from .dynamics import FloatingBases
-from .exceptions import GaussimError, InvalidOptions, InvalidRobot, shown
+from .exceptions import GaussimError, InvalidOptions, InvalidRobot, finite_numbers, missing_file, shown
 from .options import Options, is_real
 from .robot import ROBOTS_DIR, SUFFIXES, Robot, example_robot_names, load_robot
 from .scene import Anchor, Box, Ground, LoopClosure, Scene, Sphere
@@ -204,6 +204,15 @@ def load_scene(path: str | Path, **overrides: Any) -> SceneSpec:
     try:
         raw = path.read_bytes()
     except OSError as err:
+        from .runlog import is_run_log
+
+        if is_run_log(path):  # the commands that read a log would be the user's next try
+            raise SceneFileError(
+                path,
+                "file",
+                f"a run log, not a scene file: `gaussim inspect {path}` shows it and the scene it was made "
+                "from; gaussim replay, plot and forces read it",
+            ) from err
         scenes = sorted(p.stem for p in (ROBOTS_DIR / "scenes").glob("*.toml"))
         close = get_close_matches(str(path), [*scenes, *example_robot_names()], n=3)
         meant = f"did you mean {' or '.join(close)}? " if close and path.parent == Path() else ""
@@ -390,7 +399,7 @@ class _Reader:
         return value
 
     def array(self, key: str, value: Any, size: int | None = None) -> np.ndarray:
-        wanted = f"must be {'a list of' if size is None else size} finite numbers, got {shown(value)}"
+        wanted = f"must be {finite_numbers(size)}, got {shown(value)}"
         if not isinstance(value, (list, np.ndarray)) or any(not _is_number(x) for x in value):
             self.fail(key, wanted)
         arr = np.asarray(value, dtype=float)
@@ -527,7 +536,7 @@ class _Reader:
         """``value``, a path relative to the scene file, of a file that exists."""
         target = self.path.parent / self.string(key, value)
         if not target.is_file():
-            self.fail(key, f"no such file: {target}")
+            self.fail(key, missing_file(target))
         return target
 
     def load(

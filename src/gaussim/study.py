@@ -38,7 +38,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, fields
 from operator import attrgetter
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -55,7 +55,7 @@ ENTRIES = {"bodies": "name", "obstacles": "name", "bilaterals": None}
 # the sections of the one-robot form, which a scene of [[bodies]] gives per body
 ONE_ROBOT = ("robot", "initial", "control")
 RESULTS, RUNS, TABLE = "runs.jsonl", "runs", "results.parquet"
-# the summary of every run (then, per floating body B: B.x, B.y, B.z, B.displacement, B.speed)
+# the summary of every run (then, per free root B, free_roots: B.x, B.y, B.z, B.displacement, B.speed)
 SUMMARY = (
     "steps",
     "t_end",
@@ -437,27 +437,50 @@ def perturbed(spec: SceneSpec, seed: int, noise: Noise) -> State:
     drawn from ``numpy.random.default_rng(seed)`` with standard deviations ``noise.position`` [m] (per
     direction in the plane) and ``noise.velocity`` [m/s or rad/s]. A body moved this way keeps its
     height above the ground."""
-    from .dynamics import FloatingBases
     from .scene import Ground
 
     rng = np.random.default_rng(seed)
     grounds = [o for o in spec.scene.obstacles if isinstance(o, Ground)]
     n = np.asarray(grounds[0].normal if grounds else (0.0, 0.0, 1.0))  # a unit normal
     q, v = spec.initial.q.copy(), spec.initial.v.copy()
-    for layout in spec.scene.bodies.values():
-        for first in FloatingBases.of(layout.robot.model).configuration:  # each box of a stack's file too
-            shift = rng.normal(0.0, noise.position, 3)
-            start = layout.q.start + first
-            q[start : start + 3] += shift - (shift @ n) * n
+    for root in free_roots(spec):
+        shift = rng.normal(0.0, noise.position, 3)
+        q[root.q : root.q + 3] += shift - (shift @ n) * n
     v += rng.normal(0.0, noise.velocity, v.shape)
     return State(spec.initial.t, q, v, spec.initial.world)
+
+
+class FreeRoot(NamedTuple):
+    """A free root of a scene: its summary columns' name, and its first indices in the world's q and v."""
+
+    name: str
+    q: int
+    v: int
+
+
+def free_roots(spec: SceneSpec) -> list[FreeRoot]:
+    """The scene's free roots (:class:`gaussim.dynamics.FloatingBases`: each free-flyer joint hung from
+    the world, a floating base or each box of robots/box_stack.urdf), body by body in the scene's
+    order; each named by its body, or ``BODY.JOINT`` in a body of several (``box_stack.top_joint``)."""
+    from .dynamics import FloatingBases
+
+    roots = []
+    for body, layout in spec.scene.bodies.items():
+        model = layout.robot.model
+        bases = FloatingBases.of(model)
+        joints = np.flatnonzero(bases.of_joint >= 0)  # in the order of bases.configuration
+        for joint, q, v in zip(joints.tolist(), bases.configuration.tolist(), bases.velocity.tolist()):
+            name = body if len(bases) == 1 else f"{body}.{model.names[joint]}"
+            roots.append(FreeRoot(name, layout.q.start + q, layout.v.start + v))
+    return roots
 
 
 def summarise(log: RunLog, spec: SceneSpec) -> dict[str, float]:
     """A run's numbers: SUMMARY (steps, simulated end time [s], wall time [s], deepest penetration
     [m], largest KKT residual, steps whose QP did not converge, largest contact force [N], final
-    kinetic energy [J]), then each floating body B's final base position ``B.x``, ``B.y``, ``B.z`` [m],
-    its distance from its start ``B.displacement`` [m] and its final speed ``B.speed`` [m/s]."""
+    kinetic energy [J]), then for each free root B (:func:`free_roots`) its final position ``B.x``,
+    ``B.y``, ``B.z`` [m], its distance from its start ``B.displacement`` [m] and its final speed
+    ``B.speed`` [m/s]."""
     import pinocchio as pin
 
     c, s = log.contact_arrays(), log.solver_arrays()
@@ -473,19 +496,17 @@ def summarise(log: RunLog, spec: SceneSpec) -> dict[str, float]:
         "max_contact_force": float(np.linalg.norm(c["force"], axis=1).max()) if len(c["gap"]) else 0.0,
         "kinetic_energy": float(pin.computeKineticEnergy(model, model.createData(), q, v)),
     }
-    for name, layout in spec.scene.bodies.items():
-        if layout.floating:
-            start, end = log.q[0][layout.q][:3], q[layout.q][:3]
-            summary.update({f"{name}.{axis}": float(x) for axis, x in zip("xyz", end)})
-            summary[f"{name}.displacement"] = float(np.linalg.norm(end - start))
-            summary[f"{name}.speed"] = float(np.linalg.norm(v[layout.v][:3]))
+    for root in free_roots(spec):
+        start, end = log.q[0][root.q : root.q + 3], q[root.q : root.q + 3]
+        summary.update({f"{root.name}.{axis}": float(x) for axis, x in zip("xyz", end)})
+        summary[f"{root.name}.displacement"] = float(np.linalg.norm(end - start))
+        summary[f"{root.name}.speed"] = float(np.linalg.norm(v[root.v : root.v + 3]))
     return summary
 
 
 def summary_columns(spec: SceneSpec) -> list[str]:
     """The summary's columns for a scene (those of :func:`summarise`)."""
-    bodies = [n for n, layout in spec.scene.bodies.items() if layout.floating]
-    return [*SUMMARY, *(f"{n}.{c}" for n in bodies for c in BODY_SUMMARY)]
+    return [*SUMMARY, *(f"{root.name}.{c}" for root in free_roots(spec) for c in BODY_SUMMARY)]
 
 
 def run_one(run: Run) -> dict:

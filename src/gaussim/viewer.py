@@ -35,6 +35,7 @@ import io
 import json
 import math
 import os
+import re
 import subprocess
 import sys
 import tempfile
@@ -101,9 +102,11 @@ _OVERLAY = """
   #gaussim-bar input { flex: 1; }
   #gaussim-play { width: 70px; }
   #gaussim-time { min-width: 110px; font-variant-numeric: tabular-nums; }
+  #gaussim-stopped { color: #b00020; }
 </style>
 <div id="gaussim-legend">force arrows: 1 m = @SCALE@ N
-  <b style="background:@NORMAL@"></b>normal <b style="background:@FRICTION@"></b>friction<br>@BODIES@</div>
+  <b style="background:@NORMAL@"></b>normal <b style="background:@FRICTION@"></b>friction<br>@BODIES@
+  @STOPPED@</div>
 <div id="gaussim-bar"><button id="gaussim-play">play</button>
   <input id="gaussim-scrub" type="range" min="0" max="0" step="any" value="0" disabled>
   <span id="gaussim-time">t = 0.000 s</span></div>
@@ -191,6 +194,7 @@ class Viewer:
         self.visual_data = pin.GeometryData(self.visual)
         self._owned = meshcat is None  # a visualizer given by the user stays open
         self._replay_clock = (0.0, 1.0)  # the replay's first simulated time [s] and its speed
+        self._stopped: str | None = None  # why the replayed run ended early (None: it ran to its end)
         if meshcat is not None:
             if not isinstance(meshcat, Visualizer):
                 raise GaussimError(f"meshcat must be a meshcat.Visualizer, got {type(meshcat).__name__}")
@@ -262,6 +266,8 @@ class Viewer:
             )
         animation = Animation(default_framerate=fps)
         self._replay_clock = (float(t[0]), float(speed))
+        # a page of a killed or failed run must not pass for the whole run
+        self._stopped = None if log.complete else f"the run did not finish: {log.reason}"
         self._aim(log.q[:: max(1, len(log.q) // FRAMED_STATES)])
         frames = np.arange(0.0, t[-1] - t[0] + 1e-12, speed / fps)
         states = np.minimum(np.searchsorted(t - t[0], frames - 1e-12), len(t) - 1)
@@ -372,19 +378,24 @@ class Viewer:
         return low, high
 
     def _overlay(self, live: bool) -> str:
-        """gaussim's overlay of the page: the time and the animation's controls, the arrows' scale and
-        the bodies' colours (HTML)."""
+        """gaussim's overlay of the page: the time and the animation's controls, the arrows' scale,
+        the bodies' colours and, for a run that stopped early, when and why (HTML)."""
         bodies = "".join(
             f'<span><i style="background:#{_hex(b.color):06x}"></i>{escape(b.name)}</span>'
             for b in self.scene.world.bodies.values()
         )
         config = {"t0": self._replay_clock[0], "speed": self._replay_clock[1], "live": live}
+        stopped = (
+            "" if self._stopped is None else f'<br><span id="gaussim-stopped">{escape(self._stopped)}</span>'
+        )
+
         return (
             _OVERLAY.replace("@CONFIG@", json.dumps(config))
             .replace("@NORMAL@", f"#{NORMAL_COLOR:06x}")
             .replace("@FRICTION@", f"#{FRICTION_COLOR:06x}")
             .replace("@SCALE@", f"{1 / self.force_scale:.3g}")
             .replace("@BODIES@", bodies)
+            .replace("@STOPPED@", stopped)
         )
 
     def _placements(self, q: np.ndarray) -> list[tuple[str, np.ndarray]]:
@@ -706,7 +717,14 @@ def screenshot(
 def page_dom(html: str | Path, wait_ms: int = 4000, at: float | None = None) -> str:
     """The DOM of a page after it ran for ``wait_ms`` (headless Chromium), a replay stopped at the
     simulated time ``at`` [s] when given, as HTML text."""
-    return _chromium(html, f"--timeout={wait_ms}", "--dump-dom", fragment=_at(at))
+    return _chromium(html, f"--timeout={wait_ms}", "--dump-dom", fragment=_at(at)).stdout
+
+
+def page_errors(html: str | Path, wait_ms: int = 4000) -> list[str]:
+    """The JavaScript errors a page raised (uncaught, as its console shows them) while headless Chromium
+    ran it for ``wait_ms``: a page that does not load says why here, not in its pixels."""
+    logged = _chromium(html, f"--timeout={wait_ms}", "--dump-dom", "--enable-logging=stderr", "--v=0")
+    return _UNCAUGHT.findall(logged.stderr)
 
 
 def _at(at: float | None) -> str:
@@ -714,10 +732,16 @@ def _at(at: float | None) -> str:
     return "" if at is None else f"#t={at:.6g}"
 
 
-def _chromium(html: str | Path, *options: str, timeout: float = 120.0, fragment: str = "") -> str:
-    """Run headless Chromium on a page in a fresh profile; its standard output. (Measured with Chromium
-    150: ``--virtual-time-budget`` hangs on meshcat's animated page 2 runs in 5, and a Chromium started
-    in a new session hangs too; ``--timeout`` in our session has not.)"""
+# an uncaught JavaScript error in Chromium's log (--enable-logging=stderr): its console's message
+_UNCAUGHT = re.compile(r':CONSOLE[^\]]*\] "(Uncaught [^\n]*)", source: ')
+
+
+def _chromium(
+    html: str | Path, *options: str, timeout: float = 120.0, fragment: str = ""
+) -> subprocess.CompletedProcess[str]:
+    """Run headless Chromium on a page in a fresh profile; the finished process (its output as text).
+    (Measured with Chromium 150: ``--virtual-time-budget`` hangs on meshcat's animated page 2 runs in 5,
+    and a Chromium started in a new session hangs too; ``--timeout`` in our session has not.)"""
     import shutil
 
     binary = next(
@@ -744,4 +768,4 @@ def _chromium(html: str | Path, *options: str, timeout: float = 120.0, fragment:
             raise GaussimError(f"chromium did not finish rendering {html} within {timeout:.0f} s") from error
     if result.returncode != 0:
         raise GaussimError(f"chromium could not render {html}: {result.stderr.strip()[-500:]}")
-    return result.stdout
+    return result

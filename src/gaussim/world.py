@@ -18,7 +18,7 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from .exceptions import InvalidOptions, InvalidRobot, shown
+from .exceptions import InvalidOptions, InvalidRobot, finite_numbers, shown
 from .options import is_real
 from .robot import Robot, as_robot, hull_problem
 
@@ -89,7 +89,7 @@ def pose(
 def _numbers(where: str, value: object, size: int) -> np.ndarray:
     arr = np.asarray(value)
     if arr.dtype.kind not in "iuf" or arr.shape != (size,) or not np.all(np.isfinite(arr)):
-        raise InvalidOptions(where, f"must be {size} finite numbers, got {shown(value)}")
+        raise InvalidOptions(where, f"must be {finite_numbers(size)}, got {shown(value)}")
     return arr.astype(float)
 
 
