@@ -28,6 +28,13 @@ PENETRATION = 1e-4  # [m] the deepest a resting contact may sink
 FALL_TIME = 0.4  # [s]
 
 
+@pytest.fixture(autouse=True)
+def _mujoco_logs_kept_out(tmp_path, monkeypatch):
+    """Each test in its own folder: MuJoCo writes the MUJOCO_LOG.TXT of its warnings (settotalmass) and
+    of the files it refuses in the working folder."""
+    monkeypatch.chdir(tmp_path)
+
+
 def load_quietly(path: Path, **kwargs) -> gaussim.Robot:
     """A robot whose file leaves out what a Scene holds (a floor, static models): that is warned."""
     with pytest.warns(gaussim.GaussimWarning, match="left out"):
@@ -172,12 +179,11 @@ PYBULLET_MJCF = sorted((Path(pybullet_data.getDataPath()) / "mjcf").glob("*.xml"
 
 
 @pytest.mark.parametrize("path", PYBULLET_MJCF, ids=lambda path: path.name)
-def test_pybullet_mjcf_files_have_mujocos_mass_matrix(path, tmp_path, monkeypatch):
+def test_pybullet_mjcf_files_have_mujocos_mass_matrix(path):
     """Each MJCF of pybullet_data that MuJoCo 3 loads (it refuses 8 of 26: global coordinates, undefined
     materials, ...): gaussim loads it with MuJoCo's mass matrix at random configurations, or refuses it
     by name, or leaves out its other top-level bodies with a warning (then only nv differs). The
     weighing rules themselves are checked on small files above (test_mjcf_masses_are_mujocos)."""
-    monkeypatch.chdir(tmp_path)  # where MuJoCo writes the MUJOCO_LOG.TXT of a file it refuses
     try:
         reference = mujoco.MjModel.from_xml_path(str(path))
     except ValueError:  # MuJoCo 3 refuses it too (global coordinates, an undefined material, ...)
@@ -323,6 +329,23 @@ def test_mjcf_a_geom_of_class_main_loads(tmp_path):
         )
         reference = mujoco.MjModel.from_xml_path(str(path))
         assert gaussim.load_robot(path).mass == pytest.approx(reference.body_mass[1], rel=1e-12)
+
+
+def test_mjcf_a_weighing_mesh_refuses_its_own_body_alone(tmp_path):
+    """The mesh check reads the top-level body loaded: a weighing mesh of another body refused the
+    first one too."""
+    (tmp_path / "tetra.obj").write_text((DATA / "tetra.obj").read_text())
+    path = tmp_path / "two.xml"
+    path.write_text(
+        '<mujoco><asset><mesh name="tetra" file="tetra.obj"/></asset><worldbody>'
+        '<body name="arm" pos="0 0 0.5"><joint axis="0 1 0"/><geom type="sphere" size="0.05"/></body>'
+        '<body name="rock" pos="1 0 0.5"><freejoint/><geom type="mesh" mesh="tetra"/></body>'
+        "</worldbody></mujoco>"
+    )
+    with pytest.warns(gaussim.GaussimWarning, match=r"the bodies 'rock' are left out"):
+        assert gaussim.load_robot(path).name == "two"
+    with pytest.raises(gaussim.InvalidRobot, match=r"the bodies 'rock' take their inertia from mesh geoms"):
+        gaussim.load_robot(path, body="rock")
 
 
 def test_mjcf_included_assets_are_read(tmp_path):

@@ -135,21 +135,29 @@ def for_pinocchio(path: Path, root: ET.Element, body: str | int | None = None) -
         yield str(model), str(geometry)
 
 
-def _one_body(path: Path, root: ET.Element, name: str | int | None) -> None:
-    """Keep the top-level body ``name`` of ``root`` (by name or place; the first when None) and cut
-    each keyframe's qpos to its coordinates (MuJoCo's qpos holds every body's, in their order, where
-    Pinocchio's reader wants the model's alone: "Keyframe size does not match model size")."""
-    top = bodies(root)
-    names = [str(b.get("name", "")) for b in top]
-    if isinstance(name, str) and name not in names:
+def top_index(path: Path, root: ET.Element, name: str | int | None) -> int:
+    """The place among the top-level bodies of ``<worldbody>`` of the body ``name`` (by name or place;
+    the first when None); raises :class:`InvalidRobot` for a name the file does not have."""
+    if name is None or isinstance(name, int):
+        return name or 0
+    names = [str(b.get("name", "")) for b in bodies(root)]
+    if name not in names:
         listed = ", ".join(repr(n) for n in names)
         raise InvalidRobot(
             f"{path}: no top-level body '{name}' in <worldbody>{_meant(name, names)}; its bodies: {listed}"
         )
-    kept = top[0 if name is None else names.index(name) if isinstance(name, str) else name]
+    return names.index(name)
+
+
+def _one_body(path: Path, root: ET.Element, name: str | int | None) -> None:
+    """Keep the top-level body ``name`` of ``root`` (see :func:`top_index`) and cut each keyframe's
+    qpos to its coordinates (MuJoCo's qpos holds every body's, in their order, where Pinocchio's
+    reader wants the model's alone: "Keyframe size does not match model size")."""
+    top = bodies(root)
+    index = top_index(path, root, name)
+    kept = top[index]
     defaults = _defaults(root)
     sizes = [_coordinates(b, "main", defaults) for b in top]
-    start = sizes[: top.index(kept)]
     for world in root.iter("worldbody"):
         for element in list(world):
             # the world's own geoms are the first body's robot's (as a file of one body has them)
@@ -159,7 +167,7 @@ def _one_body(path: Path, root: ET.Element, name: str | int | None) -> None:
                 world.remove(element)
     if len(top) == 1:
         return
-    offset, size = sum(start), sizes[top.index(kept)]
+    offset, size = sum(sizes[:index]), sizes[index]
     for key in root.iter("key"):
         for other in ("qvel", "act", "ctrl", "mpos", "mquat"):  # sized by the whole file too
             key.attrib.pop(other, None)
@@ -229,18 +237,20 @@ def bodies(root: ET.Element) -> list[ET.Element]:
 
 
 def check(path: Path, root: ET.Element, body: str | None = None) -> list[str]:
-    """Raise :class:`InvalidRobot` when a body takes its inertia from a mesh geom that weighs (one that
-    collides with nothing too; Pinocchio gives such a geom 1 kg and a unit inertia [kg m^2]); return
-    what the model leaves out of the file: the top-level bodies after the first (when no ``body`` of
-    them was chosen) and the ``<equality>`` constraints, each a sentence."""
+    """Raise :class:`InvalidRobot` when a body of the loaded top-level body ``body`` (the first when
+    None) takes its inertia from a mesh geom that weighs (one that collides with nothing too; Pinocchio
+    gives such a geom 1 kg and a unit inertia [kg m^2]); return what the model leaves out of the file:
+    the top-level bodies after the first (when no ``body`` of them was chosen) and the ``<equality>``
+    constraints, each a sentence."""
     from_geoms = compiler(root, "inertiafromgeom", "auto")
     defaults, groups = _defaults(root), _weighed_groups(root)
+    loaded = bodies(root)[top_index(path, root, body)]
     meshes = sorted(
         {
-            str(body.get("name", ""))
-            for body, classname in _bodies_with_class(root, defaults)
-            if from_geoms == "true" or body.find("inertial") is None
-            for geom in body.findall("geom")
+            str(element.get("name", ""))
+            for element, classname in _bodies_with_class(root, defaults, [loaded])
+            if from_geoms == "true" or element.find("inertial") is None
+            for geom in element.findall("geom")
             if _attribute(geom, "type", geom.get("class", classname), defaults, "sphere") == "mesh"
             and _mass(geom, geom.get("class", classname), defaults, groups) != 0.0
         }
@@ -315,9 +325,12 @@ def _defaults(root: ET.Element) -> dict[str, tuple[ET.Element, str | None]]:
 
 
 def _bodies_with_class(
-    root: ET.Element, defaults: dict[str, tuple[ET.Element, str | None]]
+    root: ET.Element,
+    defaults: dict[str, tuple[ET.Element, str | None]],
+    tops: list[ET.Element] | None = None,
 ) -> list[tuple[ET.Element, str]]:
-    """Every body with the class its elements take when they name none (the nearest ``childclass``)."""
+    """Every body (of the top-level bodies ``tops``, default all) with the class its elements take when
+    they name none (the nearest ``childclass``)."""
     found: list[tuple[ET.Element, str]] = []
 
     def visit(body: ET.Element, classname: str) -> None:
@@ -326,7 +339,7 @@ def _bodies_with_class(
         for child in body.findall("body"):
             visit(child, classname)
 
-    for body in bodies(root):
+    for body in bodies(root) if tops is None else tops:
         visit(body, "main")
     return found
 

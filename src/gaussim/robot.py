@@ -469,10 +469,9 @@ def _from_mjcf(
 def _file_mass(path: Path, root: ET.Element, body: str | None, model: pin.Model) -> float:
     """The mass of every body of the MJCF at ``path`` as Pinocchio reads it (before ``settotalmass``):
     ``model``'s (that of ``body``, or of the first top-level body) and each other top-level body's."""
-    names = [str(b.get("name", "")) for b in mjcf.bodies(root)]
-    loaded = names.index(body) if body is not None else 0
+    loaded = mjcf.top_index(path, root, body)
     mass = sum(inertia.mass for inertia in model.inertias)
-    for k in range(len(names)):
+    for k in range(len(mjcf.bodies(root))):
         if k != loaded:
             with mjcf.for_pinocchio(path, root, k) as (weighed, _):
                 other = pin.buildModelFromMJCF(weighed)
