@@ -662,6 +662,10 @@ def test_a_bare_sdf_link_named_world_is_the_world(tmp_path):
     assert (robot.model.nq, robot.floating, robot.mass) == (expected.model.nq, False, expected.mass)
     q = pin.neutral(robot.model)
     np.testing.assert_array_equal(mass_matrix(robot, q), mass_matrix(expected, q))
+    shown = tmp_path / "shown.sdf"  # a visual of the world link is dropped, and said so
+    shown.write_text(sdf_model('<link name="world"><visual name="plate"/></link>' + body))
+    with pytest.warns(gaussim.GaussimWarning, match=r"its <visual> is not drawn"):
+        gaussim.load_robot(shown)
 
     path = KUKA.parent / "gripper" / "wsg50_one_motor_gripper_new.sdf"
     with pytest.warns(gaussim.GaussimWarning):

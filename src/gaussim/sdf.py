@@ -157,8 +157,13 @@ class _Reader:
                 "is then the model's base), or leave it bare (the model is fixed to the world)",
             )
         del links["world"]
+        unseen = (
+            " (its <visual> is not drawn: the world frame carries none)"
+            if link.find("visual") is not None
+            else ""
+        )
         self.notes.append(
-            f"the link 'world' has no <inertial>: joint {named} attaches the model to the world"
+            f"the link 'world' has no <inertial>: joint {named} attaches the model to the world{unseen}"
         )
 
     def model(self) -> ET.Element:
