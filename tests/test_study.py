@@ -1,8 +1,10 @@
 """Parameter studies (gaussim sweep): keys, values, the product, seeds, failures, resume, Dask, table."""
 
+import json
 import math
 import os
 import re
+import shutil
 import signal
 import subprocess
 import sys
@@ -327,6 +329,13 @@ def test_the_summary_follows_every_free_root_of_a_body_named_by_its_joint():
     assert summary["box_stack.middle_joint.z"] == pytest.approx(0.3, abs=1e-3)
     assert summary["box_stack.bottom_joint.speed"] < 1e-3
     assert study.summary_columns(load_scene(BALL))[-5:] == [f"ball.{c}" for c in study.BODY_SUMMARY]
+    # a change of these columns must raise SUMMARY_FORMAT: resumed sweeps then summarise again
+    assert (study.SUMMARY_FORMAT, study.SUMMARY, study.BODY_SUMMARY) == (
+        2,
+        (*"steps t_end wall_time max_penetration max_kkt_residual".split(), "unconverged_steps",
+         "max_contact_force", "kinetic_energy"),
+        ("x", "y", "z", "displacement", "speed"),
+    )  # fmt: skip
 
 
 def test_a_failing_run_is_a_row_and_the_others_go_on(tmp_path):
@@ -357,6 +366,32 @@ def test_an_interrupted_sweep_resumes_without_redoing_its_finished_runs(tmp_path
     assert _sweep(BALL, "--vary", "ground.restitution=0.9", *args) == 0
     assert "1 runs, 1 already in" in capsys.readouterr().err
     assert len(pd.read_parquet(tmp_path / study.TABLE)) == 1, "the table holds the runs asked for"
+
+
+def test_a_resumed_sweep_summarises_the_runs_an_older_gaussim_summarised_again(tmp_path, capsys):
+    """A sweep resumed by a gaussim whose summary changed (a body's columns renamed, SUMMARY_FORMAT
+    raised) reads the runs it holds again from their logs: one table of one summary's columns, the
+    new record appended; a run whose log is gone keeps its record."""
+    args = ["--vary", "simulation.duration=0.05", "--out", tmp_path]
+    assert _sweep(BALL, "--vary", "ground.restitution=0.5,0.7", *args) == 0
+    results = tmp_path / study.RESULTS
+    made = load(results)
+    assert {r["summary_format"] for r in made} == {study.SUMMARY_FORMAT}
+    for record in made:  # as an older gaussim wrote them
+        del record["summary_format"]
+        record["summary"] = {k.replace("ball.", "ball_old."): v for k, v in record["summary"].items()}
+    results.write_text("".join(json.dumps(r) + "\n" for r in made))
+    shutil.rmtree(tmp_path / made[1]["log"])
+    capsys.readouterr()
+    assert _sweep(BALL, "--vary", "ground.restitution=0.5,0.7,0.9", *args) == 0
+    frame = pd.read_parquet(tmp_path / study.TABLE)
+    assert list(frame["ground.restitution"]) == [0.5, 0.7, 0.9]
+    assert frame["ball.z"].notna().tolist() == [True, False, True]  # the second's log is gone
+    assert frame["ball_old.z"].notna().tolist() == [False, True, False]
+    again = load(results)
+    assert len(again) == 4 and again[2]["key"] == made[0]["key"]
+    assert again[2]["summary_format"] == study.SUMMARY_FORMAT
+    assert again[2]["summary"]["ball.z"] == RunLog.load(tmp_path / made[0]["log"]).q[-1][2]
 
 
 # holds a folder's lock as a sweep does, until killed

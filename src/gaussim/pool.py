@@ -98,10 +98,12 @@ def run_all(
     workers: int | None = None,
     scheduler: Any = None,
     progress: Progress | None = None,
+    refresh: Callable[[Job, dict], dict | None] | None = None,
 ) -> list[dict]:
     """Run ``job`` on each item of ``todo`` whose ``key`` is not already in ``path``, appending each
     record as it finishes; return the records of ``todo`` (those in the file and the new ones), in
-    its order.
+    its order. ``refresh(item, record)``, for each item's record already in the file: a new record to
+    append in its place (the file's last record of a key is its record), or None to keep it.
 
     ``job`` must be picklable (a module-level function) and return a JSON-able dict whose ``"key"`` is
     its item's; it should catch its own errors and record them, since an exception it raises stops the
@@ -128,6 +130,12 @@ def run_all(
         with path.open("a") as out:
             if torn:  # a line cut by an interruption ends here: the next record starts a line of its own
                 out.write("\n")
+            for item in todo:
+                held = done.get(key(item))
+                if held is not None and refresh is not None and (fresh := refresh(item, held)) is not None:
+                    out.write(json.dumps(fresh, default=str) + "\n")
+                    out.flush()
+                    done[key(item)] = fresh
             for count, record in enumerate(_results(job, remaining, workers, scheduler), start=1):
                 out.write(json.dumps(record, default=str) + "\n")
                 out.flush()

@@ -67,6 +67,9 @@ SUMMARY = (
     "kinetic_energy",
 )
 BODY_SUMMARY = ("x", "y", "z", "displacement", "speed")
+# what a record's summary was made by: raise it when summarise changes, and a resumed study summarises
+# the runs it holds again, from their logs (its table would mix two summaries' columns)
+SUMMARY_FORMAT = 2
 _PART = re.compile(r"([^.\[\]]+)(?:\[(\d+)\])?$")
 _WORD = re.compile(r"[A-Za-z_][\w.\-]*")
 _BARE_KEY = re.compile(r"[A-Za-z0-9_-]+")
@@ -529,6 +532,7 @@ def run_one(run: Run) -> dict:
             spec.initial = perturbed(spec, run.seed, run.noise)
         log = simulate(spec, log_path)
         record.update(status="ok", warnings="; ".join(log.warnings()), summary=summarise(log, spec))
+        record["summary_format"] = SUMMARY_FORMAT
     except Exception as err:  # a failing run is a result: it is recorded and the study goes on
         record.update(status=f"{type(err).__name__}: {err}", warnings="", summary={})
         record["traceback"] = traceback.format_exc(limit=3)
@@ -553,7 +557,23 @@ def study(
         raise InvalidOptions(
             "out", f"{folder}: the runs were planned for {', '.join(elsewhere)}: give plan() the same folder"
         )
-    return run_all(runs, attrgetter("key"), run_one, folder / RESULTS, workers, scheduler, progress)
+    return run_all(
+        runs, attrgetter("key"), run_one, folder / RESULTS, workers, scheduler, progress, resummarised
+    )
+
+
+def resummarised(run: Run, record: dict) -> dict | None:
+    """A finished run's record summarised again from its log when an older gaussim summarised it
+    (``summary_format``, SUMMARY_FORMAT), else None; None too when its log cannot be read (the
+    record, whose summary is the old one, stands)."""
+    if record.get("status") != "ok" or record.get("summary_format") == SUMMARY_FORMAT:
+        return None
+    try:
+        log = RunLog.load(Path(run.out) / record["log"])
+        summary = summarise(log, load_scene_text(run.text, run.scene_path))
+    except (GaussimError, OSError, KeyError, ValueError):
+        return None
+    return {**record, "summary": summary, "summary_format": SUMMARY_FORMAT}
 
 
 def rows(records: Sequence[dict]) -> list[dict[str, Any]]:
