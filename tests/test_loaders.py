@@ -381,6 +381,37 @@ def test_mjcf_included_assets_are_read(tmp_path):
     assert robot.visual_model.geometryObjects[0].meshColor.tolist() == pytest.approx([0.7, 0.5, 0.3, 1.0])
 
 
+def test_mjcf_includes_are_found_and_placed_as_mujoco_does(tmp_path):
+    """An included file is looked for in the main file's folder first, then in the including file's
+    (a nested include of common/ found common/'s copy where MuJoCo takes the main folder's); the
+    elements of two includes keep their order (the second include's body was put between the first's
+    two, so that the coordinates were not in MuJoCo's order); a missing one is named."""
+    (tmp_path / "common").mkdir()
+    ball = (
+        '<mujoco><body name="{0}" pos="{1} 0 0"><joint name="{0}" type="slide"/><geom size="0.1"/>'
+        "</body></mujoco>"
+    )
+    (tmp_path / "common" / "bodies.xml").write_text('<mujoco><include file="ball.xml"/></mujoco>')
+    (tmp_path / "common" / "ball.xml").write_text(ball.format("common_ball", 0))
+    (tmp_path / "ball.xml").write_text(ball.format("main_ball", 0))
+    (tmp_path / "two.xml").write_text(ball.format("second", 1)[:-9] + ball.format("third", 2)[8:])
+    path = tmp_path / "world.xml"
+    path.write_text(
+        '<mujoco><worldbody><body name="base" pos="0 0 1"><include file="two.xml"/>'
+        '<include file="common/bodies.xml"/><body name="last" pos="3 0 0"><joint name="last" type="slide"/>'
+        '<geom size="0.1"/></body></body></worldbody></mujoco>'
+    )
+    reference = mujoco.MjModel.from_xml_path(str(path))
+    expected = [reference.joint(j).name for j in range(reference.njnt)]
+    assert expected == ["second", "third", "main_ball", "last"]
+    assert list(gaussim.load_robot(path).model.names)[1:] == expected
+    (tmp_path / "ball.xml").unlink()  # then the including file's folder
+    assert gaussim.load_robot(path).model.names[3] == "common_ball"
+    (tmp_path / "common" / "ball.xml").unlink()
+    with pytest.raises(gaussim.InvalidRobot, match=r'bodies.xml: <include file="ball.xml">: no such file in'):
+        gaussim.load_robot(path)
+
+
 def test_mjcf_geometry(hopper):
     """Collision geometry is what collides in MuJoCo (the visual-only sphere is drawn, not collided);
     the floor plane is left out; the mesh foot has its convex hull."""

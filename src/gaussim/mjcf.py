@@ -33,23 +33,37 @@ NUMERIC = (
 )  # fmt: skip
 
 
-def read(path: Path) -> ET.Element:
-    """The ``<mujoco>`` element of the MJCF at ``path``, its ``<include>`` files inlined; raises
-    :class:`InvalidRobot` naming the file when it is not well-formed XML or not an MJCF."""
+def read(path: Path, main: Path | None = None) -> ET.Element:
+    """The ``<mujoco>`` element of the MJCF at ``path``, its ``<include>`` files inlined in place (each
+    found, as MuJoCo finds it, in the folder of the ``main`` file, default ``path``'s, else in the
+    including file's); raises :class:`InvalidRobot` naming the file when it is not well-formed XML or
+    not an MJCF, or an included file is missing."""
     try:
         root = ET.parse(path).getroot()
     except ET.ParseError as err:
         raise InvalidRobot(f"{path}: not well-formed XML ({err})") from err
     if root.tag != "mujoco":
         raise InvalidRobot(f"{path}: an MJCF file's root element is <mujoco>, got <{root.tag}>")
-    for parent in list(root.iter()):
-        for k, child in enumerate(list(parent)):
-            if child.tag == "include":
-                included = read(path.parent / child.get("file", ""))
-                parent.remove(child)
-                for offset, element in enumerate(included):
-                    parent.insert(k + offset, element)
+    _inline(root, path, path.parent if main is None else main)
     return root
+
+
+def _inline(element: ET.Element, path: Path, main: Path) -> None:
+    """``element`` of the file at ``path`` with each ``<include>`` below it replaced by the included
+    file's elements, in order."""
+    children = []
+    for child in element:
+        if child.tag != "include":
+            _inline(child, path, main)
+            children.append(child)
+            continue
+        file = child.get("file", "")
+        found = next((d / file for d in (main, path.parent) if file and (d / file).is_file()), None)
+        if found is None:
+            folders = " or ".join(dict.fromkeys(str(d) for d in (main, path.parent)))
+            raise InvalidRobot(f'{path}: <include file="{file}">: no such file in {folders}')
+        children.extend(read(found, main))
+    element[:] = children
 
 
 def check_file(path: Path, root: ET.Element) -> None:
