@@ -8,7 +8,7 @@ import pytest
 import gaussim
 from gaussim.bench.metrics import Recorder
 
-from .conftest import G, at_height
+from .conftest import G, at_height, frame_acceleration, step_velocity
 
 RADIUS = 0.1  # robots/ball.urdf [m]
 BOX_HALF_HEIGHT = 0.05  # robots/box.urdf [m]
@@ -198,3 +198,71 @@ def _cradle(balls: gaussim.Robot, dt: float, x: tuple[float, float, float]):
     v = np.zeros(18)
     v[0] = 1.0
     return sim, sim.reset(q, v)
+
+
+# Sticking contacts against Pinocchio's constraintDynamics of the same points held, relative
+PINOCCHIO_RTOL = 1e-9
+
+
+def test_sticking_feet_equal_pinocchios_constraint_dynamics(solo12):
+    """Solo-12 on its four feet, levelled so that each touches the ground at one point with zero gap,
+    moving with its feet still (v in the null space of their Jacobians) under torques that hold it up
+    plus a random part: where the feet stick (Pinocchio's forces in the friction pyramid), a step's
+    acceleration and contact forces are those of constraintDynamics with the four points held
+    (CONTACT_3D to the world, no Baumgarte terms: gap and contact velocities are zero)."""
+    model, data = solo12.model, solo12.model.createData()
+    lwa = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+    scene = gaussim.Scene(solo12, ground=gaussim.Ground(friction=1.0), contacts=[("*_FOOT_0", "ground")])
+    probe = gaussim.Simulator(scene)  # its reports give each foot's lowest point and gap
+    q = solo12.configuration("standing")
+
+    def feet(q):
+        probe.step(probe.reset(q))
+        contacts = sorted(probe.last_step.contacts, key=lambda c: c.geometry)
+        assert len(contacts) == 4
+        joints = [
+            solo12.collision_model.geometryObjects[solo12.geometry_id(c.geometry)].parentJoint
+            for c in contacts
+        ]
+        pin.computeJointJacobians(model, data, q)
+        points = [pin.SE3(np.eye(3), data.oMi[j].actInv(c.point)) for j, c in zip(joints, contacts)]
+        J = np.vstack([pin.getFrameJacobian(model, data, j, p, lwa)[:3] for j, p in zip(joints, points)])
+        return np.array([c.gap for c in contacts]), joints, points, J
+
+    for _ in range(5):  # level the feet: Newton on their gaps by the leg joints
+        gaps, joints, points, J = feet(q)
+        q[7:] -= np.linalg.lstsq(J[2::3, 6:], gaps, rcond=None)[0]
+    gaps, joints, points, J = feet(q)
+    assert np.abs(gaps).max() < 1e-12
+    # a torque that holds the standing robot with its weight shared by the feet, plus a random part
+    g = pin.computeGeneralizedGravity(model, data, q)
+    share = np.tile([0.0, 0.0, pin.computeTotalMass(model) * G / 4], 4)
+    hold = share + np.linalg.lstsq(J[:, :6].T, g[:6] - J[:, :6].T @ share, rcond=None)[0]
+    pin.forwardKinematics(model, data, q)
+    held = pin.StdVec_RigidConstraintModel()
+    for j, p in zip(joints, points):
+        held.append(
+            pin.RigidConstraintModel(pin.ContactType.CONTACT_3D, model, j, p, 0, data.oMi[j] * p, lwa)
+        )
+    sim = gaussim.Simulator(scene, gaussim.Options(scheme="acceleration"))
+    rng = np.random.default_rng(7)
+    for _ in range(10):
+        v = np.linalg.svd(J)[2][12:].T @ rng.normal(size=6) * 0.3
+        tau = (g - J.T @ hold)[6:] + 0.1 * rng.normal(size=12)
+        datas = pin.StdVec_RigidConstraintData()
+        for c in held:
+            datas.append(c.createData())
+        reference = model.createData()
+        pin.initConstraintDynamics(model, reference, held, datas)
+        settings = pin.ProximalSettings(1e-14, 1e-12, 200)
+        a_ref = pin.constraintDynamics(model, reference, q, v, np.r_[np.zeros(6), tau], held, datas, settings)
+        f_ref = np.array([d.contact_force.linear for d in datas])
+        assert f_ref[:, 2].min() > 1.0 and (np.linalg.norm(f_ref[:, :2], axis=1) < 0.5 * f_ref[:, 2]).all()
+
+        state = sim.reset(q, v)
+        after = sim.step(state, tau)
+        a = (step_velocity(state, after) - v) / sim.options.dt + frame_acceleration(v)
+        np.testing.assert_allclose(a, a_ref, atol=PINOCCHIO_RTOL * np.abs(a_ref).max())
+        assert sim.last_step.impact is None
+        forces = np.array([c.force for c in sorted(sim.last_step.contacts, key=lambda c: c.geometry)])
+        np.testing.assert_allclose(forces, f_ref, atol=PINOCCHIO_RTOL * np.abs(f_ref).max())

@@ -1,6 +1,9 @@
 """Joint position limits as unilateral rows."""
 
+from pathlib import Path
+
 import numpy as np
+import pinocchio as pin
 import pytest
 
 import gaussim
@@ -80,3 +83,74 @@ def test_the_compiled_activity_rule_is_the_plain_one_at_every_level():
         chosen = active[:count]
         want = bound_of(level, dt, stabilisation, kept[chosen], rate[chosen], 0.0, True)
         np.testing.assert_array_equal(bound[:count], want)
+
+
+# Limit torques against the closed forms of Pinocchio's RNEA (statics, or one joint held), relative
+CLOSED_FORM_RTOL = 1e-8
+
+
+@pytest.fixture(scope="module")
+def limited_double_pendulum(tmp_path_factory) -> gaussim.Robot:
+    """robots/double_pendulum.urdf with limits: shoulder [1, 2] rad, elbow [0.5, 2] rad (gravity pulls
+    both towards their lower limits from above them)."""
+    text = (Path(__file__).parent.parent / "robots" / "double_pendulum.urdf").read_text()
+    text = text.replace('type="continuous"', 'type="revolute"')
+    for origin, lower in (('<origin xyz="0 0 2"/>', 1.0), ('<origin xyz="0 0 -0.5"/>', 0.5)):
+        axis = f'{origin}<axis xyz="0 1 0"/>'
+        assert axis in text
+        text = text.replace(axis, f'{axis}<limit lower="{lower}" upper="2" effort="100" velocity="100"/>')
+    path = tmp_path_factory.mktemp("limits") / "double_pendulum_limited.urdf"
+    path.write_text(text)
+    return gaussim.load_robot(path)
+
+
+@pytest.mark.parametrize("scheme", ["velocity", "acceleration"])
+@pytest.mark.parametrize("dt", [1e-3, 1e-2])
+def test_joints_resting_on_their_limits_carry_the_gravity_torque(limited_double_pendulum, scheme, dt):
+    """Both joints started on their lower limits, which gravity pushes them into: they stay, and the
+    limit torques are the gravity torques g(q) (M a = tau_limit - g(q) with a = 0)."""
+    robot = limited_double_pendulum
+    q = robot.model.lowerPositionLimit.copy()
+    g = pin.computeGeneralizedGravity(robot.model, robot.model.createData(), q)
+    sim = gaussim.Simulator(gaussim.Scene(robot, joint_limits=True), gaussim.Options(dt=dt, scheme=scheme))
+    state = run(sim, sim.reset(q), round(1.0 / dt))
+    np.testing.assert_allclose(state.q, q, atol=LIMIT_TOLERANCE)
+    torques = {r.joint: (r.side, r.torque) for r in sim.last_step.limits}
+    assert torques.keys() == {"shoulder", "elbow"}
+    for i, joint in enumerate(("shoulder", "elbow")):
+        side, torque = torques[joint]
+        assert side == "lower"
+        assert torque == pytest.approx(g[i], rel=CLOSED_FORM_RTOL)
+
+
+@pytest.mark.parametrize("scheme", ["velocity", "acceleration"])
+def test_an_elbow_held_by_its_limit_carries_the_closed_form_torque_while_the_shoulder_swings(
+    limited_double_pendulum, scheme
+):
+    """The shoulder free and swinging, the elbow on its lower limit: at each step that starts with the
+    elbow held (q2 at its limit, v2 = 0), the two links turn as one (a2 = 0), so M11 a1 = -b1 and the
+    limit's torque is M21 a1 + b2 where that pushes (> 0), else zero and the elbow leaves its limit."""
+    robot = limited_double_pendulum
+    model = robot.model.copy()
+    model.lowerPositionLimit[0], model.upperPositionLimit[0] = -10.0, 10.0
+    free_shoulder = gaussim.as_robot((model, robot.collision_model))
+    data = model.createData()
+    sim = gaussim.Simulator(gaussim.Scene(free_shoulder, joint_limits=True), gaussim.Options(scheme=scheme))
+    state = sim.reset(np.array([1.2, 0.5]), np.array([-1.0, 0.0]))
+    held = released = 0
+    for _ in range(500):
+        before, state = state, sim.step(state)
+        if abs(before.q[1] - 0.5) > 1e-9 or abs(before.v[1]) > 1e-9:
+            continue
+        M = pin.crba(model, data, before.q)
+        b = pin.nonLinearEffects(model, data, before.q, before.v)
+        a1 = -b[0] / M[0, 0]
+        expected = M[1, 0] * a1 + b[1]
+        torque = sum(r.torque for r in sim.last_step.limits if r.joint == "elbow")
+        if expected > 0:
+            held += 1
+            assert torque == pytest.approx(expected, rel=CLOSED_FORM_RTOL)
+        else:
+            released += 1
+            assert torque == 0.0 and state.q[1] > 0.5
+    assert held > 100 and released >= 1
