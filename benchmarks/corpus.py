@@ -103,16 +103,18 @@ def corpus(random_urdfs: int) -> list[tuple[str, str, str]]:
 
 
 def scene_and_start(robot: gaussim.Robot) -> tuple[gaussim.Scene, np.ndarray]:
-    """The robot above a ground (every geometry against it, limits on) and its start: as
-    ``gaussim run ROBOT`` makes them (:func:`gaussim.scenefile.robot_scene_text`), from the start
-    clamped into the limits as reset leaves it."""
-    scene = gaussim.Scene(robot, ground=gaussim.Ground(), joint_limits=True)
+    """The robot above a ground (every geometry against it, limits on, and the joint damping and dry
+    friction its file gives) and its start: as ``gaussim run ROBOT`` makes them
+    (:func:`gaussim.scenefile.robot_scene_text`), from the start clamped into the limits as reset
+    leaves it."""
+    rubbed = bool(robot.model.damping.any() or robot.model.friction.any())
+    scene = gaussim.Scene(robot, ground=gaussim.Ground(), joint_limits=True, joint_friction=rubbed)
     probe = gaussim.Simulator(scene, gaussim.Options(start_penetration=1e9))
     q = probe.reset(robot.configuration(start_configuration(robot))).q
     if robot.floating:
         return scene, place_on_ground(scene, q, ROBOT_CLEARANCE)
     ground = gaussim.Ground(height=ground_below(robot, q, ROBOT_CLEARANCE))
-    return gaussim.Scene(robot, ground=ground, joint_limits=True), q
+    return gaussim.Scene(robot, ground=ground, joint_limits=True, joint_friction=rubbed), q
 
 
 def simulate(robot: gaussim.Robot, run: str, duration: float, row: Row) -> None:

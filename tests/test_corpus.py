@@ -26,6 +26,7 @@ PYBULLET = Path(pybullet_data.getDataPath())
 # robot: (the outcome of both passes, a text its message or warnings must hold)
 SAMPLE = {
     "solo12": ("ok", ""),
+    "go1": ("ok", ""),  # joint damping and dry friction in its file, applied
     "laikago": ("ok", ""),  # tilted continuous joints: (cos, sin) pairs
     "kinova": ("ok", "'j2s6s200_joint_3' at -1.571 (limits 0.3316, 5.952)"),  # clamped into its limits
     "talos_legs": ("ok", "geometries of joints its model does not have"),

@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any
 from . import portable as _portable  # noqa: F401  # proxsuite's build is chosen at its first import
 
 if TYPE_CHECKING:
-    from .constraints import BilateralReaction, ContactForce, LimitReaction
+    from .constraints import BilateralReaction, ContactForce, JointFrictionReaction, LimitReaction
     from .exceptions import (
         ContactError,
         FrameNotFound,
@@ -52,6 +52,7 @@ _HOME = {
     "BilateralReaction": "constraints",
     "ContactForce": "constraints",
     "LimitReaction": "constraints",
+    "JointFrictionReaction": "constraints",
     "ContactError": "exceptions",
     "FrameNotFound": "exceptions",
     "GaussimError": "exceptions",
@@ -107,6 +108,7 @@ __all__ = [
     "InvalidOptions",
     "InvalidRobot",
     "InvalidState",
+    "JointFrictionReaction",
     "LimitReaction",
     "LoopClosure",
     "Material",

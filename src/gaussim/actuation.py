@@ -36,10 +36,13 @@ class Actuation:
         model: the simulated model, whose armature the damping sets (its own armature is kept).
         world: the bodies' layout.
         dt: the time step [s].
+        damping: a damping (nv,) every step has, a step's own added to it (the robot files' joint
+            damping, ``Scene(joint_friction=True)``), or None.
     """
 
-    def __init__(self, model: pin.Model, world: World, dt: float) -> None:
+    def __init__(self, model: pin.Model, world: World, dt: float, damping: np.ndarray | None = None) -> None:
         self.model, self.world, self.dt = model, world, dt
+        self._always = damping if damping is not None and damping.any() else None
         self.nv = model.nv
         actuated = np.concatenate([b.actuated for b in world.bodies.values()]).astype(int)
         contiguous = len(actuated) and np.array_equal(actuated, np.arange(actuated[0], actuated[-1] + 1))
@@ -59,15 +62,18 @@ class Actuation:
 
     def torque(self, tau: object, damping: object = None, v: np.ndarray | None = None) -> np.ndarray:
         """The torque of a step, (nv,): ``tau`` [N m] less D v for an implicit ``damping`` D at the
-        velocity ``v`` (the step's start), with dt D added to the model's armature. The result may be
-        a buffer the next call overwrites. Raises :class:`InvalidState` for a bad shape or value."""
+        velocity ``v`` (the step's start), with dt D added to the model's armature (D: ``damping``
+        plus the damping every step has, when ``v`` is given). The result may be a buffer the next
+        call overwrites. Raises :class:`InvalidState` for a bad shape or value."""
         full = self._full(tau, "tau", self._padded)
-        if damping is None:
+        if damping is None and (self._always is None or v is None):
             if self.damping is not None:
                 self.model.armature = self._armature
                 self.damping = None
             return full
         D = self._full(damping, "damping", self._padded_damping)
+        if self._always is not None:
+            D = D + self._always
         assert v is not None
         damped = self._damped
         code, same = damped_torque.call(

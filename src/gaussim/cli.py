@@ -768,6 +768,9 @@ def _inspect(args: argparse.Namespace) -> int:
         more = f", ... ({len(names) - PAIRS_SHOWN} more)" if len(names) > PAIRS_SHOWN else ""
         _say(f"    {body} - {other if other != body else 'itself'}: {len(names)}: {listed}{more}")
     _say(f"  joint limits: {'on' if scene.joint_limits else 'off'}")
+    damped, rubbing = int(np.count_nonzero(model.damping)), int(np.count_nonzero(model.friction))
+    given = f"the files give damping to {damped} coordinates, dry friction to {rubbing}"
+    _say(f"  joint friction: {'on' if scene.joint_friction else 'off'} ({given})")
     for b in scene.bilaterals:
         _say(f"  {b.name}")
     sim = Simulator(scene, o)

@@ -16,6 +16,8 @@ from .constraints import (
     ConstraintModule,
     ContactForce,
     ContactModule,
+    JointFrictionModule,
+    JointFrictionReaction,
     LimitModule,
     LimitReaction,
     Rows,
@@ -162,6 +164,10 @@ class StepReport:
     @cached_property
     def bilaterals(self) -> list[BilateralReaction]:
         return self.reactions(BilateralModule.name)
+
+    @cached_property
+    def joint_friction(self) -> list[JointFrictionReaction]:
+        return self.reactions(JointFrictionModule.name)
 
     @property
     def impulses(self) -> list[ContactImpulse]:

@@ -10,7 +10,7 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from .exceptions import GeometryNotFound, InvalidOptions, finite_numbers, shown
+from .exceptions import GeometryNotFound, InvalidOptions, InvalidRobot, finite_numbers, shown
 from .options import is_real
 from .robot import Robot
 from .world import BodyLayout, FreeBody, Material, World, check_material, combined
@@ -206,6 +206,10 @@ class Scene:
         materials: name or pattern of a body or geometry -> :class:`~gaussim.world.Material`
             (a geometry's entry overrides its body's).
         joint_limits: enforce the URDF position limits.
+        joint_friction: apply the joints' viscous damping and dry friction that the robot files give
+            (URDF ``<dynamics damping friction>``, MJCF ``damping`` and ``frictionloss``; Pinocchio's
+            ``model.damping`` and ``model.friction``): the damping as an implicit one, the dry friction
+            as a constraint family (:mod:`gaussim.constraints.joint_friction`).
         bilaterals: anchors and loop closures.
         gravity: gravity vector [m/s^2], shape (3,).
     """
@@ -219,6 +223,7 @@ class Scene:
         obstacles: Sequence[Box | Sphere] = (),
         contacts: str | Sequence[tuple[str, str]] | None = None,
         joint_limits: bool = False,
+        joint_friction: bool = False,
         bilaterals: Sequence[Bilateral] = (),
         gravity: Sequence[float] = (0.0, 0.0, -9.81),
         self_contact: tuple[float, float] = (0.8, 0.0),
@@ -240,6 +245,9 @@ class Scene:
         check_material("self_contact", *self_contact)
         self.self_contact = (float(self_contact[0]), float(self_contact[1]))
         self.joint_limits = bool(joint_limits)
+        self.joint_friction = bool(joint_friction)
+        if self.joint_friction:
+            _check_joint_friction(robot)
         self.gravity = _vector("gravity", gravity, 3)
         self.bilaterals = tuple(bilaterals)
         for b in self.bilaterals:
@@ -446,3 +454,22 @@ class _Names:
                 known = self.obstacles + self.geometry_names
                 raise GeometryNotFound(name, known, "obstacle or collision geometry", "the scene") from None
         return [("geometry", g) for g in self.geometries(name, where)]
+
+
+def _check_joint_friction(robot: Robot) -> None:
+    """Refuse joint damping or dry friction (of the robot files) that is not finite and >= 0, naming
+    the joints."""
+    model = robot.model
+    for values, what in ((model.damping, "damping"), (model.friction, "friction")):
+        bad = np.flatnonzero(~(np.isfinite(values) & (values >= 0.0)))
+        if len(bad):
+            owners = {
+                model.names[j]
+                for j in range(1, model.njoints)
+                for i in bad
+                if model.joints[j].idx_v <= i < model.joints[j].idx_v + model.joints[j].nv
+            }
+            raise InvalidRobot(
+                f"{robot.source}: joints {sorted(owners)} have a {what} of {values[bad].tolist()}: "
+                "joint_friction=True needs finite values >= 0"
+            )

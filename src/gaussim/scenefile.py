@@ -21,6 +21,7 @@ then:
                    (default "auto": see gaussim.Scene); friction, restitution: of the pairs of two
                    geometries where neither side declares a material
     [limits]       enabled = true
+    [joint_friction] enabled = true  (the joints' damping and dry friction of the robot files)
     [[bilaterals]] type = "anchor", frame, position, rpy  |  type = "loop", frames = [a, b], orientation
     [simulation]   duration = 2.0
     [options]      any field of gaussim.Options (dt, scheme, friction_mode, ...)
@@ -96,6 +97,7 @@ SECTIONS = {
     "obstacles": {"type", "name", "size", "radius", "position", "rpy", "friction", "restitution"},
     "contacts": {"pairs", "friction", "restitution"},
     "limits": {"enabled"},
+    "joint_friction": {"enabled"},
     **{
         table: {"type", *(key for keys in types.values() for key in keys)}
         for table, types in TYPE_KEYS.items()
@@ -310,6 +312,12 @@ def _robot_scene(source: str) -> tuple[str, Robot, tuple[str, bool | None]]:
         height = ground_below(robot, q, ROBOT_CLEARANCE)
         lines += ["", "[ground]", f"height = {height:.6g}"]
     lines += ["", "[limits]", "enabled = true"]
+    if robot.model.damping.any() or robot.model.friction.any():
+        lines += [
+            "",
+            "[joint_friction]  # the damping and dry friction its file gives its joints",
+            "enabled = true",
+        ]
     if actuated:
         gain = max(robot.mass, 1.0)
         lines += [
@@ -445,6 +453,8 @@ class _Reader:
                         f"contacts.pairs[{k}]", f"must be [geometry, obstacle] (two names), got {shown(pair)}"
                     )
         limits = self.boolean("limits.enabled", self.table("limits").get("enabled", False))
+        friction = self.table("joint_friction").get("enabled", False)
+        friction = self.boolean("joint_friction.enabled", friction)
         listed = self.tables("bilaterals")
         # the robot whose frames the bilaterals name: the one robot, or the bodies merged
         framed = robot or (self.scene_part(lambda: World(bodies).robot) if listed else None)  # type: ignore[arg-type]
@@ -457,6 +467,7 @@ class _Reader:
                 obstacles=obstacles,
                 contacts=None if contacts is None else [tuple(p) for p in contacts],
                 joint_limits=limits,
+                joint_friction=friction,
                 bilaterals=bilaterals,
                 self_contact=self_contact,
             )

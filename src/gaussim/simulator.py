@@ -24,7 +24,7 @@ import pinocchio as pin
 from .actuation import Actuation
 from .collision import NO_CONTACTS, ContactDetector, Contacts
 from .collision.contacts import NOTHING_FOUND
-from .constraints import BilateralModule, ContactModule, LimitModule, checked_modules
+from .constraints import BilateralModule, ContactModule, JointFrictionModule, LimitModule, checked_modules
 from .constraints.base import ConstraintModule
 from .dynamics import DynamicsStage
 from .exceptions import GaussimWarning, InvalidRobot, InvalidState, SolverError
@@ -57,7 +57,8 @@ class Simulator:
         self.model = scene.robot.model.copy()
         self.model.gravity.linear = scene.gravity
         self.data = self.model.createData()
-        self.actuation = Actuation(self.model, self.world, self.options.dt)
+        damping = self.model.damping.copy() if scene.joint_friction else None  # the files' viscous friction
+        self.actuation = Actuation(self.model, self.world, self.options.dt, damping)
         self.dynamics = DynamicsStage(self.model, self.data)
         self.detector = ContactDetector(scene, self.options.contact_margin) if scene.pairs else None
         built_in = self._modules(scene, self.options)
@@ -92,6 +93,8 @@ class Simulator:
             modules.append(LimitModule(scene.robot.model))
         if scene.bilaterals:
             modules.append(BilateralModule(scene.robot.frame_id, scene.bilaterals))
+        if scene.joint_friction and scene.robot.model.friction.any():
+            modules.append(JointFrictionModule(scene.robot.model))
         return modules
 
     # -- state handling ---------------------------------------------------------------------------

@@ -3,8 +3,8 @@
 A family is a :class:`ConstraintModule`: its :meth:`~ConstraintModule.rows` returns, at one level
 of one step, the rows J x >= bound (or = bound) of the unknown x of the Gauss problem, or None; the
 QP multipliers of those rows are its reactions. gaussim builds the families a scene declares
-(contacts with Coulomb friction, joint limits, bilateral constraints); a user adds one with
-``Simulator(scene, options, constraints=[...])`` (see examples/custom_constraint.py).
+(contacts with Coulomb friction, joint limits, bilateral constraints, dry friction in the joints); a
+user adds one with ``Simulator(scene, options, constraints=[...])`` (see examples/custom_constraint.py).
 """
 
 from collections.abc import Sequence
@@ -13,10 +13,11 @@ from ..exceptions import InvalidOptions
 from .base import ConstraintModule, Context, Level, RowReaction, Rows, is_active, stabilised_bound
 from .bilateral import BilateralModule, BilateralReaction
 from .contact import ContactForce, ContactModule, FrictionIterate
+from .joint_friction import JointFrictionModule, JointFrictionReaction
 from .limits import LimitModule, LimitReaction
 
 # The names of the families gaussim builds from a scene: a user's module takes another.
-BUILT_IN = (ContactModule.name, LimitModule.name, BilateralModule.name)
+BUILT_IN = (ContactModule.name, LimitModule.name, BilateralModule.name, JointFrictionModule.name)
 
 
 def checked_modules(built_in: list[ConstraintModule], extra: Sequence[object]) -> list[ConstraintModule]:
@@ -29,7 +30,7 @@ def checked_modules(built_in: list[ConstraintModule], extra: Sequence[object]) -
             raise InvalidOptions(
                 field, f"must be a gaussim.constraints.ConstraintModule, got {type(module).__name__}"
             )
-        if type(module) in (ContactModule, LimitModule, BilateralModule):  # made for a scene, read as its
+        if type(module) in (ContactModule, LimitModule, BilateralModule, JointFrictionModule):  # the scene's
             raise InvalidOptions(
                 field, f"gaussim's {type(module).__name__} comes from the scene: declare it there, not here"
             )
@@ -49,6 +50,8 @@ __all__ = [
     "ContactModule",
     "Context",
     "FrictionIterate",
+    "JointFrictionModule",
+    "JointFrictionReaction",
     "Level",
     "LimitModule",
     "LimitReaction",

@@ -1,0 +1,130 @@
+"""The joints' viscous damping and dry friction of the robot files (Scene(joint_friction=True)), against
+closed forms."""
+
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+import gaussim
+
+PENDULUM = (Path(__file__).parents[1] / "robots" / "pendulum.urdf").read_text()
+I = 1.0 + 0.001  # the pendulum's inertia about its hinge [kg m^2]: the bob at 1 m, and its own
+G = 9.81
+
+
+def pendulum(tmp_path, damping=0.0, friction=0.0, gravity=True):
+    """robots/pendulum.urdf with <dynamics damping friction> on its hinge, in a scene that applies them."""
+    path = tmp_path / "pendulum.urdf"
+    path.write_text(
+        PENDULUM.replace(
+            '<axis xyz="0 1 0"/>', f'<axis xyz="0 1 0"/><dynamics damping="{damping}" friction="{friction}"/>'
+        )
+    )
+    robot = gaussim.load_robot(path)
+    return gaussim.Scene(robot, joint_friction=True, gravity=(0.0, 0.0, -G if gravity else 0.0))
+
+
+@pytest.mark.parametrize("scheme", ["velocity", "acceleration"])
+def test_the_files_damping_slows_a_joint_as_implicit_damping_does(tmp_path, scheme):
+    """v_n = v0 / (1 + dt D / I)^n exactly (backward Euler of I v' = -D v); off without joint_friction."""
+    scene, dt, D, v0 = pendulum(tmp_path, damping=2.0, gravity=False), 1e-2, 2.0, 3.0
+    sim = gaussim.Simulator(scene, gaussim.Options(dt=dt, scheme=scheme))
+    state = sim.reset(np.zeros(1), np.array([v0]))
+    for n in range(1, 101):
+        state = sim.step(state)
+        assert state.v[0] == pytest.approx(v0 / (1.0 + dt * D / I) ** n, rel=1e-12)
+    free = gaussim.Scene(
+        scene.robot, gravity=(0.0, 0.0, 0.0)
+    )  # joint_friction off: the file's damping unread
+    sim = gaussim.Simulator(free, gaussim.Options(dt=dt, scheme=scheme))
+    assert sim.step(sim.reset(np.zeros(1), np.array([v0]))).v[0] == v0
+
+
+@pytest.mark.parametrize("scheme", ["velocity", "acceleration"])
+def test_dry_friction_stops_a_spinning_joint_at_a_constant_rate_then_holds_it(tmp_path, scheme):
+    """Without gravity, friction f decelerates the joint by f / I until it stops, exactly at each step,
+    and then holds it with no torque; each step reports the friction torque, sliding then sticking."""
+    scene, dt, f, v0 = pendulum(tmp_path, friction=0.5, gravity=False), 1e-3, 0.5, 0.3
+    sim = gaussim.Simulator(scene, gaussim.Options(dt=dt, scheme=scheme))
+    state = sim.reset(np.zeros(1), np.array([v0]))
+    stop = v0 * I / f  # [s]
+    for n in range(1, 1000):
+        state = sim.step(state)
+        expected = max(v0 - n * dt * f / I, 0.0)
+        assert state.v[0] == pytest.approx(expected, abs=1e-9)
+        (reaction,) = sim.last_step.joint_friction
+        assert reaction.joint == "hinge"
+        if n * dt < stop - dt:
+            assert reaction.sliding and reaction.torque == pytest.approx(-f, rel=1e-9)
+        elif n * dt > stop + dt:
+            assert not reaction.sliding and abs(reaction.torque) < 1e-9
+    assert state.q[0] == pytest.approx(v0 * stop / 2, abs=2 * v0 * dt)
+
+
+@pytest.mark.parametrize("scheme", ["velocity", "acceleration"])
+@pytest.mark.parametrize("angle", [0.2, 0.3])
+def test_dry_friction_holds_a_pendulum_while_gravity_pulls_less_than_it(tmp_path, scheme, angle):
+    """Started at rest at an angle: held when m g l sin(angle) <= f (the reported torque is the gravity
+    torque it holds), else it swings with the friction torque f against it (I a = -m g l sin q + f)."""
+    f = G * np.sin(0.25)  # holds below 0.25 rad
+    scene = pendulum(tmp_path, friction=f)
+    sim = gaussim.Simulator(scene, gaussim.Options(dt=1e-3, scheme=scheme))
+    state = sim.step(sim.reset(np.array([angle])))
+    (reaction,) = sim.last_step.joint_friction
+    if angle < 0.25:
+        assert abs(state.q[0] - angle) < 1e-12 and abs(state.v[0]) < 1e-12
+        assert not reaction.sliding and reaction.torque == pytest.approx(G * np.sin(angle), rel=1e-9)
+    else:
+        assert reaction.sliding and reaction.torque == pytest.approx(f, rel=1e-9)
+        assert state.v[0] == pytest.approx(1e-3 * (f - G * np.sin(angle)) / I, rel=1e-6)
+
+
+def test_friction_in_one_of_several_joints_of_a_moving_robot(tmp_path):
+    """A double pendulum whose elbow has friction: energy never rises, and the elbow's reported torque
+    never exceeds its bound; the shoulder, frictionless, has no row."""
+    text = (Path(__file__).parents[1] / "robots" / "double_pendulum.urdf").read_text()
+    head, _, tail = text.partition("</joint>")
+    second = tail.replace("<axis", '<dynamics friction="0.2"/><axis', 1)
+    path = tmp_path / "double.urdf"
+    path.write_text(head + "</joint>" + second)
+    robot = gaussim.load_robot(path)
+    assert robot.model.friction.tolist() == [0.0, 0.2]
+    sim = gaussim.Simulator(gaussim.Scene(robot, joint_friction=True), gaussim.Options(dt=1e-3))
+    model, data = sim.model, sim.model.createData()
+
+    def energy(s):
+        return pin.computeKineticEnergy(model, data, s.q, s.v) + pin.computePotentialEnergy(model, data, s.q)
+
+    state = sim.reset(np.array([np.cos(1.0), np.sin(1.0), np.cos(-0.5), np.sin(-0.5)]))
+    start, torques = energy(state), []
+    for _ in range(2000):
+        state = sim.step(state)
+        assert energy(state) <= start + 1e-9
+        torques += [r.torque for r in sim.last_step.joint_friction]
+    assert max(np.abs(torques)) <= 0.2 * (1 + 1e-9) and max(np.abs(torques)) > 0.19
+    assert energy(state) < start - 0.01, "friction takes energy"
+
+
+def test_a_negative_damping_in_a_file_is_refused_naming_the_joint(tmp_path):
+    with pytest.raises(gaussim.InvalidRobot, match=r"joints \['hinge'\] have a damping of \[-1.0\]"):
+        pendulum(tmp_path, damping=-1.0)
+
+
+def test_a_scene_file_declares_joint_friction_and_a_robots_own_scene_has_it_where_its_file_gives_any(
+    tmp_path,
+):
+    from gaussim.scenefile import load_scene_text, robot_scene_text
+
+    scene = pendulum(tmp_path, friction=0.5)
+    text = f'[robot]\nurdf = "{scene.robot.source}"\n\n[joint_friction]\nenabled = true\n'
+    spec = load_scene_text(text, tmp_path / "scene.toml")
+    assert spec.scene.joint_friction and [m.name for m in gaussim.Simulator(spec.scene).modules] == [
+        "joint_friction"
+    ]
+    assert not load_scene_text(text.replace("true", "false"), tmp_path / "scene.toml").scene.joint_friction
+    with pytest.raises(gaussim.InvalidOptions, match=r"joint_friction.enabled"):
+        load_scene_text(text.replace("true", '"yes"'), tmp_path / "scene.toml")
+    assert "[joint_friction]" in robot_scene_text("panda")  # damping 0.3 in its URDF
+    assert "[joint_friction]" not in robot_scene_text("solo12")
