@@ -128,3 +128,32 @@ def test_a_scene_file_declares_joint_friction_and_a_robots_own_scene_has_it_wher
         load_scene_text(text.replace("true", '"yes"'), tmp_path / "scene.toml")
     assert "[joint_friction]" in robot_scene_text("panda")  # damping 0.3 in its URDF
     assert "[joint_friction]" not in robot_scene_text("solo12")
+
+
+def test_an_mjcf_hinges_damping_and_frictionloss_slow_it_as_mujoco_does(tmp_path):
+    """A spinning arm whose MJCF hinge has damping 0.3 and frictionloss 0.2: gaussim's velocity follows
+    MuJoCo's (implicitfast, dt 1 ms) to 1e-10 while it slides, and both hold it once stopped (MuJoCo's
+    soft friction row lets it creep at 1e-10 rad/s)."""
+    mujoco = pytest.importorskip("mujoco")
+    path = tmp_path / "spin.xml"
+    path.write_text(
+        '<mujoco><option gravity="0 0 0" timestep="0.001" integrator="implicitfast"/><worldbody>'
+        '<body name="arm"><joint name="a" type="hinge" axis="0 0 1" damping="0.3" frictionloss="0.2"/>'
+        '<geom type="capsule" fromto="0 0 0 1 0 0" size="0.05" mass="1"/></body></worldbody></mujoco>'
+    )
+    model = mujoco.MjModel.from_xml_path(str(path))
+    data = mujoco.MjData(model)
+    data.qvel[0] = 2.0
+    robot = gaussim.load_robot(path)
+    sim = gaussim.Simulator(
+        gaussim.Scene(robot, joint_friction=True, gravity=(0, 0, 0)), gaussim.Options(dt=1e-3)
+    )
+    state = sim.reset(None, np.array([2.0]))
+    sliding = 0
+    for _ in range(2500):
+        mujoco.mj_step(model, data)
+        state = sim.step(state)
+        if data.qvel[0] > 0.05:
+            sliding += 1
+            assert state.v[0] == pytest.approx(data.qvel[0], abs=1e-10)
+    assert sliding > 1000 and abs(data.qvel[0]) < 1e-9 and abs(state.v[0]) < 1e-12
