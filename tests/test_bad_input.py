@@ -5,6 +5,7 @@ import re
 import stat
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -902,3 +903,34 @@ def test_absurd_torques_are_named_as_the_cause_not_the_solver_settings(solo12):
         for _ in range(5):
             state = sim.step(state, np.full(12, 1e12))
     assert "check the inputs" in str(info.value) and "max_iter" not in str(info.value)
+
+
+@pytest.mark.parametrize(
+    ("args", "told"),
+    [
+        (
+            ["--dt", "1", "--duration", "0.1"],
+            "the duration 0.1 s is shorter than one step of dt = 1 s: the run takes 1 step, 1 s",
+        ),
+        (
+            ["--dt", "0.03", "--duration", "0.1"],
+            "the duration 0.1 s is not a whole number of steps of dt = 0.03 s: the run takes 3 steps, 0.09 s",
+        ),
+    ],
+    ids=["shorter than dt", "not a multiple of dt"],
+)
+def test_a_duration_the_steps_cannot_make_is_told(tmp_path, capsys, args, told):
+    """--dt 1 --duration 0.1 simulated 1 s, ten times the time asked for, and --dt 0.03 --duration 0.1
+    0.09 s, without a word: the run says what it simulates instead (the command prints it as
+    ``gaussim: warning: ...``), before it starts."""
+    with pytest.warns(gaussim.GaussimWarning, match=re.escape(told)):
+        code, err = _cli(capsys, "run", "pendulum_limits", *args, "--out", tmp_path / "r", "--quiet")
+    assert code == 0, err
+    spec = gaussim.load_scene("pendulum_limits", dt=1e-3)
+    spec.duration = 0.3  # 0.3 / 1e-3 is 299.99999999999994: 300 steps, no warning
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", gaussim.GaussimWarning)
+        assert gaussim.run(spec).steps == 300
+    spec.duration = 0.0004
+    with pytest.warns(gaussim.GaussimWarning, match="the run takes 1 step, 0.001 s"):
+        assert gaussim.run(spec).steps == 1
