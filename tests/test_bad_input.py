@@ -934,3 +934,19 @@ def test_a_duration_the_steps_cannot_make_is_told(tmp_path, capsys, args, told):
     spec.duration = 0.0004
     with pytest.warns(gaussim.GaussimWarning, match="the run takes 1 step, 0.001 s"):
         assert gaussim.run(spec).steps == 1
+
+
+def test_the_reactions_of_a_family_the_simulator_does_not_pose_are_refused_by_name(sim, ball):
+    """report.reactions("contacts") returned [] where report.reactions("contact") held the ball's
+    weight: a misspelt family read as a step without reactions. gaussim's own families answer in any
+    scene (no limit rows: no limit reaction)."""
+    sim.step(sim.reset(at_height(ball, 0.1)))
+    report = sim.last_step
+    assert np.allclose(sum(c.force for c in report.reactions("contact")), [0.0, 0.0, 9.81])
+    assert report.reactions("limit") == [] and report.reactions("bilateral") == []
+    with pytest.raises(
+        gaussim.InvalidOptions,
+        match=r"no constraint family 'contacts' in this simulator "
+        r"\(did you mean contact\?\); its families: bilateral, contact, limit",
+    ):
+        report.reactions("contacts")

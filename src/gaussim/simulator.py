@@ -62,6 +62,7 @@ class Simulator:
         self.detector = ContactDetector(scene, self.options.contact_margin) if scene.pairs else None
         built_in = self._modules(scene, self.options)
         self.modules = checked_modules(built_in, constraints)
+        self._families = tuple(m.name for m in self.modules)
         self.gauss = GaussStage(
             self.model, self.data, self.modules, self.options, self.modules[len(built_in) :]
         )
@@ -290,7 +291,7 @@ class Simulator:
         report.mark("integrate")
         if moved is None:
             raise SolverError(f"step at t={state.t:.6g} s produced a non-finite velocity", report)
-        report.world = self.world
+        report.world, report.families = self.world, self._families
         self.last_step = report
         self._last_state = State.adopt(state.t + dt, *moved, self.world)  # both arrays are this step's own
         return self._last_state
