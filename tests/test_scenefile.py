@@ -539,3 +539,26 @@ def test_a_robot_run_by_itself_is_loaded_once(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     spec = load_scene("solo12")
     assert len(calls) == 1 and spec.robot.name == "solo12"
+
+
+def test_gaussim_run_robot_leaves_the_scene_of_another_robot_and_says_so(tmp_path, monkeypatch, capsys):
+    """kuka_iiwa/model.sdf then kuka_iiwa/model.urdf (one stem, out/model.toml for both): the second run
+    said 'out/model.toml, which differs from it, is left as it is (run that file to use it)', and that
+    file runs the first robot. It now says whose scene the file is, and that this robot's is not
+    written."""
+    from gaussim.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    for folder, robot in (("a", "pendulum"), ("b", "double_pendulum")):
+        (tmp_path / folder).mkdir()
+        (tmp_path / folder / "robot.urdf").write_text((ROBOTS_DIR / f"{robot}.urdf").read_text())
+    assert main(["run", "a/robot.urdf", "--duration", "0.01", "--quiet"]) == 0
+    first = (tmp_path / "out" / "robot.toml").read_text()
+    capsys.readouterr()
+    assert main(["run", "b/robot.urdf", "--duration", "0.01", "--quiet"]) == 0
+    err = capsys.readouterr().err
+    first_urdf = tmp_path / "a" / "robot.urdf"
+    told = f'{Path("out") / "robot.toml"} is the scene of urdf = "{first_urdf}", not of this robot'
+    assert told in err and "this robot's scene is not written" in err, err
+    assert "run that file to use it" not in err
+    assert (tmp_path / "out" / "robot.toml").read_text() == first

@@ -8,12 +8,14 @@ from __future__ import annotations
 
 import argparse
 import functools
+import json
 import math
 import os
 import re
 import signal
 import sys
 import time
+import tomllib
 import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn, TextIO
@@ -621,12 +623,33 @@ def _robot_scene_file(text: str, path: Path) -> str:
     """Write the scene of a robot run by itself (``text``) to ``path``, unless a different file is
     there (a user's edit of the last one); returns what the run tells of it."""
     said = "it runs in the scene gaussim writes for it (its first lines say what it holds)"
-    if path.is_file() and path.read_text() != text:
+    if path.is_file() and (there := path.read_text()) != text:
+        other = _scene_robot(there)
+        if other != _scene_robot(text):  # not this robot's scene edited: running it runs something else
+            return (
+                f"{said}; {path} is {'the scene of ' + other if other else 'another scene'}, not of this "
+                "robot: it is left as it is, and this robot's scene is not written (it goes beside the run "
+                "log: give --out another name)"
+            )
         return f"{said}; {path}, which differs from it, is left as it is (run that file to use it)"
     check_writable(path, "scene")
     with atomic_path(path) as tmp:
         tmp.write_text(text)
     return f"{said}, written to {path}: edit it and run that file"
+
+
+def _scene_robot(text: str) -> str | None:
+    """The robot a scene file's ``[robot]`` table loads (``urdf = "PATH"``, ``name = "NAME"``, ...), or None
+    (no such table, or no TOML)."""
+    try:
+        robot = tomllib.loads(text).get("robot")
+    except tomllib.TOMLDecodeError:
+        return None
+    if not isinstance(robot, dict):
+        return None
+    return next(
+        (f"{key} = {json.dumps(robot[key])}" for key in ("urdf", "mjcf", "sdf", "name") if key in robot), None
+    )
 
 
 def _arrow_option(parser: argparse.ArgumentParser) -> None:
