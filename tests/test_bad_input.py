@@ -538,11 +538,11 @@ def test_a_start_inside_an_obstacle_is_refused(tmp_path, capsys, initial, obstac
     path = tmp_path / "scene.toml"
     scene = f'[robot]\nname = "ball"\nfloating_base = true\n[initial]\n{initial}\n[ground]\n{obstacle}'
     path.write_text(scene + "[simulation]\nduration = 0.002\n")
-    code, err = _cli(capsys, "run", path, "--out", tmp_path / "log.npz", "--quiet")
+    code, err = _cli(capsys, "run", path, "--out", tmp_path / "log.runlog", "--quiet")
     assert code == 2 and f"{path}: the initial configuration has {where}" in err, err
-    assert "start_penetration" in err and not (tmp_path / "log.npz").exists()
+    assert "start_penetration" in err and not (tmp_path / "log.runlog").exists()
     path.write_text(scene + "[options]\nstart_penetration = 0.2\n[simulation]\nduration = 0.002\n")
-    assert _cli(capsys, "run", path, "--out", tmp_path / "log.npz", "--quiet")[0] == 0
+    assert _cli(capsys, "run", path, "--out", tmp_path / "log.runlog", "--quiet")[0] == 0
 
 
 def test_a_negative_ground_clearance_is_refused_at_reset(tmp_path, capsys):
@@ -551,7 +551,7 @@ def test_a_negative_ground_clearance_is_refused_at_reset(tmp_path, capsys):
     path.write_text(
         '[robot]\nname = "solo12"\n[initial]\nconfiguration = "standing"\nground_clearance = -0.5\n[ground]\n'
     )
-    code, err = _cli(capsys, "run", path, "--out", tmp_path / "log.npz", "--quiet")
+    code, err = _cli(capsys, "run", path, "--out", tmp_path / "log.runlog", "--quiet")
     assert code == 2 and re.search(rf"{path}: .*'[FH][LR]_FOOT_0' 500 mm inside 'ground'", err), err
 
 
@@ -799,8 +799,8 @@ def test_unwritable_outputs_exit_2_naming_the_path(tmp_path, capsys, small_log):
     assert code == 2 and f"--output {tmp_path / 'forces'}: the image's suffix must be one of .png, " in err
     scene = tmp_path / "scene.toml"
     scene.write_text(BALL_SCENE)
-    code, err = _cli(capsys, "run", scene, "--plot", tmp_path / "forces", "--out", tmp_path / "l.npz")
-    assert code == 2 and not (tmp_path / "l.npz").exists(), "refused before the run"
+    code, err = _cli(capsys, "run", scene, "--plot", tmp_path / "forces", "--out", tmp_path / "l.runlog")
+    assert code == 2 and not (tmp_path / "l.runlog").exists(), "refused before the run"
     assert f"--plot {tmp_path / 'forces'}: the image's suffix" in err, "the flag named, as --html's is"
 
 
@@ -851,8 +851,8 @@ def test_ctrl_c_before_the_first_step_writes_no_log(tmp_path, capsys, monkeypatc
     path = tmp_path / "scene.toml"
     path.write_text(BALL_SCENE)
     monkeypatch.setattr(gaussim.runner, "run", interrupted)
-    code, err = _cli(capsys, "run", path, "--out", tmp_path / "log.npz")
-    assert code == 1 and "interrupted; no log written" in err and not (tmp_path / "log.npz").exists()
+    code, err = _cli(capsys, "run", path, "--out", tmp_path / "log.runlog")
+    assert code == 1 and "interrupted; no log written" in err and not (tmp_path / "log.runlog").exists()
 
 
 DIRECTORY_FAULTS = {  # the run log directory (header.json and its chunks), as LOG_FAULTS for the .npz
@@ -950,3 +950,19 @@ def test_the_reactions_of_a_family_the_simulator_does_not_pose_are_refused_by_na
         r"\(did you mean contact\?\); its families: bilateral, contact, limit",
     ):
         report.reactions("contacts")
+
+
+def test_a_run_log_named_npz_is_refused_before_the_run(tmp_path, capsys):
+    """gaussim run ... --out x.npz made a folder named x.npz (a run log is a folder of chunks), where a
+    user expects one .npz file, as RunLog.save writes: refused before the run, naming both ways."""
+    from gaussim.cli import EXIT_BAD_INPUT
+
+    out = tmp_path / "x.npz"
+    code, err = _cli(capsys, "run", "pendulum_limits", "--duration", "0.01", "--out", out, "--quiet")
+    assert code == EXIT_BAD_INPUT and not out.exists(), err
+    folder = tmp_path / "x.runlog"
+    assert f"--out: {out}: a run log is a folder of chunks written as the run goes" in err, err
+    assert f"name it without .npz (e.g. {folder})" in err
+    assert f"gaussim.RunLog.load('{folder}').save('{out}')" in err
+    code, err = _cli(capsys, "run", "pendulum_limits", "--duration", "0.01", "--out", folder, "--quiet")
+    assert code == 0 and gaussim.RunLog.load(gaussim.RunLog.load(folder).save(out)).steps == 10, err

@@ -530,6 +530,14 @@ def _run(args: argparse.Namespace) -> int:
         plot_path(args.plot, "--plot")  # before the run, not after it
     if args.dt is not None:
         _positive("--dt", args.dt)
+    if args.out is not None and args.out.suffix == ".npz":  # else a folder named like a file
+        folder = args.out.with_suffix(".runlog")
+        raise InvalidOptions(
+            "--out",
+            f"{args.out}: a run log is a folder of chunks written as the run goes (kept whatever stops "
+            f"it), not one .npz file; name it without .npz (e.g. {folder}), then write one file from it "
+            f"with gaussim.RunLog.load('{folder}').save('{args.out}')",
+        )
     for flag, given in (("--speed", args.speed is not None), ("--no-wait", args.no_wait)):
         if given and not args.view:  # else ignored without a word
             raise InvalidOptions(
