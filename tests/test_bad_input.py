@@ -966,3 +966,52 @@ def test_a_run_log_named_npz_is_refused_before_the_run(tmp_path, capsys):
     assert f"gaussim.RunLog.load('{folder}').save('{out}')" in err
     code, err = _cli(capsys, "run", "pendulum_limits", "--duration", "0.01", "--out", folder, "--quiet")
     assert code == 0 and gaussim.RunLog.load(gaussim.RunLog.load(folder).save(out)).steps == 10, err
+
+
+@pytest.mark.parametrize(
+    ("call", "message"),
+    [
+        (
+            lambda ball: gaussim.Simulator(ball),
+            r"scene: must be a gaussim.Scene, got Robot\(.*gaussim.Scene\(robot",
+        ),
+        (
+            lambda ball: gaussim.Simulator(gaussim.Scene(ball), {"dt": 1e-3}),
+            r"options: must be a gaussim.Options or None, got \{'dt': 0.001\}: gaussim.Options\(\*\*fields\)",
+        ),
+        (lambda ball: gaussim.Scene(ball, ground=True), "ground: must be a gaussim.Ground or None, got True"),
+        (
+            lambda ball: gaussim.Scene(ball, obstacles=gaussim.Box("b", (1, 1, 1), (0, 0, 2))),
+            r"obstacles: must be a list of gaussim.Box and gaussim.Sphere, got one: give \[Box\(",
+        ),
+        (
+            lambda ball: gaussim.Scene(ball, obstacles=[gaussim.Ground()]),
+            r"obstacles\[0\]: must be one of gaussim.Box and gaussim.Sphere, got Ground\(",
+        ),
+        (
+            lambda ball: gaussim.Scene(ball, bilaterals=gaussim.Anchor("ball", (0, 0, 1))),
+            r"bilaterals: must be a list of gaussim.Anchor and gaussim.LoopClosure, got one",
+        ),
+        (lambda ball: gaussim.load_robot(12), r"name: must be a robot's name or a file's path, got 12"),
+        (
+            lambda ball: gaussim.load_scene(None),
+            "path: must be a scene file's path or a shipped scene's name",
+        ),
+    ],
+    ids=[
+        "robot as scene",
+        "dict as options",
+        "ground",
+        "one obstacle",
+        "ground as obstacle",
+        "one anchor",
+        "robot int",
+        "scene None",
+    ],  # fmt: skip
+)
+def test_an_argument_of_the_wrong_type_is_refused_naming_it(ball, call, message):
+    """Simulator(robot) raised AttributeError: 'Robot' object has no attribute 'world'; Scene(ground=True)
+    'bool' object has no attribute 'name'; obstacles=Box(...) "'Box' object is not iterable";
+    load_robot(12) a TypeError of pathlib: each now names the argument and what it takes."""
+    with pytest.raises(gaussim.InvalidOptions, match=message):
+        call(ball)

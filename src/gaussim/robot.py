@@ -246,6 +246,12 @@ def load_robot(
         InvalidRobot: the file could not be read or describes an unusable model.
     """
     policies = {"on_massless": on_massless, "on_bad_inertia": on_bad_inertia}
+    if not isinstance(name, (str, os.PathLike)):  # a model or wrapper is as_robot's
+        raise InvalidOptions(
+            "name",
+            f"must be a robot's name or a file's path, got {shown(name)} (gaussim.as_robot takes a Pinocchio "
+            "model or RobotWrapper)",
+        )
     path = Path(name)
     local = ROBOTS_DIR / f"{name}.urdf"
     if path.suffix in SUFFIXES or path.exists():

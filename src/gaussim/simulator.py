@@ -27,12 +27,13 @@ from .collision.contacts import NOTHING_FOUND
 from .constraints import BilateralModule, ContactModule, LimitModule, checked_modules
 from .constraints.base import ConstraintModule
 from .dynamics import DynamicsStage
-from .exceptions import GaussimWarning, InvalidRobot, InvalidState, SolverError
+from .exceptions import GaussimWarning, InvalidOptions, InvalidRobot, InvalidState, SolverError, shown
 from .gauss import GaussStage
 from .integrator import integrate
 from .kernels.bound import is_c_float
 from .options import Options
 from .report import StepReport
+from .robot import Robot
 from .scene import Scene
 from .schemes import SCHEMES, Scheme
 from .state import State, real_array
@@ -51,6 +52,14 @@ class Simulator:
     def __init__(
         self, scene: Scene, options: Options | None = None, *, constraints: Sequence[ConstraintModule] = ()
     ) -> None:
+        if not isinstance(scene, Scene):
+            hint = ": gaussim.Scene(robot, ...) makes one of a robot" if isinstance(scene, Robot) else ""
+            raise InvalidOptions("scene", f"must be a gaussim.Scene, got {shown(scene)}{hint}")
+        if options is not None and not isinstance(options, Options):
+            hint = (
+                ": gaussim.Options(**fields) makes one of a mapping" if isinstance(options, Mapping) else ""
+            )
+            raise InvalidOptions("options", f"must be a gaussim.Options or None, got {shown(options)}{hint}")
         self.scene = scene
         self.options = options or Options()
         self.world = scene.world
