@@ -1,5 +1,6 @@
 """Scene files: every shipped scene loads and runs; every malformed file is named precisely."""
 
+import re
 import warnings
 from pathlib import Path
 
@@ -562,3 +563,21 @@ def test_gaussim_run_robot_leaves_the_scene_of_another_robot_and_says_so(tmp_pat
     assert told in err and "this robot's scene is not written" in err, err
     assert "run that file to use it" not in err
     assert (tmp_path / "out" / "robot.toml").read_text() == first
+
+
+def test_a_pair_with_the_ground_in_a_scene_without_one_says_the_ground_is_missing(tmp_path):
+    """A [[bodies]] scene file has no ground unless it has a [ground] section: its pairs with "ground"
+    said only "no obstacle or collision geometry 'ground' in the scene", as for a misspelt name."""
+    path = _write(
+        tmp_path,
+        '[[bodies]]\nname = "ball"\nshape = "sphere"\nradius = 0.1\nmass = 1.0\nposition = [0, 0, 0.2]\n'
+        '[contacts]\npairs = [["ball", "ground"]]\n',
+    )
+    told = "it has no ground: give ground=gaussim.Ground(); a scene file, a [ground] section"
+    with pytest.raises(
+        SceneFileError,
+        match=re.escape(f"contacts.pairs: no obstacle or collision geometry 'ground' in the scene ({told})"),
+    ):
+        load_scene(path)
+    path.write_text(path.read_text() + "[ground]\n")
+    assert len(load_scene(path).scene.pairs) == 1

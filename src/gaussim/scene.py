@@ -464,5 +464,10 @@ class _Names:
                 if obstacles:
                     return obstacles
                 known = self.obstacles + self.geometry_names
-                raise GeometryNotFound(name, known, "obstacle or collision geometry", "the scene") from None
+                scene = "the scene"
+                if name == Ground().name:  # not a typo: the ground was left out
+                    scene += (
+                        " (it has no ground: give ground=gaussim.Ground(); a scene file, a [ground] section)"
+                    )
+                raise GeometryNotFound(name, known, "obstacle or collision geometry", scene) from None
         return [("geometry", g) for g in self.geometries(name, where)]
