@@ -5,6 +5,7 @@ import re
 import stat
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -537,11 +538,11 @@ def test_a_start_inside_an_obstacle_is_refused(tmp_path, capsys, initial, obstac
     path = tmp_path / "scene.toml"
     scene = f'[robot]\nname = "ball"\nfloating_base = true\n[initial]\n{initial}\n[ground]\n{obstacle}'
     path.write_text(scene + "[simulation]\nduration = 0.002\n")
-    code, err = _cli(capsys, "run", path, "--out", tmp_path / "log.npz", "--quiet")
+    code, err = _cli(capsys, "run", path, "--out", tmp_path / "log.runlog", "--quiet")
     assert code == 2 and f"{path}: the initial configuration has {where}" in err, err
-    assert "start_penetration" in err and not (tmp_path / "log.npz").exists()
+    assert "start_penetration" in err and not (tmp_path / "log.runlog").exists()
     path.write_text(scene + "[options]\nstart_penetration = 0.2\n[simulation]\nduration = 0.002\n")
-    assert _cli(capsys, "run", path, "--out", tmp_path / "log.npz", "--quiet")[0] == 0
+    assert _cli(capsys, "run", path, "--out", tmp_path / "log.runlog", "--quiet")[0] == 0
 
 
 def test_a_negative_ground_clearance_is_refused_at_reset(tmp_path, capsys):
@@ -550,7 +551,7 @@ def test_a_negative_ground_clearance_is_refused_at_reset(tmp_path, capsys):
     path.write_text(
         '[robot]\nname = "solo12"\n[initial]\nconfiguration = "standing"\nground_clearance = -0.5\n[ground]\n'
     )
-    code, err = _cli(capsys, "run", path, "--out", tmp_path / "log.npz", "--quiet")
+    code, err = _cli(capsys, "run", path, "--out", tmp_path / "log.runlog", "--quiet")
     assert code == 2 and re.search(rf"{path}: .*'[FH][LR]_FOOT_0' 500 mm inside 'ground'", err), err
 
 
@@ -798,8 +799,8 @@ def test_unwritable_outputs_exit_2_naming_the_path(tmp_path, capsys, small_log):
     assert code == 2 and f"--output {tmp_path / 'forces'}: the image's suffix must be one of .png, " in err
     scene = tmp_path / "scene.toml"
     scene.write_text(BALL_SCENE)
-    code, err = _cli(capsys, "run", scene, "--plot", tmp_path / "forces", "--out", tmp_path / "l.npz")
-    assert code == 2 and not (tmp_path / "l.npz").exists(), "refused before the run"
+    code, err = _cli(capsys, "run", scene, "--plot", tmp_path / "forces", "--out", tmp_path / "l.runlog")
+    assert code == 2 and not (tmp_path / "l.runlog").exists(), "refused before the run"
     assert f"--plot {tmp_path / 'forces'}: the image's suffix" in err, "the flag named, as --html's is"
 
 
@@ -850,8 +851,8 @@ def test_ctrl_c_before_the_first_step_writes_no_log(tmp_path, capsys, monkeypatc
     path = tmp_path / "scene.toml"
     path.write_text(BALL_SCENE)
     monkeypatch.setattr(gaussim.runner, "run", interrupted)
-    code, err = _cli(capsys, "run", path, "--out", tmp_path / "log.npz")
-    assert code == 1 and "interrupted; no log written" in err and not (tmp_path / "log.npz").exists()
+    code, err = _cli(capsys, "run", path, "--out", tmp_path / "log.runlog")
+    assert code == 1 and "interrupted; no log written" in err and not (tmp_path / "log.runlog").exists()
 
 
 DIRECTORY_FAULTS = {  # the run log directory (header.json and its chunks), as LOG_FAULTS for the .npz
@@ -902,3 +903,115 @@ def test_absurd_torques_are_named_as_the_cause_not_the_solver_settings(solo12):
         for _ in range(5):
             state = sim.step(state, np.full(12, 1e12))
     assert "check the inputs" in str(info.value) and "max_iter" not in str(info.value)
+
+
+@pytest.mark.parametrize(
+    ("args", "told"),
+    [
+        (
+            ["--dt", "1", "--duration", "0.1"],
+            "the duration 0.1 s is shorter than one step of dt = 1 s: the run takes 1 step, 1 s",
+        ),
+        (
+            ["--dt", "0.03", "--duration", "0.1"],
+            "the duration 0.1 s is not a whole number of steps of dt = 0.03 s: the run takes 3 steps, 0.09 s",
+        ),
+    ],
+    ids=["shorter than dt", "not a multiple of dt"],
+)
+def test_a_duration_the_steps_cannot_make_is_told(tmp_path, capsys, args, told):
+    """--dt 1 --duration 0.1 simulated 1 s, ten times the time asked for, and --dt 0.03 --duration 0.1
+    0.09 s, without a word: the run says what it simulates instead (the command prints it as
+    ``gaussim: warning: ...``), before it starts."""
+    with pytest.warns(gaussim.GaussimWarning, match=re.escape(told)):
+        code, err = _cli(capsys, "run", "pendulum_limits", *args, "--out", tmp_path / "r", "--quiet")
+    assert code == 0, err
+    spec = gaussim.load_scene("pendulum_limits", dt=1e-3)
+    spec.duration = 0.3  # 0.3 / 1e-3 is 299.99999999999994: 300 steps, no warning
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", gaussim.GaussimWarning)
+        assert gaussim.run(spec).steps == 300
+    spec.duration = 0.0004
+    with pytest.warns(gaussim.GaussimWarning, match="the run takes 1 step, 0.001 s"):
+        assert gaussim.run(spec).steps == 1
+
+
+def test_the_reactions_of_a_family_the_simulator_does_not_pose_are_refused_by_name(sim, ball):
+    """report.reactions("contacts") returned [] where report.reactions("contact") held the ball's
+    weight: a misspelt family read as a step without reactions. gaussim's own families answer in any
+    scene (no limit rows: no limit reaction)."""
+    sim.step(sim.reset(at_height(ball, 0.1)))
+    report = sim.last_step
+    assert np.allclose(sum(c.force for c in report.reactions("contact")), [0.0, 0.0, 9.81])
+    assert report.reactions("limit") == [] and report.reactions("bilateral") == []
+    with pytest.raises(
+        gaussim.InvalidOptions,
+        match=r"no constraint family 'contacts' in this simulator "
+        r"\(did you mean contact\?\); its families: bilateral, contact, limit",
+    ):
+        report.reactions("contacts")
+
+
+def test_a_run_log_named_npz_is_refused_before_the_run(tmp_path, capsys):
+    """gaussim run ... --out x.npz made a folder named x.npz (a run log is a folder of chunks), where a
+    user expects one .npz file, as RunLog.save writes: refused before the run, naming both ways."""
+    from gaussim.cli import EXIT_BAD_INPUT
+
+    out = tmp_path / "x.npz"
+    code, err = _cli(capsys, "run", "pendulum_limits", "--duration", "0.01", "--out", out, "--quiet")
+    assert code == EXIT_BAD_INPUT and not out.exists(), err
+    folder = tmp_path / "x.runlog"
+    assert f"--out: {out}: a run log is a folder of chunks written as the run goes" in err, err
+    assert f"name it without .npz (e.g. {folder})" in err
+    assert f"gaussim.RunLog.load('{folder}').save('{out}')" in err
+    code, err = _cli(capsys, "run", "pendulum_limits", "--duration", "0.01", "--out", folder, "--quiet")
+    assert code == 0 and gaussim.RunLog.load(gaussim.RunLog.load(folder).save(out)).steps == 10, err
+
+
+@pytest.mark.parametrize(
+    ("call", "message"),
+    [
+        (
+            lambda ball: gaussim.Simulator(ball),
+            r"scene: must be a gaussim.Scene, got Robot\(.*gaussim.Scene\(robot",
+        ),
+        (
+            lambda ball: gaussim.Simulator(gaussim.Scene(ball), {"dt": 1e-3}),
+            r"options: must be a gaussim.Options or None, got \{'dt': 0.001\}: gaussim.Options\(\*\*fields\)",
+        ),
+        (lambda ball: gaussim.Scene(ball, ground=True), "ground: must be a gaussim.Ground or None, got True"),
+        (
+            lambda ball: gaussim.Scene(ball, obstacles=gaussim.Box("b", (1, 1, 1), (0, 0, 2))),
+            r"obstacles: must be a list of gaussim.Box and gaussim.Sphere, got one: give \[Box\(",
+        ),
+        (
+            lambda ball: gaussim.Scene(ball, obstacles=[gaussim.Ground()]),
+            r"obstacles\[0\]: must be one of gaussim.Box and gaussim.Sphere, got Ground\(",
+        ),
+        (
+            lambda ball: gaussim.Scene(ball, bilaterals=gaussim.Anchor("ball", (0, 0, 1))),
+            r"bilaterals: must be a list of gaussim.Anchor and gaussim.LoopClosure, got one",
+        ),
+        (lambda ball: gaussim.load_robot(12), r"name: must be a robot's name or a file's path, got 12"),
+        (
+            lambda ball: gaussim.load_scene(None),
+            "path: must be a scene file's path or a shipped scene's name",
+        ),
+    ],
+    ids=[
+        "robot as scene",
+        "dict as options",
+        "ground",
+        "one obstacle",
+        "ground as obstacle",
+        "one anchor",
+        "robot int",
+        "scene None",
+    ],  # fmt: skip
+)
+def test_an_argument_of_the_wrong_type_is_refused_naming_it(ball, call, message):
+    """Simulator(robot) raised AttributeError: 'Robot' object has no attribute 'world'; Scene(ground=True)
+    'bool' object has no attribute 'name'; obstacles=Box(...) "'Box' object is not iterable";
+    load_robot(12) a TypeError of pathlib: each now names the argument and what it takes."""
+    with pytest.raises(gaussim.InvalidOptions, match=message):
+        call(ball)

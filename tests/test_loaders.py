@@ -994,3 +994,31 @@ def test_a_single_free_body_without_a_floating_base_is_refused_with_the_fix():
     give it one."""
     with pytest.raises(gaussim.InvalidRobot, match=r"ball\.urdf: .*floating_base=True"):
         gaussim.load_robot("ball")
+
+
+def test_talos_legs_loads_without_a_warning_its_collision_geometry_cut_to_its_legs():
+    """example-robot-data's TalosLegsLoader cuts Talos's model and visual geometry to the legs (joints
+    below 14) but keeps all 52 collision geometries: the 39 of the torso and arms, on joints its model
+    does not have, are left out as its visual ones are, without the warning that every run of the
+    shipped talos_standing printed."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", gaussim.GaussimWarning)
+        robot = gaussim.load_robot("talos_legs")
+    for geometry in (robot.collision_model, robot.visual_model):
+        assert geometry.ngeoms == 13
+        assert all(g.parentJoint < robot.model.njoints for g in geometry.geometryObjects)
+
+
+def test_geometry_of_joints_a_model_does_not_have_is_left_out_with_a_warning():
+    """Where nothing says the loader meant it (its visual geometry is not cut the same way), the
+    geometry of joints the model lacks is still left out with a warning naming it."""
+    from gaussim.robot import _own_geometry
+
+    model = pin.Model()
+    joint = model.addJoint(0, pin.JointModelRZ(), pin.SE3.Identity(), "hinge")
+    geometry = pin.GeometryModel()
+    for name, parent in (("kept", joint), ("stray", joint + 5)):
+        geometry.addGeometryObject(pin.GeometryObject(name, parent, pin.SE3.Identity(), coal.Sphere(0.1)))
+    with pytest.warns(gaussim.GaussimWarning, match=r"'arm' holds 1 geometries of joints .*\['stray'\]"):
+        kept = _own_geometry("arm", model, geometry)
+    assert [g.name for g in kept.geometryObjects] == ["kept"]

@@ -171,7 +171,7 @@ def _cli(*args, **kwargs):
 
 
 def test_cli_run_inspect_and_forces(tmp_path):
-    out = tmp_path / "run.npz"
+    out = tmp_path / "run.runlog"
     result = _cli("run", str(SCENES / "solo12_standing.toml"), "--out", str(out), "--duration", "0.2")
     assert result.returncode == 0, result.stderr
     assert "max penetration" in result.stdout and "FL_FOOT_0/ground#0" in result.stdout
@@ -263,11 +263,11 @@ def test_cli_simulation_failure_exits_1_and_keeps_the_log(tmp_path):
     scene.write_text(
         (SCENES / "box_incline.toml").read_text() + "\n[options]\nmax_iter = 1\nsolver = 'proxqp'\n"
     )
-    result = _cli("run", str(scene), "--out", str(tmp_path / "r.npz"), "--quiet")
+    result = _cli("run", str(scene), "--out", str(tmp_path / "r.runlog"), "--quiet")
     assert (
         result.returncode == 1 and "simulation failed" in result.stderr and "Traceback" not in result.stderr
     )
-    assert not gaussim.RunLog.load(tmp_path / "r.npz").complete
+    assert not gaussim.RunLog.load(tmp_path / "r.runlog").complete
 
 
 def test_cli_contact_failure_exits_1_and_keeps_the_log(tmp_path, monkeypatch, capsys):
@@ -285,7 +285,7 @@ def test_cli_contact_failure_exits_1_and_keeps_the_log(tmp_path, monkeypatch, ca
         return detect(self, data, margin, turns)
 
     monkeypatch.setattr(BoxPairs, "detect", failing)
-    out = tmp_path / "r.npz"
+    out = tmp_path / "r.runlog"
     assert main(["run", str(SCENES / "box_stack.toml"), "--out", str(out), "--quiet"]) == 1
     stderr = capsys.readouterr().err
     assert "simulation failed" in stderr and "non-finite contact" in stderr and str(out) in stderr
@@ -294,7 +294,7 @@ def test_cli_contact_failure_exits_1_and_keeps_the_log(tmp_path, monkeypatch, ca
 
 
 def test_cli_ctrl_c_keeps_the_log(tmp_path):
-    out = tmp_path / "r.npz"
+    out = tmp_path / "r.runlog"
     process = subprocess.Popen(
         [
             sys.executable,

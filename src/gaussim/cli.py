@@ -8,12 +8,14 @@ from __future__ import annotations
 
 import argparse
 import functools
+import json
 import math
 import os
 import re
 import signal
 import sys
 import time
+import tomllib
 import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn, TextIO
@@ -528,6 +530,14 @@ def _run(args: argparse.Namespace) -> int:
         plot_path(args.plot, "--plot")  # before the run, not after it
     if args.dt is not None:
         _positive("--dt", args.dt)
+    if args.out is not None and args.out.suffix == ".npz":  # else a folder named like a file
+        folder = args.out.with_suffix(".runlog")
+        raise InvalidOptions(
+            "--out",
+            f"{args.out}: a run log is a folder of chunks written as the run goes (kept whatever stops "
+            f"it), not one .npz file; name it without .npz (e.g. {folder}), then write one file from it "
+            f"with gaussim.RunLog.load('{folder}').save('{args.out}')",
+        )
     for flag, given in (("--speed", args.speed is not None), ("--no-wait", args.no_wait)):
         if given and not args.view:  # else ignored without a word
             raise InvalidOptions(
@@ -621,12 +631,33 @@ def _robot_scene_file(text: str, path: Path) -> str:
     """Write the scene of a robot run by itself (``text``) to ``path``, unless a different file is
     there (a user's edit of the last one); returns what the run tells of it."""
     said = "it runs in the scene gaussim writes for it (its first lines say what it holds)"
-    if path.is_file() and path.read_text() != text:
+    if path.is_file() and (there := path.read_text()) != text:
+        other = _scene_robot(there)
+        if other != _scene_robot(text):  # not this robot's scene edited: running it runs something else
+            return (
+                f"{said}; {path} is {'the scene of ' + other if other else 'another scene'}, not of this "
+                "robot: it is left as it is, and this robot's scene is not written (it goes beside the run "
+                "log: give --out another name)"
+            )
         return f"{said}; {path}, which differs from it, is left as it is (run that file to use it)"
     check_writable(path, "scene")
     with atomic_path(path) as tmp:
         tmp.write_text(text)
     return f"{said}, written to {path}: edit it and run that file"
+
+
+def _scene_robot(text: str) -> str | None:
+    """The robot a scene file's ``[robot]`` table loads (``urdf = "PATH"``, ``name = "NAME"``, ...), or None
+    (no such table, or no TOML)."""
+    try:
+        robot = tomllib.loads(text).get("robot")
+    except tomllib.TOMLDecodeError:
+        return None
+    if not isinstance(robot, dict):
+        return None
+    return next(
+        (f"{key} = {json.dumps(robot[key])}" for key in ("urdf", "mjcf", "sdf", "name") if key in robot), None
+    )
 
 
 def _arrow_option(parser: argparse.ArgumentParser) -> None:

@@ -15,6 +15,9 @@ SOLVERS = ("dual", "daqp", "proxqp")
 # Upper bounds of the integer options: ProxQP's max_iter is a C int; more facets or fixed-point QPs than
 # these only cost time (a 64-facet pyramid is within 0.12 % of the cone)
 MAXIMA = {"max_iter": 2**31 - 1, "friction_facets": 64, "friction_iterations": 1000}
+# A duration within this fraction of a whole number of steps is that number of steps (round-off of
+# decimal durations and steps: 0.3 / 1e-3 is 299.99999999999994)
+DURATION_TOLERANCE = 1e-9
 
 
 @dataclass(frozen=True)
@@ -124,6 +127,19 @@ class Options:
     def steps(self, duration: float) -> int:
         """The number of steps a run of ``duration`` [s] takes: the nearest whole number, at least one."""
         return max(1, round(duration / self.dt))
+
+    def duration_note(self, duration: float) -> str | None:
+        """What a run of ``duration`` [s] simulates instead, when that is not ``duration`` (a duration
+        shorter than one step, or not a whole number of steps); None when it is."""
+        steps = self.steps(duration)
+        simulated = steps * self.dt
+        if abs(simulated - duration) <= DURATION_TOLERANCE * duration:
+            return None
+        why = "shorter than one step" if duration < self.dt else "not a whole number of steps"
+        return (
+            f"the duration {duration:g} s is {why} of dt = {self.dt:g} s: the run takes {steps} "
+            f"step{'s' if steps > 1 else ''}, {simulated:g} s (make the duration a multiple of dt)"
+        )
 
     def replace(self, **changes: object) -> Options:
         """Return a copy with some fields changed (validated again)."""

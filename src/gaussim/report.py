@@ -23,12 +23,17 @@ from .constraints import (
     Rows,
 )
 from .constraints.contact import contact_batch
+from .exceptions import InvalidOptions, _choices, _meant
 from .solver import Certificate
 from .solver.reactions import least_norm_multipliers
 
 if TYPE_CHECKING:
     from .assembly import GaussProblem
     from .world import World
+
+# The families a step's reactions are read from whether or not the simulator poses them (a scene without
+# joint limits reports no limit reaction)
+BUILT_IN_FAMILIES = (ContactModule.name, LimitModule.name, BilateralModule.name)
 
 # Relative singular-value threshold under which stacked contact Jacobians count as rank deficient.
 RANK_TOLERANCE = 1e-9
@@ -108,6 +113,8 @@ class StepReport:
     )
     # the bodies of the stepped world (set by the Simulator), for the forces between bodies
     world: World | None = field(default=None, repr=False, compare=False)
+    # the names of the constraint families the Simulator poses (set by it), which :meth:`reactions` knows
+    families: tuple[str, ...] | None = field(default=None, repr=False, compare=False)
 
     def __init__(self, t: float, timed: bool = False) -> None:
         """The report of the step from time ``t``, whose stages start now; ``timed``: record their
@@ -128,7 +135,16 @@ class StepReport:
     def reactions(self, family: str) -> list:
         """The reactions of the constraint family named ``family`` (a module's ``name``), as its module
         reports them from the multipliers of the step's last QP (forces [N], torques [N m]); empty when
-        it held no rows."""
+        it held no rows. A name that is no family of the simulator's (nor gaussim's own: ``contact``,
+        ``limit``, ``bilateral``) raises :class:`gaussim.InvalidOptions` listing them: a misspelt one
+        would read as a step without reactions."""
+        if self.families is not None and family not in self.families and family not in BUILT_IN_FAMILIES:
+            known = {*self.families, *BUILT_IN_FAMILIES}
+            raise InvalidOptions(
+                "family",
+                f"no constraint family '{family}' in this simulator{_meant(str(family), known)}; its "
+                f"families: {_choices(known)}",
+            )
         return [
             r for m, rows, lam in self._spread if m.name == family for r in m.reactions(rows, lam, self.scale)
         ]

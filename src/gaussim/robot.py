@@ -246,6 +246,12 @@ def load_robot(
         InvalidRobot: the file could not be read or describes an unusable model.
     """
     policies = {"on_massless": on_massless, "on_bad_inertia": on_bad_inertia}
+    if not isinstance(name, (str, os.PathLike)):  # a model or wrapper is as_robot's
+        raise InvalidOptions(
+            "name",
+            f"must be a robot's name or a file's path, got {shown(name)} (gaussim.as_robot takes a Pinocchio "
+            "model or RobotWrapper)",
+        )
     path = Path(name)
     local = ROBOTS_DIR / f"{name}.urdf"
     if path.suffix in SUFFIXES or path.exists():
@@ -290,11 +296,15 @@ def load_robot(
         )
     model = loader.robot.model
     _warn_mimics(Path(loader.df_path), model)
+    # a loader that cut its model and its visual geometry to some joints but left its collision geometry
+    # whole (talos_legs: Talos's legs) meant the same cut for both; only an unexplained one is warned
+    visual = loader.robot.visual_model
+    cut = visual.ngeoms > 0 and not _stray(model, visual)
     return Robot(
         str(name),
         model,
-        _own_geometry(str(name), model, loader.robot.collision_model),
-        _own_geometry(str(name), model, loader.robot.visual_model),
+        _own_geometry(str(name), model, loader.robot.collision_model, warn=not cut),
+        _own_geometry(str(name), model, visual),
         str(loader.df_path),
         (str(loader.model_path),),
         _configurations(model),
@@ -302,14 +312,22 @@ def load_robot(
     )
 
 
-def _own_geometry(name: str, model: pin.Model, geometry: pin.GeometryModel) -> pin.GeometryModel:
+def _stray(model: pin.Model, geometry: pin.GeometryModel) -> list[str]:
+    """The names of the geometries of ``geometry`` attached to joints ``model`` does not have."""
+    return [g.name for g in geometry.geometryObjects if g.parentJoint >= model.njoints]
+
+
+def _own_geometry(
+    name: str, model: pin.Model, geometry: pin.GeometryModel, *, warn: bool = True
+) -> pin.GeometryModel:
     """The geometry of an example-robot-data robot attached to joints of its model: a loader that
     reduces a model may keep the geometry of the joints it removed (talos_legs keeps the collision
-    geometry of Talos's torso and arms), which is left out, with a warning."""
-    stray = [g.name for g in geometry.geometryObjects if g.parentJoint >= model.njoints]
+    geometry of Talos's torso and arms, though it cuts its visual geometry to the legs), which is left
+    out, with a warning when ``warn``."""
+    stray = _stray(model, geometry)
     for geometry_name in stray:
         geometry.removeGeometryObject(geometry_name)
-    if stray:
+    if stray and warn:
         warnings.warn(
             f"example-robot-data's '{name}' holds {len(stray)} geometries of joints its model does not have "
             f"({shown(stray)}): left out",

@@ -5,6 +5,7 @@ from __future__ import annotations
 import signal
 import threading
 import time
+import warnings
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -15,7 +16,7 @@ from numba.core import event
 from tqdm import tqdm
 
 from .control import command
-from .exceptions import GaussimError, InvalidOptions, shown
+from .exceptions import GaussimError, GaussimWarning, InvalidOptions, shown
 from .options import is_real
 from .report import StepReport
 from .runlog import RunLog, RunLogWriter
@@ -79,6 +80,9 @@ def run(
     if not (is_real(spec.duration) and spec.duration > 0):  # a spec's fields are the caller's to set
         raise InvalidOptions("duration", f"must be a finite number > 0 [s], got {shown(spec.duration)}")
     steps = spec.options.steps(spec.duration)
+    note = spec.options.duration_note(spec.duration)
+    if note is not None:  # the run does not simulate the time asked for: say so before it
+        warnings.warn(note, GaussimWarning, stacklevel=2)
     line = _Progress(progress, steps) if progress is not None else None
     with compile_notice(line.compiling if line is not None else None):
         return _steps(spec, out, steps, line, checkpoint_seconds, checkpoint_steps, observer)

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import fnmatch
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import coal
@@ -185,6 +185,20 @@ class ContactPair:
     restitution: float = 0.0
 
 
+def _listed(field: str, items: object, kinds: tuple[type, ...], named: str) -> tuple:
+    """``items`` as a tuple, when it is a list (or tuple, ...) of ``kinds``; else InvalidOptions naming
+    ``field`` (one item given bare, ``obstacles=Box(...)``, is told to be put in a list)."""
+    if isinstance(items, kinds):
+        raise InvalidOptions(field, f"must be a list of {named}, got one: give [{shown(items)}]")
+    if isinstance(items, (str, bytes, Mapping)) or not isinstance(items, Iterable):
+        raise InvalidOptions(field, f"must be a list of {named}, got {shown(items)}")
+    found = tuple(items)
+    for i, item in enumerate(found):
+        if not isinstance(item, kinds):
+            raise InvalidOptions(f"{field}[{i}]", f"must be one of {named}, got {shown(item)}")
+    return found
+
+
 class Scene:
     """Bodies (robots and free objects), the world around them and the constraints declared on them.
 
@@ -233,7 +247,11 @@ class Scene:
             raise InvalidOptions("bodies", "give one robot, or bodies={name: robot or free body, ...}")
         if robot is not None and not isinstance(robot, Robot):
             raise InvalidOptions("robot", f"must be a gaussim.Robot (gaussim.load_robot), got {shown(robot)}")
-        self.obstacles: tuple[Obstacle, ...] = ((ground,) if ground else ()) + tuple(obstacles)
+        if ground is not None and not isinstance(ground, Ground):
+            raise InvalidOptions("ground", f"must be a gaussim.Ground or None, got {shown(ground)}")
+        self.obstacles: tuple[Obstacle, ...] = ((ground,) if ground else ()) + _listed(
+            "obstacles", obstacles, (Box, Sphere), "gaussim.Box and gaussim.Sphere"
+        )
         names = [o.name for o in self.obstacles]
         self.world = World({robot.name: robot} if robot is not None else bodies, names)  # type: ignore[dict-item, arg-type]
         self.robot = robot = self.world.robot
@@ -249,7 +267,9 @@ class Scene:
         if self.joint_friction:
             _check_joint_friction(robot)
         self.gravity = _vector("gravity", gravity, 3)
-        self.bilaterals = tuple(bilaterals)
+        self.bilaterals = _listed(
+            "bilaterals", bilaterals, (Anchor, LoopClosure), "gaussim.Anchor and gaussim.LoopClosure"
+        )
         for b in self.bilaterals:
             for frame in (b.frame,) if isinstance(b, Anchor) else (b.frame_a, b.frame_b):
                 robot.frame_id(frame)
@@ -452,7 +472,12 @@ class _Names:
                 if obstacles:
                     return obstacles
                 known = self.obstacles + self.geometry_names
-                raise GeometryNotFound(name, known, "obstacle or collision geometry", "the scene") from None
+                scene = "the scene"
+                if name == Ground().name:  # not a typo: the ground was left out
+                    scene += (
+                        " (it has no ground: give ground=gaussim.Ground(); a scene file, a [ground] section)"
+                    )
+                raise GeometryNotFound(name, known, "obstacle or collision geometry", scene) from None
         return [("geometry", g) for g in self.geometries(name, where)]
 
 

@@ -34,6 +34,7 @@ writes for it.
 from __future__ import annotations
 
 import json
+import os
 import re
 import tomllib
 import warnings
@@ -198,6 +199,10 @@ def load_scene(path: str | Path, **overrides: Any) -> SceneSpec:
         SceneFileError: unreadable TOML, unknown key, wrong type or value (names file and key).
         GaussimError: an unknown robot, frame or geometry (the message lists the valid names).
     """
+    if not isinstance(path, (str, os.PathLike)):
+        raise InvalidOptions(
+            "path", f"must be a scene file's path or a shipped scene's name, got {shown(path)}"
+        )
     path = Path(path)
     if names_robot(path):
         text, robot, source = _robot_scene(str(path))

@@ -27,12 +27,13 @@ from .collision.contacts import NOTHING_FOUND
 from .constraints import BilateralModule, ContactModule, JointFrictionModule, LimitModule, checked_modules
 from .constraints.base import ConstraintModule
 from .dynamics import DynamicsStage
-from .exceptions import GaussimWarning, InvalidRobot, InvalidState, SolverError
+from .exceptions import GaussimWarning, InvalidOptions, InvalidRobot, InvalidState, SolverError, shown
 from .gauss import GaussStage
 from .integrator import integrate
 from .kernels.bound import is_c_float
 from .options import Options
 from .report import StepReport
+from .robot import Robot
 from .scene import Scene
 from .schemes import SCHEMES, Scheme
 from .state import State, real_array
@@ -51,6 +52,14 @@ class Simulator:
     def __init__(
         self, scene: Scene, options: Options | None = None, *, constraints: Sequence[ConstraintModule] = ()
     ) -> None:
+        if not isinstance(scene, Scene):
+            hint = ": gaussim.Scene(robot, ...) makes one of a robot" if isinstance(scene, Robot) else ""
+            raise InvalidOptions("scene", f"must be a gaussim.Scene, got {shown(scene)}{hint}")
+        if options is not None and not isinstance(options, Options):
+            hint = (
+                ": gaussim.Options(**fields) makes one of a mapping" if isinstance(options, Mapping) else ""
+            )
+            raise InvalidOptions("options", f"must be a gaussim.Options or None, got {shown(options)}{hint}")
         self.scene = scene
         self.options = options or Options()
         self.world = scene.world
@@ -63,6 +72,7 @@ class Simulator:
         self.detector = ContactDetector(scene, self.options.contact_margin) if scene.pairs else None
         built_in = self._modules(scene, self.options)
         self.modules = checked_modules(built_in, constraints)
+        self._families = tuple(m.name for m in self.modules)
         self.gauss = GaussStage(
             self.model, self.data, self.modules, self.options, self.modules[len(built_in) :]
         )
@@ -293,7 +303,7 @@ class Simulator:
         report.mark("integrate")
         if moved is None:
             raise SolverError(f"step at t={state.t:.6g} s produced a non-finite velocity", report)
-        report.world = self.world
+        report.world, report.families = self.world, self._families
         self.last_step = report
         self._last_state = State.adopt(state.t + dt, *moved, self.world)  # both arrays are this step's own
         return self._last_state
