@@ -947,7 +947,7 @@ def test_the_reactions_of_a_family_the_simulator_does_not_pose_are_refused_by_na
     with pytest.raises(
         gaussim.InvalidOptions,
         match=r"no constraint family 'contacts' in this simulator "
-        r"\(did you mean contact\?\); its families: bilateral, contact, limit",
+        r"\(did you mean contact\?\); its families: bilateral, contact, joint_friction, limit",
     ):
         report.reactions("contacts")
 

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .constraints import (
+    BUILT_IN,
     BilateralModule,
     BilateralReaction,
     ConstraintModule,
@@ -30,10 +31,6 @@ from .solver.reactions import least_norm_multipliers
 if TYPE_CHECKING:
     from .assembly import GaussProblem
     from .world import World
-
-# The families a step's reactions are read from whether or not the simulator poses them (a scene without
-# joint limits reports no limit reaction)
-BUILT_IN_FAMILIES = (ContactModule.name, LimitModule.name, BilateralModule.name)
 
 # Relative singular-value threshold under which stacked contact Jacobians count as rank deficient.
 RANK_TOLERANCE = 1e-9
@@ -136,10 +133,11 @@ class StepReport:
         """The reactions of the constraint family named ``family`` (a module's ``name``), as its module
         reports them from the multipliers of the step's last QP (forces [N], torques [N m]); empty when
         it held no rows. A name that is no family of the simulator's (nor gaussim's own: ``contact``,
-        ``limit``, ``bilateral``) raises :class:`gaussim.InvalidOptions` listing them: a misspelt one
-        would read as a step without reactions."""
-        if self.families is not None and family not in self.families and family not in BUILT_IN_FAMILIES:
-            known = {*self.families, *BUILT_IN_FAMILIES}
+        ``limit``, ``bilateral``, ``joint_friction``) raises :class:`gaussim.InvalidOptions` listing
+        them: a misspelt one would read as a step without reactions."""
+        # gaussim's own families answer whether or not the simulator poses them (no limit: no reaction)
+        if self.families is not None and family not in self.families and family not in BUILT_IN:
+            known = {*self.families, *BUILT_IN}
             raise InvalidOptions(
                 "family",
                 f"no constraint family '{family}' in this simulator{_meant(str(family), known)}; its "
