@@ -182,3 +182,71 @@ def test_an_arm_falling_onto_the_ground_with_friction_in_its_joints_gives_way_to
         for r in sim.last_step.joint_friction:
             assert abs(r.torque) <= bounds[r.joint] * (1 + 1e-9)
     assert touched > 100
+
+
+def test_a_quadruped_collapsing_with_friction_in_its_joints_sticks_or_slides_against_them():
+    """example-robot-data's go1 (damping and dry friction in its joints) let go with zero torques
+    collapses onto the ground, its feet and legs sliding: each step's friction meets Coulomb's law at
+    the step's end (a joint within its bound does not move; one at its bound moves against it), and the
+    passes settle in nearly every step (they once cycled between two sets of active contact rows and
+    spent the 10 QPs a step allows on one step in ten)."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
+    from corpus import scene_and_start
+
+    robot = gaussim.load_robot("go1")
+    scene, q0 = scene_and_start(robot)
+    sim = gaussim.Simulator(scene, gaussim.Options(dt=1e-3))
+    state = sim.reset(q0)
+    model = sim.model
+    index = {name: model.joints[model.getJointId(name)].idx_v for name in sim.modules[-1].labels}
+    bound = dict(zip(sim.modules[-1].labels, sim.modules[-1].bounds))
+    unsettled, sliding, along = 0, 0, 0
+    for _ in range(400):
+        state = sim.step(state)
+        report = sim.last_step
+        unsettled += report.friction_unsettled
+        if report.friction_unsettled:
+            continue
+        for r in report.joint_friction:
+            u = state.v[index[r.joint]]
+            assert abs(r.torque) <= bound[r.joint] * (1 + 1e-9)
+            if r.sliding:  # it moves against the friction
+                sliding += 1
+                # but where the contacts' rows alone set its speed (no friction changes it) and the
+                # contacts' own passes turn it at the last (within their 1e-3 m/s: 5e-3 rad/s at 0.2 m)
+                along += u * np.sign(r.torque) > 1e-6
+                assert u * np.sign(r.torque) <= 5e-3, (r, u)
+            else:
+                assert abs(u) <= 2e-5, (r, u)  # it sticks, to what the QPs resolve of its speed
+    assert sliding > 500
+    assert along <= 0.02 * sliding
+    assert unsettled <= 10
+
+
+def test_the_box_minimum_matches_proxqp_on_random_boxes_singular_ones_included():
+    """The friction's box QP (the primal active-set kernel, from a warm start) against ProxQP at a tight
+    tolerance: min 1/2 p^T W p + c^T p over |p| <= bound, W positive semi-definite and often singular
+    (a joint the active rows hold)."""
+    import proxsuite
+
+    from gaussim.constraints.joint_friction import _box_minimum
+
+    rng = np.random.default_rng(7)
+    for _ in range(300):
+        k = int(rng.integers(1, 13))
+        B = rng.normal(size=(k, int(rng.integers(1, k + 1))))
+        W = B @ B.T * 10 ** rng.uniform(-3, 6)
+        c = rng.normal(size=k) * 10 ** rng.uniform(-6, 0)
+        bound = 10 ** rng.uniform(-6, 0, size=k)
+        p = _box_minimum(W, c, bound, rng.uniform(-1.2, 1.2, size=k) * bound)
+        qp = proxsuite.proxqp.dense.QP(k, 0, k)
+        qp.settings.eps_abs, qp.settings.eps_rel, qp.settings.verbose = 1e-14, 0.0, False
+        qp.settings.max_iter = 100000
+        qp.init(W, c, None, None, np.eye(k), -bound, bound)
+        qp.solve()
+        reference = np.clip(qp.results.x, -bound, bound)
+        ours, theirs = (0.5 * x @ W @ x + c @ x for x in (p, reference))
+        assert np.all(np.abs(p) <= bound)
+        assert ours <= theirs + 1e-6 * (abs(theirs) + 1e-3 * np.abs(c) @ bound)

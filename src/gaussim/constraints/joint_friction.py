@@ -4,34 +4,53 @@ coordinate): a joint sticks while the torque that holds it stays within f, else 
 
 The friction is a generalized force the module applies outside the QP, never a row: a row holding a
 joint still could contradict the others (a limit or a contact that must push the joint back), where a
-finite friction only ever gives way. Its impulse p_i (f dt at most at the velocity level, f at the
-acceleration level) is the fixed point of the step's passes (:meth:`JointFrictionModule.refine`):
-the next impulses are those that leave the coordinates' new velocities u at 0 where |p_i| stays within
-its bound (sticking) and moving against p_i = bound elsewhere (sliding), as u answers p while the rows
-the pass held active hold (u + W (p' - p), :func:`_response`): the minimum of
-1/2 p'^T W p' + (u - W p)^T p' over the box |p'| <= bound (:func:`_box_minimum`). A pass that moves
-no impulse has reached it. Each solve starts from the last step's
-impulses. Impacts (the impulse level) take no friction: a finite force gives no impulse.
+finite friction only ever gives way. Its impulse p (|p_i| <= f_i dt at the velocity level, f_i at
+the acceleration level) maximises the step's dual value psi(p), the QP's minimum with p applied:
+concave, its gradient minus the coordinates' new velocities u (divided by dt at the acceleration
+level), so that at its maximum a joint within its bound has u = 0 (it sticks) and one at its bound
+moves against it (it slides). The step's passes (:meth:`JointFrictionModule.refine`) take Newton's
+steps on psi: u answers p as W p while the rows a pass held active hold (:func:`_response`), so the
+next impulses minimise 1/2 p'^T W p' + (u - W p)^T p' over the box (:func:`_box_minimum`); a step
+that does not raise psi (the active rows changed on its way) is shortened, and a step that moves
+the velocities by less than the QPs resolve them ends the passes. Each solve starts from the last
+step's impulses. Impacts (the impulse level) take no friction: a finite force gives no impulse.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pinocchio as pin
 
-from ..assembly import GaussProblem
-from ..portable import portable_proxsuite
+from ..kernels.bound import Bound
 from .base import ConstraintModule, Context, Rows
 
-proxqp = portable_proxsuite().proxqp
+if TYPE_CHECKING:  # assembly imports the constraint families
+    from ..assembly import GaussProblem
 
-# A pass whose impulses move less than this fraction of their bounds has reached the fixed point.
+box_minimum = Bound("solver.box_minimum")
+
+# A Newton step shorter than this fraction of the bounds, or changing the velocities by less than the
+# solvers' tolerance eps_abs (or the QPs' error seen on the way), ends the passes.
 SETTLED = 1e-6
 # An impulse this close to its bound (relative) is at it: the joint slides.
 AT_BOUND = 1e-6
+# The singular values of the active rows below this fraction of their largest count as dependent.
+NULL_SPACE = 1e-9
+# The box minimum's proximal shift (relative to W's largest diagonal entry; a floor where W is 0) and
+# the gradient (relative to the linear term's largest) below which a coordinate held at its bound
+# stays there.
+REGULARISATION, SHIFT_FLOOR = 1e-12, 1e-300
+RELEASE = 1e-12
+# A Newton step must raise the dual value by this fraction of what its slope promised (Armijo), up to
+# NOISE of its terms (round-off); else a shorter one is tried (a fraction of it within SHORTEST and
+# LONGEST), down to MIN_STEP, which is taken as it is.
+ARMIJO = 1e-4
+NOISE = 1e-12
+SHORTEST, LONGEST = 0.05, 0.9
+MIN_STEP = 1.0 / 64
 
 
 @dataclass
@@ -44,12 +63,30 @@ class JointFrictionReaction:
 
 
 @dataclass
-class JointFrictionIterate:
-    """One solve's passes: each coordinate's impulse, and the rows the last pass held active with the
-    response W it gave (the passes of a solve share H)."""
+class JointFrictionPoint:
+    """An impulse the passes accepted: its coordinates' velocities u, the dual value psi there,
+    Newton's direction from it and the rows psi was the value over (their key and bounds (b, l))."""
 
     impulse: np.ndarray
+    u: np.ndarray
+    value: float
+    direction: np.ndarray
+    rows_key: object
+    bounds: tuple[np.ndarray, np.ndarray]
+
+
+@dataclass
+class JointFrictionIterate:
+    """One solve's passes: the impulse the next pass applies, the last accepted point and the fraction
+    of its Newton step the next pass tries, and the rows the last pass held active with the response W
+    they gave (the passes of a solve share H)."""
+
+    impulse: np.ndarray
+    base: JointFrictionPoint | None = None
+    step: float = 1.0
     response: tuple[np.ndarray, np.ndarray] | None = None
+    noise: float = 0.0  # how far the QPs' u missed W's prediction over the same rows: their error
+    unseen: bool = False  # whether the impulse of the next pass is a step that moves u no more than that
 
 
 @dataclass(frozen=True)
@@ -104,23 +141,56 @@ class JointFrictionModule(ConstraintModule[JointFrictionRows]):
     ) -> bool:
         lagged: JointFrictionIterate = ctx.lagged[id(self)]
         record, p = rows.data, rows.data.impulse
-        u = (x if ctx.level == "velocity" else ctx.v + ctx.options.dt * x)[self.coordinates]
+        per = 1.0 if ctx.level == "velocity" else ctx.options.dt  # u per x
+        u = (x if ctx.level == "velocity" else ctx.v + per * x)[self.coordinates]
         assert ctx.solved is not None
-        # u answers p through x, as the rows active in this pass hold (at the acceleration level u = v + dt a)
         problem, lam = ctx.solved
+        # the dual value psi(p), concave in p with gradient -u / per: its maximum over the box is the step
+        curvature = 0.5 * x @ (problem.H @ x)
+        value = curvature + problem.g @ x
+        rounding = NOISE * (abs(curvature) + float(np.abs(problem.g * x).sum()))  # psi's round-off
+        if ctx.level != "velocity":
+            value -= p @ ctx.v[self.coordinates] / per
+        base = lagged.base
+        same = (
+            base is not None
+            and base.rows_key == problem.rows_key
+            and np.array_equal(base.bounds[0], problem.b)
+            and np.array_equal(base.bounds[1], problem.l)
+        )
+        # psi over the same rows as at base (another module's pass may move them) can be compared
+        if base is not None and same and lagged.step > MIN_STEP:
+            step, d = lagged.step, base.direction
+            slope, there = -(base.u @ d) / per, -(u @ d) / per  # psi's slope along d at base and here
+            if value < base.value + ARMIJO * step * slope - rounding:  # overshot
+                # where the slope, linear between the two, vanishes (exact where psi is quadratic there)
+                fraction = slope / (slope - there) if slope > there else 0.5
+                lagged.step = step * min(max(fraction, SHORTEST), LONGEST)
+                lagged.impulse = base.impulse + lagged.step * d
+                rows.settled = False
+                return True
+        # u answers p through x, as the rows active in this pass hold (at the acceleration level u = v + dt a)
         active = np.concatenate([np.ones(len(problem.b), bool), lam[len(problem.b) :] > 0.0])
         if lagged.response is None or not np.array_equal(lagged.response[0], active):  # else the same W
-            W = _response(problem, active, self.coordinates)
-            lagged.response = (active, W * (1.0 if ctx.level == "velocity" else ctx.options.dt))
+            lagged.response = (active, per * _response(problem, active, self.coordinates))
+        elif (
+            base is not None and same
+        ):  # the same rows held as at base: u missed W's prediction by the QPs' error alone
+            missed = u - base.u - lagged.response[1] @ (p - base.impulse)
+            lagged.noise = max(lagged.noise, float(np.abs(missed).max()))
         W = lagged.response[1]
-        nxt = _inside(W, u, p, record.bound)
-        if nxt is None:
-            nxt = _box_minimum(W, u - W @ p, record.bound, ctx.options.eps_abs)
+        nxt = _box_minimum(W, u - W @ p, record.bound, p)  # Newton's step on psi, within the box
         self._last = (ctx.level, nxt * self.bounds / record.bound)
-        settled = bool(np.all(np.abs(nxt - p) <= SETTLED * record.bound))
+        # settled: the impulses stay, or move the velocities by no more than the QPs resolve them after
+        # this pass applied such a step (taken once: where rows hold a joint, its friction goes to its bound)
+        direction = nxt - p
+        unseen = bool(np.abs(W @ direction).max() <= max(ctx.options.eps_abs * per, 2.0 * lagged.noise))
+        settled = bool(np.all(np.abs(direction) <= SETTLED * record.bound)) or (unseen and lagged.unseen)
+        lagged.unseen = unseen and not settled
         rows.settled = settled
         if not settled:
-            lagged.impulse = nxt
+            lagged.impulse, lagged.step = nxt, 1.0
+            lagged.base = JointFrictionPoint(p, u, value, direction, problem.rows_key, (problem.b, problem.l))
         return not settled
 
     def reactions(
@@ -135,52 +205,30 @@ class JointFrictionModule(ConstraintModule[JointFrictionRows]):
 
 def _response(problem: GaussProblem, active: np.ndarray, coordinates: np.ndarray) -> np.ndarray:
     """How the velocities (or accelerations) of ``coordinates`` (k,) answer impulses (or forces) on them
-    while the ``active`` rows of ``problem`` (of [A; C]) hold: the k x k block of
-    H^-1 - H^-1 A^T (A H^-1 A^T)^+ A H^-1 over those rows A."""
+    while the ``active`` rows of ``problem`` (of [A; C]) hold: the k x k block of Z (Z^T H Z)^-1 Z^T,
+    Z a basis of the motions those rows A allow (their null space; rows that repeat others, as
+    redundant contacts do, are read once: singular values within NULL_SPACE of the largest)."""
     p = problem
     rows = np.vstack([p.A, p.C])[active]
-    selected = np.eye(len(p.H))[:, coordinates]
-    spread = np.linalg.solve(p.H, np.hstack([selected, rows.T]))  # H^-1 [S^T, A^T]
-    free, moved = spread[:, : len(coordinates)], spread[:, len(coordinates) :]
     if not len(rows):
-        return free[coordinates]
-    coupling = rows @ moved  # A H^-1 A^T, singular where contacts are redundant
-    held = moved @ np.linalg.lstsq(coupling, rows @ free, rcond=None)[0]
-    return (free - held)[coordinates]
+        return np.linalg.inv(p.H)[np.ix_(coordinates, coordinates)]
+    _, sigma, vt = np.linalg.svd(rows)
+    rank = int(np.sum(sigma > NULL_SPACE * sigma[0])) if len(sigma) and sigma[0] > 0.0 else 0
+    Z = vt[rank:].T  # (nv, nv - rank)
+    if not Z.shape[1]:  # the rows hold every coordinate
+        return np.zeros((len(coordinates), len(coordinates)))
+    reduced = Z.T @ p.H @ Z
+    spread = Z @ np.linalg.solve(reduced, Z[coordinates].T)  # Z (Z^T H Z)^-1 Z_S^T
+    W = spread[coordinates]
+    return 0.5 * (W + W.T)  # symmetric but for round-off
 
 
-def _inside(W: np.ndarray, u: np.ndarray, p: np.ndarray, bound: np.ndarray) -> np.ndarray | None:
-    """The box's minimum (see :func:`_box_minimum`) when the coordinates at their bound in ``p`` stay
-    there and the others come to rest within theirs (Newton's step on those, p_f - W_ff^-1 u'_f, u' the
-    velocities with the bound ones' impulses kept), else None: the minimum of one active set."""
-    at = np.abs(p) >= bound * (1.0 - AT_BOUND)
-    free = ~at
-    nxt = p.copy()
-    try:
-        if free.any():
-            nxt[free] = p[free] - np.linalg.solve(W[np.ix_(free, free)], u[free])
-    except np.linalg.LinAlgError:  # a coordinate the active rows hold still: W singular
-        return None
-    moved = u + W @ (nxt - p)  # the velocities at nxt
-    if np.all(np.abs(nxt[free]) < bound[free]) and np.all(moved[at] * np.sign(p[at]) <= 0.0):
-        return nxt
-    return None
-
-
-def _box_minimum(W: np.ndarray, c: np.ndarray, bound: np.ndarray, eps_abs: float) -> np.ndarray:
+def _box_minimum(W: np.ndarray, c: np.ndarray, bound: np.ndarray, start: np.ndarray) -> np.ndarray:
     """argmin 1/2 p^T W p + c^T p over -bound <= p <= bound (W symmetric, positive semi-definite), by
-    ProxQP."""
-    k = len(c)
-    qp = _BOXES.get(k)
-    if qp is None:
-        qp = _BOXES[k] = proxqp.dense.QP(k, 0, k)
-        qp.settings.eps_rel, qp.settings.verbose = 0.0, False
-        qp.init(np.eye(k), np.zeros(k), None, None, np.eye(k), -np.ones(k), np.ones(k))
-    qp.settings.eps_abs = eps_abs * 1e-3
-    qp.update(0.5 * (W + W.T), c, None, None, None, -bound, bound)
-    qp.solve()
-    return np.clip(qp.results.x, -bound, bound)
-
-
-# a box QP per size, made once (a QP's making costs more than its solve)
-_BOXES: dict[int, Any] = {}
+    proximal rounds of the primal active-set method from ``start``
+    (:func:`gaussim.kernels.solver.box_minimum`): W is singular where the active rows hold a joint."""
+    shift = REGULARISATION * max(float(np.max(np.diag(W))), 0.0) + SHIFT_FLOOR
+    p = np.empty(len(c))
+    # p stays within the box: an unfinished minimum (rounds out of budget) is the pass's next iterate
+    box_minimum.call(W, c, bound, start, shift, RELEASE * float(np.abs(c).max()), p)
+    return p

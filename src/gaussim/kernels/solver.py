@@ -482,3 +482,93 @@ def least_norm(H, g, A, C, l, x, tolerance, out):  # type: ignore[no-untyped-def
         if columns[j] >= n_eq:
             least = min(least, lam[j])
     return least
+
+
+# The proximal rounds of :func:`box_minimum` end when a round moves no coordinate by more than this
+# fraction of its bound.
+PROXIMAL_TOLERANCE = 1e-9
+
+
+@njit(cache=True, fastmath={"reassoc", "contract"})
+def box_minimum(W, c, bound, start, shift, release, p):  # type: ignore[no-untyped-def]
+    """argmin 1/2 p^T W p + c^T p over -bound <= p <= bound (W symmetric positive semi-definite), into
+    ``p``, by proximal rounds: each the minimum of the objective plus shift/2 |p - centre|^2 (shift > 0:
+    a positive definite problem however singular W is; centre the last round's answer, ``start`` at
+    first), found by the primal active-set method from the last round's working set (the coordinates at
+    a bound held there): a Newton step on the free ones, cut short at the first bound it crosses (held
+    from then on); at a working set's minimum, the held coordinate whose gradient pulls it inside by
+    more than ``release`` most is freed. Returns the number of active-set iterations, or -1 when the
+    rounds did not settle within their budget (``p`` is then the last round's, within the box)."""
+    k = len(c)
+    side, centre = np.zeros(k), np.empty(k)
+    for i in range(k):
+        p[i] = min(max(start[i], -bound[i]), bound[i])
+        if abs(p[i]) >= bound[i] * (1.0 - 1e-6):
+            side[i] = 1.0 if p[i] > 0.0 else -1.0
+            p[i] = side[i] * bound[i]
+    gradient, step = np.empty(k), np.empty(k)
+    iterations = 0
+    for _ in range(4 * k + 8):  # proximal rounds
+        centre[:] = p
+        finished = False
+        for _ in range(4 * k + 8):
+            iterations += 1
+            _box_gradient(W, c, shift, p, centre, gradient)
+            free = np.flatnonzero(side == 0.0)
+            n = len(free)
+            if n:
+                G = np.empty((n, n))
+                for a in range(n):
+                    for b in range(n):
+                        G[a, b] = W[free[a], free[b]]
+                L = cholesky(G, shift)
+                if L is None:  # W not positive semi-definite
+                    return -1
+                rhs = np.empty((1, n))
+                for a in range(n):
+                    rhs[0, a] = -gradient[free[a]]
+                newton = backward(L, forward(L, rhs)[0])
+                blocking, ratio = -1, 1.0
+                for a in range(n):
+                    i = free[a]
+                    if abs(p[i] + newton[a]) > bound[i]:  # crosses its bound: the step stops at the first
+                        room = (bound[i] if newton[a] > 0.0 else -bound[i]) - p[i]
+                        r = max(room / newton[a], 0.0)
+                        if r < ratio:
+                            blocking, ratio = i, r
+                step[:] = 0.0
+                for a in range(n):
+                    step[free[a]] = newton[a]
+                for i in range(k):
+                    p[i] += ratio * step[i]
+                if blocking >= 0:
+                    side[blocking] = 1.0 if step[blocking] > 0.0 else -1.0
+                    p[blocking] = side[blocking] * bound[blocking]
+                    continue
+                _box_gradient(W, c, shift, p, centre, gradient)
+            freed, pull = -1, release
+            for i in range(k):  # pull > 0: the held coordinate would move inside
+                if side[i] != 0.0 and gradient[i] * side[i] > pull:
+                    freed, pull = i, gradient[i] * side[i]
+            if freed < 0:
+                finished = True
+                break
+            side[freed] = 0.0
+        if not finished:
+            return -1
+        moved = False
+        for i in range(k):
+            moved = moved or abs(p[i] - centre[i]) > PROXIMAL_TOLERANCE * bound[i]
+        if not moved:
+            return iterations
+    return -1
+
+
+@njit(cache=True, fastmath={"reassoc", "contract"})
+def _box_gradient(W, c, shift, p, centre, out):  # type: ignore[no-untyped-def]
+    """The gradient of 1/2 p^T W p + c^T p + shift/2 |p - centre|^2, into ``out``."""
+    for i in range(len(c)):
+        total = c[i] + shift * (p[i] - centre[i])
+        for j in range(len(c)):
+            total += W[i, j] * p[j]
+        out[i] = total
