@@ -114,6 +114,7 @@ class GaussStage:
             again = [
                 module for module, rows, multipliers in blocks if module.refine(ctx, rows, x, multipliers)
             ]
+            mark("solve")  # the modules' fixed-point updates are the solve's too
             if not again or k == passes - 1:  # the last pass's answer stands: no rows to pose for it
                 break
             asked = {id(module) for module in again}  # by identity: a user's module may define __eq__
