@@ -28,6 +28,17 @@ def test_solo12_drop(tmp_path):
     assert rows and {r["contact"] for r in rows} >= {"FL_FOOT_0/ground#0", "HR_FOOT_0/ground#0"}
 
 
+def test_arm_joint_friction():
+    """The Z1 let go: its friction holds the joints a free arm swings (joint2 falls 1.77 rad free), and
+    the joint that reaches its limit is reported still there, not sliding."""
+    stdout = _run(str(EXAMPLES / "arm_joint_friction.py"), "--duration", "0.5")
+    rows = {line.split()[0]: line.split() for line in stdout.splitlines()[2:]}
+    assert set(rows) == {f"joint{i}" for i in range(1, 7)} | {"jointGripper"}, stdout
+    free, rubbed = float(rows["joint2"][2]), float(rows["joint2"][3])
+    assert free > 0.5 and abs(rubbed) < 0.5 * free, stdout
+    assert float(rows["joint3"][3]) == pytest.approx(1.0, abs=1e-3) and rows["joint3"][-1] == "sticks", stdout
+
+
 @pytest.mark.parametrize("mode", ["pyramid", "accurate"])
 def test_sliding_block(mode):
     stdout = _run(str(EXAMPLES / "sliding_block.py"), "--mode", mode, "--heading", "15")

@@ -35,8 +35,10 @@ box_minimum = Bound("solver.box_minimum")
 # A Newton step shorter than this fraction of the bounds, or changing the velocities by less than the
 # solvers' tolerance eps_abs (or the QPs' error seen on the way), ends the passes.
 SETTLED = 1e-6
-# An impulse this close to its bound (relative) is at it: the joint slides.
+# An impulse this close to its bound (relative) is at it: the joint slides if it moves faster than
+# MOVING [rad/s or m/s] (else it sticks at the verge: held by a limit or a contact, say).
 AT_BOUND = 1e-6
+MOVING = 1e-6
 # The singular values of the active rows below this fraction of their largest count as dependent.
 NULL_SPACE = 1e-9
 # The box minimum's proximal shift (relative to W's largest diagonal entry; a floor where W is 0) and
@@ -55,7 +57,8 @@ MIN_STEP = 1.0 / 64
 
 @dataclass
 class JointFrictionReaction:
-    """The friction torque of a joint coordinate [N m or N]: sticking (within its bound) or sliding."""
+    """The friction torque of a joint coordinate [N m or N]: sliding (at its bound, the joint moving
+    against it) or sticking (within its bound, or at it with the joint still)."""
 
     joint: str
     torque: float
@@ -89,13 +92,14 @@ class JointFrictionIterate:
     unseen: bool = False  # whether the impulse of the next pass is a step that moves u no more than that
 
 
-@dataclass(frozen=True)
+@dataclass
 class JointFrictionRows:
-    """The module's record of one QP: the impulse on each coordinate (the module's order) and the
-    bound it is clipped to."""
+    """The module's record of one QP: the impulse on each coordinate (the module's order), the bound
+    it is clipped to, and (once the QP is solved) whether each coordinate moves faster than MOVING."""
 
     impulse: np.ndarray
     bound: np.ndarray
+    moving: np.ndarray | None = None
 
 
 class JointFrictionModule(ConstraintModule[JointFrictionRows]):
@@ -143,6 +147,7 @@ class JointFrictionModule(ConstraintModule[JointFrictionRows]):
         record, p = rows.data, rows.data.impulse
         per = 1.0 if ctx.level == "velocity" else ctx.options.dt  # u per x
         u = (x if ctx.level == "velocity" else ctx.v + per * x)[self.coordinates]
+        record.moving = np.abs(u) > MOVING
         assert ctx.solved is not None
         problem, lam = ctx.solved
         # the dual value psi(p), concave in p with gradient -u / per: its maximum over the box is the step
@@ -197,9 +202,14 @@ class JointFrictionModule(ConstraintModule[JointFrictionRows]):
         self, rows: Rows[JointFrictionRows], multipliers: np.ndarray, scale: float
     ) -> list[JointFrictionReaction]:
         record = rows.data
+        moving = np.ones(len(record.bound), bool) if record.moving is None else record.moving
         return [
-            JointFrictionReaction(self.labels[k], float(scale * p), bool(abs(p) >= bound * (1.0 - AT_BOUND)))
-            for k, (p, bound) in enumerate(zip(record.impulse.tolist(), record.bound.tolist()))
+            JointFrictionReaction(
+                self.labels[k], float(scale * p), bool(abs(p) >= bound * (1.0 - AT_BOUND) and m)
+            )
+            for k, (p, bound, m) in enumerate(
+                zip(record.impulse.tolist(), record.bound.tolist(), moving.tolist())
+            )
         ]
 
 
